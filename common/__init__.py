@@ -1,0 +1,1 @@
+"""Shared contract of the AEB stack: messages, keys, configuration, Zenoh access, clocks."""

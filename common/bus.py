@@ -1,0 +1,237 @@
+"""Zenoh access for every process: open a session from settings, and publish, subscribe,
+query and declare liveliness only through the key registry.
+
+Payloads that do not decode are counted (`Bus.decode_errors`, by key name) and logged
+with a rate limit; they never reach a callback and never raise in Zenoh's threads.
+"""
+
+import json
+import logging
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+import msgspec
+import zenoh
+
+from common.clock import mono_ns
+from common.config.base import ZenohMode, ZenohSettings
+from common.counters import ReasonCounter
+from common.keys import HEALTH, Congestion, KeySpec, Priority
+from common.log import RateLimitedLog
+from common.messages import DecodeError, decode, encode
+
+T = TypeVar("T", bound=msgspec.Struct)
+
+_log = logging.getLogger("bus")
+
+_PRIORITY = {
+    Priority.REAL_TIME: zenoh.Priority.REAL_TIME,
+    Priority.INTERACTIVE_HIGH: zenoh.Priority.INTERACTIVE_HIGH,
+    Priority.INTERACTIVE_LOW: zenoh.Priority.INTERACTIVE_LOW,
+    Priority.DATA_HIGH: zenoh.Priority.DATA_HIGH,
+    Priority.DATA: zenoh.Priority.DATA,
+    Priority.DATA_LOW: zenoh.Priority.DATA_LOW,
+    Priority.BACKGROUND: zenoh.Priority.BACKGROUND,
+}
+_CONGESTION = {
+    Congestion.BLOCK: zenoh.CongestionControl.BLOCK,
+    Congestion.DROP: zenoh.CongestionControl.DROP,
+}
+
+
+class BusError(RuntimeError):
+    """The Zenoh configuration is invalid or the session could not be opened."""
+
+
+def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
+    """Build a zenoh.Config: file first, then our fields, then raw overrides.
+
+    Clients block in `zenoh.open` until a router is reachable (retrying with backoff), so
+    that start order does not matter. Raises BusError on an unreadable file or bad key.
+    """
+    try:
+        if settings.config_file:
+            if not Path(settings.config_file).is_file():
+                raise BusError(f"zenoh config file {settings.config_file!r} not found")
+            conf = zenoh.Config.from_file(settings.config_file)
+        else:
+            conf = zenoh.Config()
+        values: dict[str, Any] = {
+            "mode": settings.mode.value,
+            "scouting/multicast/enabled": settings.multicast_scouting,
+            "scouting/gossip/enabled": settings.gossip_scouting,
+        }
+        if settings.connect or not settings.config_file:
+            values["connect/endpoints"] = list(settings.connect)
+        if settings.listen or not settings.config_file:
+            values["listen/endpoints"] = list(settings.listen)
+        if settings.mode is not ZenohMode.ROUTER:
+            values["connect/timeout_ms"] = -1
+            values["connect/exit_on_failure"] = False
+            values["connect/retry"] = {
+                "period_init_ms": 100,
+                "period_max_ms": settings.connect_retry_max_ms,
+                "period_increase_factor": 2,
+            }
+        values.update(settings.overrides)
+        for key, value in values.items():
+            conf.insert_json5(key, json.dumps(value))
+    except BusError:
+        raise
+    except Exception as exc:  # zenoh raises ZError or ValueError with its own text
+        raise BusError(f"invalid zenoh configuration: {exc}") from exc
+    return conf
+
+
+def open_session(settings: ZenohSettings) -> zenoh.Session:
+    """Open a session (blocks until a router is reachable for clients). Raises BusError."""
+    conf = zenoh_config(settings)
+    try:
+        return zenoh.open(conf)
+    except Exception as exc:
+        raise BusError(f"cannot open zenoh session: {exc}") from exc
+
+
+class TypedPublisher(Generic[T]):
+    """A declared publisher for one concrete key, with the registry's QoS."""
+
+    def __init__(self, session: zenoh.Session, spec: KeySpec[T], key: str) -> None:
+        self.spec = spec
+        self.key = key
+        self._pub = session.declare_publisher(
+            key,
+            priority=_PRIORITY[spec.qos.priority],
+            congestion_control=_CONGESTION[spec.qos.congestion],
+            express=spec.qos.express,
+        )
+
+    def put(self, msg: T) -> None:
+        self._pub.put(encode(msg))
+
+    def undeclare(self) -> None:
+        self._pub.undeclare()
+
+
+class Bus:
+    """A session plus the vehicle prefix; the only way services touch Zenoh.
+
+    Use as a context manager so that the session is closed (a callback subscriber in an
+    unclosed session can hang interpreter exit).
+    """
+
+    def __init__(self, session: zenoh.Session, vehicle: str, source: str) -> None:
+        self.session = session
+        self.vehicle = vehicle
+        self.source = source
+        self.decode_errors = ReasonCounter()
+        self.callback_errors = ReasonCounter()
+        self._rl = RateLimitedLog(_log)
+        self._seqs: dict[str, int] = {}
+        self._seq_lock = threading.Lock()
+        self._closed = False
+
+    @classmethod
+    def open(cls, settings: ZenohSettings, vehicle: str, source: str) -> "Bus":
+        """Open a session from settings. Raises BusError."""
+        return cls(open_session(settings), vehicle, source)
+
+    def __enter__(self) -> "Bus":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.session.close()
+
+    def next_seq(self, stream: str) -> int:
+        """Sequence numbers per stream, starting at 0."""
+        with self._seq_lock:
+            seq = self._seqs.get(stream, 0)
+            self._seqs[stream] = seq + 1
+            return seq
+
+    def key(self, spec: KeySpec[Any], **params: str) -> str:
+        return spec.key(self.vehicle, **params)
+
+    def publisher(self, spec: KeySpec[T], **params: str) -> TypedPublisher[T]:
+        return TypedPublisher(self.session, spec, self.key(spec, **params))
+
+    def subscribe(
+        self,
+        spec: KeySpec[T],
+        callback: Callable[[T, str], None],
+        **params: str,
+    ) -> zenoh.Subscriber[None]:
+        """Subscribe to a key (missing parameters become `*`); `callback(msg, key)` gets
+        decoded messages only. Undecodable payloads are counted and logged."""
+        msg_type = spec.msg_type
+        if msg_type is None:
+            raise ValueError(f"key {spec.name!r} carries no message")
+        expr = spec.wildcard(self.vehicle, **params)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            key = str(sample.key_expr)
+            try:
+                msg = decode(sample.payload.to_bytes(), msg_type)
+            except DecodeError as exc:
+                self.decode_errors.add(spec.name)
+                self._rl.warning(f"decode:{spec.name}", "undecodable_payload", key=key, error=exc)
+                return
+            try:
+                callback(msg, key)
+            except Exception as exc:  # never let a bug kill Zenoh's callback thread silently
+                self.callback_errors.add(spec.name)
+                self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
+                _log.debug("callback traceback", exc_info=True)
+
+        return self.session.declare_subscriber(expr, on_sample)
+
+    def subscribe_raw(
+        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None], **params: str
+    ) -> zenoh.Subscriber[None]:
+        """Subscribe without decoding: `callback(payload, key, receipt_mono_ns)`.
+
+        For shells that decode off Zenoh's thread (e.g. JPEG frames) or time the receipt.
+        """
+        expr = spec.wildcard(self.vehicle, **params)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            t = mono_ns()
+            try:
+                callback(sample.payload.to_bytes(), str(sample.key_expr), t)
+            except Exception as exc:
+                self.callback_errors.add(spec.name)
+                self._rl.error(f"cb:{spec.name}", "callback_failed", error=repr(exc))
+
+        return self.session.declare_subscriber(expr, on_sample)
+
+    def declare_health(self, service: str, instance: str) -> zenoh.LivelinessToken:
+        """Declare this process alive: `health/<service>/<instance>`. Declare it last, once
+        the service is ready, so that seeing the token means the service is serving."""
+        return self.session.liveliness().declare_token(
+            self.key(HEALTH, service=service, instance=instance)
+        )
+
+    def subscribe_health(
+        self, callback: Callable[[str, str, bool], None], history: bool = True
+    ) -> zenoh.Subscriber[None]:
+        """`callback(service, instance, alive)` for every token appearing or vanishing."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            params = HEALTH.match(str(sample.key_expr), self.vehicle)
+            if params is not None:
+                callback(params["service"], params["instance"],
+                         sample.kind == zenoh.SampleKind.PUT)
+
+        return self.session.liveliness().declare_subscriber(
+            HEALTH.wildcard(self.vehicle), on_sample, history=history
+        )

@@ -1,0 +1,47 @@
+"""Load a TOML file into a validated config type; fail fast naming the field."""
+
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any, TypeVar
+
+import msgspec
+
+T = TypeVar("T", bound=msgspec.Struct)
+
+
+class ConfigError(ValueError):
+    """An unreadable or invalid configuration; the message names the file and field."""
+
+
+def parse_config(data: dict[str, Any], config_type: type[T], origin: str = "<config>") -> T:
+    """Validate a mapping as `config_type`. Raises ConfigError naming the offending field."""
+    try:
+        return msgspec.convert(data, config_type, strict=True)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"{origin}: invalid configuration: {exc}") from exc
+
+
+def load_config(path: str | Path, config_type: type[T]) -> T:
+    """Read and validate a TOML file. Raises ConfigError (missing file, bad TOML, bad field)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read configuration: {exc.strerror}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+    return parse_config(data, config_type, str(p))
+
+
+def load_config_or_exit(path: str | Path | None, config_type: type[T]) -> T:
+    """For a service's main: the config (defaults when `path` is None) or exit code 2."""
+    try:
+        if path is None:
+            return parse_config({}, config_type, "<defaults>")
+        return load_config(path, config_type)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from exc

@@ -1,0 +1,47 @@
+"""Every message type on the bus. Defined here and nowhere else."""
+
+from common.messages.brake import BrakeState, BrakeStatus, FailsafePolicy
+from common.messages.camera import CameraInfo, CompressedFrame
+from common.messages.codec import DecodeError, decode, encode
+from common.messages.fusion import (
+    BrakeCommand,
+    Decision,
+    Verification,
+    VerifiedTarget,
+    VerifiedTargets,
+    VerifierStatus,
+)
+from common.messages.header import SCHEMA_VERSION, Header
+from common.messages.radar import (
+    BusState,
+    OutputMode,
+    RadarState,
+    RadarStatus,
+    RadarTrack,
+    RadarTracks,
+)
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "BrakeCommand",
+    "BrakeState",
+    "BrakeStatus",
+    "BusState",
+    "CameraInfo",
+    "CompressedFrame",
+    "Decision",
+    "DecodeError",
+    "FailsafePolicy",
+    "Header",
+    "OutputMode",
+    "RadarState",
+    "RadarStatus",
+    "RadarTrack",
+    "RadarTracks",
+    "Verification",
+    "VerifiedTarget",
+    "VerifiedTargets",
+    "VerifierStatus",
+    "decode",
+    "encode",
+]

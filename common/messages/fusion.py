@@ -1,0 +1,89 @@
+"""Messages published by a fusion (verifier) instance."""
+
+import enum
+
+import msgspec
+
+from common.messages.header import Header
+
+
+class Decision(enum.Enum):
+    """Ordered by severity: NONE < WARNING < BRAKE."""
+
+    NONE = "NONE"
+    WARNING = "WARNING"
+    BRAKE = "BRAKE"
+
+
+class Verification(enum.Enum):
+    VERIFIED = "verified"          # density >= threshold
+    REJECTED = "rejected"          # density below threshold
+    NOT_VISIBLE = "not_visible"    # behind the camera or outside the image
+    UNAVAILABLE = "unavailable"    # no usable frame (stale, missing, undecodable)
+    NOT_CHECKED = "not_checked"    # out of the decision's range: the gate did not run
+
+
+class VerifierStatus(enum.Enum):
+    OK = "ok"
+    UNAVAILABLE = "unavailable"    # no fresh decodable frame
+    STALE_RADAR = "stale_radar"    # radar input older than allowed: never brakes
+
+
+class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One confirmed radar track after verification and decision.
+
+    Positions are the track predicted to the frame's capture time. `roi_xywh` is in pixels
+    of the frame, empty when not visible.
+    """
+
+    track_id: int
+    x_m: float
+    y_m: float
+    range_m: float
+    range_rate_mps: float
+    in_path: bool
+    verification: Verification
+    roi_xywh: tuple[int, ...]
+    density: float | None
+    ttc_s: float | None            # None when not closing
+    ttc_eff_s: float | None
+    decision: Decision
+    reason: str                    # why this decision, for people and logs
+    frame_seq: int | None
+    frame_age_ms: float | None     # frame capture to radar cycle stamp
+
+
+class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    header: Header
+    instance: str
+    radar_sensor: str
+    radar_seq: int
+    verifier: str
+    verifier_params: dict[str, float | int | str | bool]
+    verifier_status: VerifierStatus
+    targets: tuple[VerifiedTarget, ...]
+    processing_ns: int             # tracks received -> decision made
+
+
+class BrakeCommand(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Exactly one per radar cycle per fusion instance: the most severe decision, or a
+    plain heartbeat (decision NONE, level 0).
+
+    `header.seq` increases by one per command of this instance; `header.stamp_ns` is the
+    radar cycle's stamp. `radar_last_frame_mono_ns` carries the radar host's monotonic
+    time of the cycle's last CAN frame so that a same-host receiver can measure the whole
+    chain.
+    """
+
+    header: Header
+    instance: str
+    decision: Decision
+    brake_level_pct: float         # 0..100; 0 unless decision is BRAKE
+    verifier_status: VerifierStatus
+    held: bool                     # BRAKE kept by the minimum-hold rule, not by this cycle
+    track_id: int                  # the deciding track, -1 when none
+    range_m: float | None
+    ttc_s: float | None
+    reason: str
+    radar_seq: int
+    radar_last_frame_mono_ns: int

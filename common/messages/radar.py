@@ -1,0 +1,101 @@
+"""Messages published by the radar service."""
+
+import enum
+
+import msgspec
+
+from common.messages.header import Header
+
+
+class OutputMode(enum.Enum):
+    OBJECTS = "objects"
+    CLUSTERS = "clusters"
+
+
+class BusState(enum.Enum):
+    ACTIVE = "active"          # frames arriving
+    SILENT = "silent"          # bus open, nothing received recently
+    ERROR = "error"            # bus reported errors
+    REOPENING = "reopening"    # bus vanished, reopening with backoff
+    ENDED = "ended"            # a finite replay reached its end
+
+
+class RadarTrack(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One Kalman track in the radar frame (x forward, y left, z up; origin at the radar).
+
+    `range_rate_mps` is the time derivative of range: negative means closing.
+    """
+
+    track_id: int
+    x_m: float
+    y_m: float
+    vx_mps: float
+    vy_mps: float
+    range_m: float
+    range_rate_mps: float
+    rcs_dbsm: float
+    confirmed: bool
+    hits: int                  # consecutive updates so far
+    misses: int                # consecutive cycles without an update
+    x_var_m2: float
+    y_var_m2: float
+    radar_object_id: int = -1  # the radar's own ID in object mode, -1 when unknown
+
+
+class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Every track of one radar cycle, confirmed or not; published every cycle, also when empty.
+
+    `header.stamp_ns` is the wall time the cycle's status frame was received.
+    `last_frame_mono_ns` is the radar host's monotonic time at the cycle's last CAN frame:
+    the start of the radar-to-brake latency chain.
+    """
+
+    header: Header
+    sensor: str
+    mode: OutputMode
+    meas_counter: int
+    complete: bool             # all frames announced by the status message arrived
+    n_detections: int          # decoded detections in the cycle
+    n_prefiltered: int         # detections left after the prefilter
+    last_frame_mono_ns: int
+    processing_ns: int         # decode + prefilter + merge + track for this cycle
+    tracks: tuple[RadarTrack, ...]
+
+
+class RadarState(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Decoded 0x201 RadarState."""
+
+    nvm_read_ok: bool
+    max_distance_m: int
+    persistent_error: bool
+    interference: bool
+    temperature_error: bool
+    temporary_error: bool
+    voltage_error: bool
+    sensor_id: int
+    sort_index: int
+    motion_rx_state: int
+    send_ext_info: bool
+    send_quality: bool
+    output_type: int
+    rcs_threshold: int
+
+
+class RadarStatus(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Radar health: published at 1 Hz and on every change of `ready`, `bus_state` or state."""
+
+    header: Header
+    sensor: str
+    ready: bool
+    not_ready_reason: str      # empty when ready
+    bus_state: BusState
+    interface: str             # python-can interface name, or "replay"
+    channel: str
+    radar_state: RadarState | None
+    firmware: str              # "4.30.2", empty until 0x700 is seen
+    cycle_period_ms: float     # median over recent cycles, 0 until measured
+    frames_per_s: float
+    cycles_total: int
+    cycles_incomplete: int
+    bus_reopens: int
+    rejected: dict[str, int]   # frames rejected, by reason

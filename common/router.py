@@ -1,0 +1,43 @@
+"""A Zenoh router run from Python (zenoh's own router mode): `aeb router`."""
+
+import argparse
+import sys
+
+from common.bus import BusError, open_session
+from common.config.base import ZenohMode, ZenohSettings
+from common.log import kv, setup_logging
+from common.service import stop_event_on_signals
+
+
+def router_settings(listen: list[str], connect: list[str], config_file: str = "") -> ZenohSettings:
+    return ZenohSettings(
+        mode=ZenohMode.ROUTER, listen=tuple(listen), connect=tuple(connect),
+        config_file=config_file,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="aeb router", description=__doc__)
+    parser.add_argument("--listen", action="append", default=None,
+                        help="endpoint to listen on (repeatable), default tcp/127.0.0.1:7447")
+    parser.add_argument("--connect", action="append", default=[],
+                        help="another router to connect to (repeatable)")
+    parser.add_argument("--config-file", default="", help="zenoh JSON5 router config")
+    args = parser.parse_args(argv)
+    log = setup_logging("router")
+    listen = args.listen or ([] if args.config_file else ["tcp/127.0.0.1:7447"])
+    stop = stop_event_on_signals()
+    try:
+        session = open_session(router_settings(listen, args.connect, args.config_file))
+    except (BusError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    with session:
+        log.info(kv("router_ready", listen=",".join(listen), zid=str(session.zid())))
+        stop.wait()
+    log.info(kv("router_stopped"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

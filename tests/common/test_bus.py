@@ -1,0 +1,91 @@
+import threading
+
+import pytest
+
+from common.bus import Bus, BusError, zenoh_config
+from common.config.base import ZenohSettings
+from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from common.messages import Decision, VerifierStatus
+from common.messages.fusion import BrakeCommand
+from common.messages.header import Header
+from tests.support import Collector, HealthWatch, open_bus, wait_for
+
+
+def cmd(seq: int) -> BrakeCommand:
+    return BrakeCommand(
+        header=Header(seq=seq, source="test", stamp_ns=1, pub_mono_ns=2), instance="primary",
+        decision=Decision.NONE, brake_level_pct=0.0, verifier_status=VerifierStatus.OK,
+        held=False, track_id=-1, range_m=None, ttc_s=None, reason="", radar_seq=seq,
+        radar_last_frame_mono_ns=0,
+    )
+
+
+def test_config_keeps_multicast_off_and_applies_overrides():
+    import json
+    conf = zenoh_config(ZenohSettings(overrides={"transport/unicast/max_links": 2}))
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+    assert json.loads(conf.get_json("transport/unicast/max_links")) == 2
+    assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:7447"]
+
+
+def test_bad_override_and_missing_file_are_bus_errors():
+    with pytest.raises(BusError, match="invalid zenoh configuration"):
+        zenoh_config(ZenohSettings(overrides={"no/such/key": 1}))
+    with pytest.raises(BusError, match="not found"):
+        zenoh_config(ZenohSettings(config_file="/nonexistent.json5"))
+
+
+def test_publish_subscribe_through_a_router_and_count_garbage(router):
+    with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:
+        got = Collector()
+        sub_bus.subscribe(FUSION_BRAKE_CMD, got, instance="primary")
+        other = Collector()
+        sub_bus.subscribe(FUSION_BRAKE_CMD, other, instance="candidate")
+        pub = pub_bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        # The subscription may take a moment to propagate through the router.
+        def first_sample() -> int:
+            pub.put(cmd(0))
+            return len(got.items)
+
+        wait_for(first_sample, 30, 0.05, "first sample")
+        n = len(got.items)
+        pub_bus.session.put(pub.key, b"\x00garbage")
+        pub.put(cmd(1))
+        got.wait_count(n + 1, 10)
+        wait_for(lambda: sub_bus.decode_errors.get("fusion_brake_cmd") == 1, 10)
+        assert got.messages[-1].header.seq == 1
+        assert got.items[-1][1] == "aeb/ego/fusion/primary/brake_cmd"
+        assert other.items == []
+
+
+def test_liveliness_appears_and_vanishes(router):
+    with open_bus(router) as watcher_bus:
+        watch = HealthWatch(watcher_bus)
+        with open_bus(router) as svc:
+            token = svc.declare_health("fusion", "primary")
+            watch.wait_alive("fusion", "primary", 30)
+            token.undeclare()
+            wait_for(lambda: not watch.is_alive("fusion", "primary"), 30)
+
+
+def test_client_started_before_its_router_connects_when_it_appears(tmp_path):
+    from tests.support import free_port, router_process
+
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    opened: dict[str, Bus] = {}
+    t = threading.Thread(target=lambda: opened.setdefault("bus", open_bus(endpoint)))
+    t.start()
+    assert not opened  # blocked: nothing listens yet
+    with router_process(tmp_path, port):
+        t.join(60)
+        assert "bus" in opened
+        with opened["bus"] as bus, open_bus(endpoint) as other:
+            got = Collector()
+            bus.subscribe(BRAKE_STATUS, got)
+            assert got.items == []
+            def garbage_counted() -> int:
+                other.session.put(bus.key(BRAKE_STATUS), b"x")
+                return bus.decode_errors.get("brake_status")
+
+            wait_for(garbage_counted, 30, 0.05)

@@ -1,0 +1,63 @@
+import logging
+
+import pytest
+
+from common.freshness import Freshness, FreshnessTracker
+from common.keys import RADAR_TRACKS
+from common.log import RateLimitedLog, kv
+
+S = 1_000_000_000
+
+
+def test_alive_until_max_age_then_stale():
+    f = Freshness("radar", max_age_s=0.16, nominal_rate_hz=13.3)
+    assert not f.alive(0)
+    assert f.age_s(0) is None
+    f.observe(10 * S)
+    assert f.alive(10 * S + int(0.16 * S))
+    assert not f.alive(10 * S + int(0.161 * S))
+
+
+def test_on_rate_from_the_registry_rate():
+    f = Freshness.from_spec(RADAR_TRACKS, window_s=2.0)
+    t = 0
+    for _ in range(27):  # 75 ms period for 2 s
+        t += 75_000_000
+        f.observe(t)
+    assert f.health(t).on_rate
+    slow = Freshness.from_spec(RADAR_TRACKS, window_s=2.0)
+    t = 0
+    for _ in range(10):  # 150 ms period: alive between samples but half the rate
+        t += 150_000_000
+        slow.observe(t)
+    h = slow.health(t)
+    assert h.alive and not h.on_rate
+    assert h.rate_hz == pytest.approx(5.0)
+
+
+def test_tracker_snapshot_names_each_input():
+    tr = FreshnessTracker()
+    tr.add(Freshness("a", 1.0))
+    tr.add(Freshness("b", 1.0))
+    tr.observe("a", 5)
+    snap = tr.snapshot(10)
+    assert snap["a"].alive and not snap["b"].alive
+    assert not tr.all_alive(10)
+
+
+def test_rate_limited_log_holds_back_repeats_and_counts_them(caplog):
+    now = [0.0]
+    rl = RateLimitedLog(logging.getLogger("t"), interval_s=5.0, clock=lambda: now[0])
+    with caplog.at_level(logging.WARNING):
+        assert rl.warning("k", "bad_frame", id="0x7FF")
+        for _ in range(9):
+            assert not rl.warning("k", "bad_frame", id="0x7FF")
+        assert rl.warning("other", "x")
+        now[0] = 5.0
+        assert rl.warning("k", "bad_frame", id="0x7FF")
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines == ["bad_frame id=0x7FF", "x", "bad_frame id=0x7FF repeated=9"]
+
+
+def test_kv_quotes_values_with_spaces():
+    assert kv("e", a=1, b="two words", c=0.5) == "e a=1 b='two words' c=0.5"

@@ -1,0 +1,62 @@
+import msgspec
+import pytest
+
+from common.messages import (
+    BrakeCommand,
+    Decision,
+    DecodeError,
+    Header,
+    RadarTrack,
+    RadarTracks,
+    VerifierStatus,
+    decode,
+    encode,
+)
+from common.messages.radar import OutputMode
+
+
+def header(seq: int = 3) -> Header:
+    return Header(seq=seq, source="fusion/primary", stamp_ns=1_700_000_000_000_000_000,
+                  pub_mono_ns=42)
+
+
+def command() -> BrakeCommand:
+    return BrakeCommand(
+        header=header(), instance="primary", decision=Decision.BRAKE, brake_level_pct=80.0,
+        verifier_status=VerifierStatus.OK, held=False, track_id=7, range_m=9.5, ttc_s=1.2,
+        reason="verified in path", radar_seq=11, radar_last_frame_mono_ns=41,
+    )
+
+
+def test_round_trip_keeps_every_field():
+    cmd = command()
+    assert decode(encode(cmd), BrakeCommand) == cmd
+
+
+def test_tracks_round_trip_with_nested_structs():
+    track = RadarTrack(track_id=1, x_m=11.4, y_m=-0.2, vx_mps=0.0, vy_mps=0.0, range_m=11.4,
+                       range_rate_mps=0.0, rcs_dbsm=27.0, confirmed=True, hits=5, misses=0,
+                       x_var_m2=0.1, y_var_m2=0.1, radar_object_id=56)
+    msg = RadarTracks(header=header(), sensor="front", mode=OutputMode.OBJECTS, meas_counter=9,
+                      complete=True, n_detections=3, n_prefiltered=2, last_frame_mono_ns=5,
+                      processing_ns=100, tracks=(track,))
+    assert decode(encode(msg), RadarTracks).tracks[0] == track
+
+
+@pytest.mark.parametrize("payload", [b"", b"\xc1", b"not msgpack at all", encode(header())])
+def test_garbage_raises_decode_error_naming_the_type(payload):
+    with pytest.raises(DecodeError, match="BrakeCommand"):
+        decode(payload, BrakeCommand)
+
+
+def test_other_schema_version_is_rejected():
+    cmd = msgspec.structs.replace(command(), header=msgspec.structs.replace(header(), schema=99))
+    with pytest.raises(DecodeError, match="schema version 99"):
+        decode(encode(cmd), BrakeCommand)
+
+
+def test_unknown_field_is_rejected():
+    data = msgspec.msgpack.decode(encode(command()))
+    data["extra"] = 1
+    with pytest.raises(DecodeError, match="unknown field `extra`"):
+        decode(msgspec.msgpack.encode(data), BrakeCommand)

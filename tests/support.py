@@ -1,0 +1,188 @@
+"""Helpers for multi-process tests: free ports, a router process, service processes with
+captured logs, and polling with deadlines (never fixed sleeps as synchronisation)."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, TypeVar
+
+from common.bus import Bus
+from common.config.base import ZenohMode, ZenohSettings
+
+REPO = Path(__file__).resolve().parent.parent
+T = TypeVar("T")
+
+# Deadlines are generous: CI is a loaded 2-core machine.
+START_TIMEOUT_S = 60.0
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for(
+    predicate: Callable[[], T], timeout_s: float, interval_s: float = 0.01, what: str = ""
+) -> T:
+    """Poll until `predicate()` is truthy; return its value. Raises TimeoutError."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout_s} s waiting for {what or predicate}")
+        time.sleep(interval_s)
+
+
+def port_open(port: int, host: str = "127.0.0.1") -> bool:
+    try:
+        with socket.create_connection((host, port), timeout=0.2):
+            return True
+    except OSError:
+        return False
+
+
+class ServiceProcess:
+    """A child process with stdout+stderr captured to a file, stopped on exit."""
+
+    def __init__(self, name: str, argv: list[str], log_dir: Path,
+                 env: dict[str, str] | None = None) -> None:
+        self.name = name
+        self.argv = argv
+        self.log_path = log_dir / f"{name}.log"
+        self._log = open(self.log_path, "wb")  # noqa: SIM115 (closed in stop())
+        full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
+        self.proc = subprocess.Popen(
+            argv, stdout=self._log, stderr=subprocess.STDOUT, cwd=REPO, env=full_env,
+            start_new_session=True,
+        )
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def signal(self, sig: int) -> None:
+        if self.alive():
+            os.kill(self.proc.pid, sig)
+
+    def stop(self, timeout_s: float = 10.0) -> int | None:
+        if self.alive():
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(5)
+        self._log.close()
+        return self.proc.returncode
+
+
+def python_module(module: str, *args: str) -> list[str]:
+    return [sys.executable, "-m", module, *args]
+
+
+@contextmanager
+def router_process(log_dir: Path, port: int | None = None) -> Iterator[str]:
+    """A Zenoh router on 127.0.0.1; yields its endpoint once it accepts connections."""
+    port = port or free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    proc = ServiceProcess(f"router-{port}", python_module("common.router", "--listen", endpoint),
+                          log_dir)
+    try:
+        wait_for(lambda: port_open(port) or not proc.alive(), START_TIMEOUT_S, 0.05,
+                 "router port")
+        if not proc.alive():
+            raise RuntimeError(f"router exited:\n{proc.output()}")
+        yield endpoint
+    finally:
+        proc.stop()
+
+
+def client_settings(endpoint: str) -> ZenohSettings:
+    return ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))
+
+
+def open_bus(endpoint: str, vehicle: str = "ego", source: str = "test") -> Bus:
+    return Bus.open(client_settings(endpoint), vehicle, source)
+
+
+class Collector:
+    """Collects decoded messages from a subscription; thread-safe waiting."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[Any, str]] = []
+        self._cond = threading.Condition()
+
+    def __call__(self, msg: Any, key: str) -> None:
+        with self._cond:
+            self.items.append((msg, key))
+            self._cond.notify_all()
+
+    @property
+    def messages(self) -> list[Any]:
+        with self._cond:
+            return [m for m, _ in self.items]
+
+    def wait_count(self, n: int, timeout_s: float) -> list[Any]:
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while len(self.items) < n:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"got {len(self.items)} messages, wanted {n}")
+                self._cond.wait(left)
+            return [m for m, _ in self.items]
+
+    def wait_until(self, predicate: Callable[[Any], bool], timeout_s: float) -> Any:
+        """The first message satisfying `predicate`."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            seen = 0
+            while True:
+                for msg, _ in self.items[seen:]:
+                    if predicate(msg):
+                        return msg
+                seen = len(self.items)
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"no matching message among {len(self.items)}")
+                self._cond.wait(left)
+
+
+class HealthWatch:
+    """Liveliness tokens seen on the bus: `(service, instance) -> alive`."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.state: dict[tuple[str, str], bool] = {}
+        self.history: list[tuple[float, str, str, bool]] = []
+        self._lock = threading.Lock()
+        self._sub = bus.subscribe_health(self._on)
+
+    def _on(self, service: str, instance: str, alive: bool) -> None:
+        with self._lock:
+            self.state[(service, instance)] = alive
+            self.history.append((time.monotonic(), service, instance, alive))
+
+    def is_alive(self, service: str, instance: str) -> bool:
+        with self._lock:
+            return self.state.get((service, instance), False)
+
+    def wait_alive(self, service: str, instance: str, timeout_s: float = START_TIMEOUT_S) -> None:
+        wait_for(lambda: self.is_alive(service, instance), timeout_s, 0.02,
+                 f"health/{service}/{instance}")
