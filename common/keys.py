@@ -16,6 +16,7 @@ from common.messages import (
     BrakeStatus,
     CameraInfo,
     CompressedFrame,
+    EgoMotion,
     RadarStatus,
     RadarTracks,
     VerifiedTargets,
@@ -136,6 +137,10 @@ BRAKE_STATUS: KeySpec[BrakeStatus] = KeySpec(
     "brake_status", "brake/status", BrakeStatus,
     rate_hz=10.0, max_age_s=0.3, qos=QoS(Priority.INTERACTIVE_HIGH, Congestion.BLOCK),
 )
+EGO_MOTION: KeySpec[EgoMotion] = KeySpec(
+    "ego_motion", "vehicle/motion", EgoMotion,
+    rate_hz=50.0, max_age_s=0.1, qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
+)
 HEALTH: KeySpec[Any] = KeySpec(
     "health", "health/{service}/{instance}", None,
     rate_hz=None, max_age_s=None, qos=QoS(),
@@ -145,6 +150,6 @@ REGISTRY: dict[str, KeySpec[Any]] = {
     spec.name: spec
     for spec in (
         RADAR_TRACKS, RADAR_STATUS, CAMERA_JPEG, CAMERA_INFO,
-        FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, HEALTH,
+        FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, HEALTH,
     )
 }

@@ -20,6 +20,7 @@ from common.messages.radar import (
     RadarTrack,
     RadarTracks,
 )
+from common.messages.vehicle import EgoMotion
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -31,6 +32,7 @@ __all__ = [
     "CompressedFrame",
     "Decision",
     "DecodeError",
+    "EgoMotion",
     "FailsafePolicy",
     "Header",
     "OutputMode",
