@@ -214,6 +214,46 @@ class Bus:
 
         return self.session.declare_subscriber(expr, on_sample)
 
+    def declare_queryable(
+        self, spec: KeySpec[T], reply: Callable[[], T], **params: str
+    ) -> zenoh.Queryable[None]:
+        """Answer queries on one concrete key with `reply()`, encoded. A `reply` that
+        raises is counted in `callback_errors` and answered with an error reply."""
+        key = self.key(spec, **params)
+
+        def on_query(query: zenoh.Query) -> None:
+            try:
+                payload = encode(reply())
+            except Exception as exc:
+                self.callback_errors.add(spec.name)
+                self._rl.error(f"query:{spec.name}", "query_reply_failed", key=key,
+                               error=repr(exc))
+                query.reply_err(f"{type(exc).__name__}: {exc}")
+                return
+            query.reply(key, payload)
+
+        return self.session.declare_queryable(key, on_query)
+
+    def query(self, spec: KeySpec[T], timeout_s: float = 2.0,
+              **params: str) -> list[tuple[T, str]]:
+        """Query a key (missing parameters become `*`); blocks until every replier
+        answered or `timeout_s`. Returns decoded replies with their keys; error replies
+        and undecodable payloads are counted in `decode_errors` and left out."""
+        msg_type = spec.msg_type
+        if msg_type is None:
+            raise ValueError(f"key {spec.name!r} carries no message")
+        out: list[tuple[T, str]] = []
+        for reply in self.session.get(spec.wildcard(self.vehicle, **params), timeout=timeout_s):
+            sample = reply.ok
+            try:
+                if sample is None:
+                    raise DecodeError(f"error reply: {reply.err}")
+                out.append((decode(sample.payload.to_bytes(), msg_type), str(sample.key_expr)))
+            except DecodeError as exc:
+                self.decode_errors.add(spec.name)
+                self._rl.warning(f"decode:{spec.name}", "bad_query_reply", error=exc)
+        return out
+
     def declare_health(self, service: str, instance: str) -> zenoh.LivelinessToken:
         """Declare this process alive: `health/<service>/<instance>`. Declare it last, once
         the service is ready, so that seeing the token means the service is serving."""

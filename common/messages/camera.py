@@ -21,6 +21,10 @@ class CameraInfo(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     `k` is the 3x3 camera matrix row-major, `dist` OpenCV distortion coefficients
     (k1, k2, p1, p2[, k3...]), `r` (3x3 row-major) and `t_m` map a point from the radar
     frame to the camera frame: X_cam = R X_radar + t.
+
+    `frames_dropped` counts frames replaced before the encoder took them (congestion: the
+    camera drops rather than queues); `read_errors` counts unreadable inputs skipped,
+    frames rejected (wrong size) and source failures.
     """
 
     header: Header
@@ -38,3 +42,8 @@ class CameraInfo(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     read_errors: int
     healthy: bool
     status: str                # empty when healthy, else why not
+    # Added by the camera service (defaults keep older payloads decodable):
+    frames_captured: int = 0   # delivered by the source
+    frames_decimated: int = 0  # skipped because the source is faster than `fps`
+    reopens: int = 0           # times the source failed while streaming and was reopened
+    errors: dict[str, int] = msgspec.field(default_factory=dict)  # read_errors by reason

@@ -1,0 +1,5 @@
+import sys
+
+from services.camera.main import main
+
+sys.exit(main())

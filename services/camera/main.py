@@ -1,0 +1,44 @@
+"""`aeb camera`: frames from the configured source to JPEG on Zenoh, plus CameraInfo."""
+
+import sys
+
+from common.bus import Bus, BusError
+from common.calibration import Calibration
+from common.config.camera import CameraConfig
+from common.config.loader import ConfigError
+from common.log import kv, setup_logging
+from common.service import load_service_config, service_argparser, stop_event_on_signals
+from services.camera.node import EXIT_CONFIG, CameraNode
+from services.camera.source import SourceConfigError
+from services.camera.sources import build_source
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = service_argparser("camera", __doc__ or "")
+    args = parser.parse_args(argv)
+    cfg = load_service_config(args, CameraConfig)
+    settings = cfg.camera
+    log = setup_logging("camera", cfg.log.level.value)
+    stop = stop_event_on_signals()
+    try:
+        cal = Calibration.load(settings.calibration)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
+    try:
+        with Bus.open(cfg.zenoh, cfg.vehicle, f"camera/{settings.name}") as bus:
+            try:
+                source = build_source(settings, cal, bus)
+            except SourceConfigError as exc:
+                print(f"error: camera.source: {exc}", file=sys.stderr)
+                return EXIT_CONFIG
+            code = CameraNode(settings, cal, source, bus).run(stop)
+    except BusError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
+    log.info(kv("camera_stopped", code=code))
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,194 @@
+"""The camera's two threads around the pure core.
+
+- capture: opens the source (reopening with backoff after a failure), reads frames and
+  offers them to the core's one-frame slot. It never waits for the encoder or the bus.
+- publish: takes the newest frame from the slot, encodes it to JPEG and hands the
+  message to `publish`. While it is busy, newer frames replace the pending one (counted
+  as dropped): a slow encoder or bus never builds a backlog.
+
+`publish` must not block for long (the Zenoh publisher uses congestion control DROP).
+"""
+
+import logging
+import threading
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+
+from common.clock import NS_PER_MS, mono_ns
+from common.imaging import encode_jpeg
+from common.log import RateLimitedLog, kv
+from common.messages import CompressedFrame
+from services.camera.core import Backoff, Health, Offer, PublishCore
+from services.camera.source import EndOfStream, FrameSource, SourceConfigError
+
+_log = logging.getLogger("camera")
+
+Encoder = Callable[[np.ndarray, int], bytes]
+
+
+class Timing:
+    """Recent encode durations and publish instants, for the stats log and benchmarks
+    (read and written under the pipeline's lock)."""
+
+    def __init__(self, window: int = 300) -> None:
+        self.encode_ns: deque[int] = deque(maxlen=window)
+        self.publish_mono_ns: deque[int] = deque(maxlen=window)
+
+    def encode_ms(self, pct: float) -> float:
+        if not self.encode_ns:
+            return float("nan")
+        return float(np.percentile(np.array(self.encode_ns), pct)) / NS_PER_MS
+
+    def publish_rate_hz(self) -> float:
+        stamps = self.publish_mono_ns
+        if len(stamps) < 2 or stamps[-1] == stamps[0]:
+            return 0.0
+        return (len(stamps) - 1) * 1e9 / (stamps[-1] - stamps[0])
+
+
+class FramePipeline:
+    """Capture and publish threads for one source. `lock` guards core and health."""
+
+    def __init__(self, source: FrameSource, core: PublishCore, health: Health,
+                 backoff: Backoff, publish: Callable[[CompressedFrame], None],
+                 jpeg_quality: int = 80, encode: Encoder = encode_jpeg,
+                 clock: Callable[[], int] = mono_ns) -> None:
+        self.source = source
+        self.core = core
+        self.health = health
+        self.backoff = backoff
+        self.timing = Timing()
+        self.lock = threading.Condition()
+        self.ended = threading.Event()
+        self.fatal: SourceConfigError | None = None
+        self._publish = publish
+        self._quality = jpeg_quality
+        self._encode = encode
+        self._clock = clock
+        self._stopping = threading.Event()
+        self._rl = RateLimitedLog(_log)
+        self._threads = [
+            threading.Thread(target=self._capture_loop, name="camera-capture", daemon=True),
+            threading.Thread(target=self._publish_loop, name="camera-publish", daemon=True),
+        ]
+
+    @property
+    def finished(self) -> bool:
+        """The source ended or can never work: nothing more will be published."""
+        return self.ended.is_set() or self.fatal is not None
+
+    def start(self) -> None:
+        for t in self._threads:
+            t.start()
+
+    def stop(self, timeout_s: float = 3.0) -> None:
+        """Stop both threads. A source blocked in read() longer than `timeout_s` is left
+        to its daemon thread (the process is exiting anyway)."""
+        self._stopping.set()
+        with self.lock:
+            self.lock.notify_all()
+        for t in self._threads:
+            t.join(timeout_s)
+
+    def _capture_loop(self) -> None:
+        try:
+            while not self._stopping.is_set():
+                if self._open():
+                    self._read_until_failure()
+        finally:
+            self.source.close()
+            with self.lock:
+                self.lock.notify_all()
+
+    def _open(self) -> bool:
+        try:
+            self.source.open()
+        except SourceConfigError as exc:
+            self._fatal(exc)
+            return False
+        except Exception as exc:
+            self._failed("open", exc)
+            return False
+        with self.lock:
+            self.health.streaming(self._clock())
+        _log.info(kv("source_open", source=self.source.describe()))
+        return True
+
+    def _read_until_failure(self) -> None:
+        first = True
+        while not self._stopping.is_set():
+            try:
+                frame = self.source.read()
+            except EndOfStream as exc:
+                with self.lock:
+                    self.health.ended()
+                _log.info(kv("end_of_stream", detail=str(exc)))
+                self.ended.set()
+                self._stopping.set()
+                return
+            except SourceConfigError as exc:
+                self._fatal(exc)
+                return
+            except Exception as exc:
+                self.source.close()
+                self._failed("read", exc)
+                return
+            now = self._clock()
+            with self.lock:
+                result = self.core.offer(frame, now)
+                if result is Offer.REJECTED:
+                    self._rl.warning("rejected", "frame_rejected", reason=self.core.last_rejection)
+                    continue
+                self.health.frame(now)
+                if result is Offer.PENDING:
+                    self.lock.notify()
+            if first:
+                self.backoff.reset()
+                first = False
+
+    def _failed(self, what: str, exc: Exception) -> None:
+        delay = self.backoff.next_delay()
+        error = f"{what}: {exc}" if str(exc) else f"{what}: {type(exc).__name__}"
+        with self.lock:
+            self.core.stats.errors.add("source_error")
+            self.health.failed(error, delay)
+        self._rl.warning("source_failed", "source_failed", error=error, retry_in_s=delay)
+        self._stopping.wait(delay)
+
+    def _fatal(self, exc: SourceConfigError) -> None:
+        _log.error(kv("source_unusable", error=str(exc)))
+        self.fatal = exc
+        self._stopping.set()
+
+    def _publish_loop(self) -> None:
+        while True:
+            with self.lock:
+                while not self._stopping.is_set() and self.core.pending is None:
+                    self.lock.wait()
+                if self._stopping.is_set():
+                    return
+                frame = self.core.take()
+            assert frame is not None
+            t0 = self._clock()
+            try:
+                jpeg = self._encode(frame.image, self._quality)
+            except Exception as exc:
+                with self.lock:
+                    self.core.stats.errors.add("encode_error")
+                self._rl.error("encode", "encode_failed", error=repr(exc))
+                continue
+            t1 = self._clock()
+            with self.lock:
+                msg = self.core.message(frame, jpeg, self._clock())
+            try:
+                self._publish(msg)
+            except Exception as exc:
+                with self.lock:
+                    self.core.stats.errors.add("publish_error")
+                self._rl.error("publish", "publish_failed", error=repr(exc))
+                continue
+            with self.lock:
+                self.timing.encode_ns.append(t1 - t0)
+                self.timing.publish_mono_ns.append(msg.header.pub_mono_ns)

@@ -1,0 +1,47 @@
+"""Build the configured FrameSource (`[camera.source]`, tagged by `kind`)."""
+
+from typing import TYPE_CHECKING
+
+from common.calibration import Calibration
+from common.config import camera as cfg
+from services.camera.source import FrameSource, SourceConfigError
+
+if TYPE_CHECKING:
+    from common.bus import Bus
+
+
+def build_source(settings: cfg.CameraSettings, cal: Calibration,
+                 bus: "Bus | None" = None) -> FrameSource:
+    """The source for `settings.source`; a source `fps` of 0 means the camera's fps.
+
+    Raises SourceConfigError (bad plugin, bad options). Opening is left to the camera.
+    """
+    src = settings.source
+    try:
+        if isinstance(src, cfg.FolderSource):
+            from services.camera.folder import FolderSource
+
+            return FolderSource(src.path, src.fps or settings.fps, src.loop, src.extensions)
+        if isinstance(src, cfg.OpenCVSource):
+            from services.camera.opencv_capture import OpenCVSource
+
+            return OpenCVSource(src.device, fps=src.fps, fallback_fps=settings.fps,
+                                loop=src.loop, backend=src.backend, width=src.width,
+                                height=src.height, timeout_ms=src.timeout_ms)
+        if isinstance(src, cfg.RealSenseSource):
+            from services.camera.realsense import RealSenseSource
+
+            return RealSenseSource(serial=src.serial, bag=src.bag, loop=src.loop,
+                                   width=src.width, height=src.height,
+                                   fps=src.fps or round(settings.fps),
+                                   timeout_ms=src.timeout_ms)
+        from services.camera.synthetic import SyntheticContext, make_synthetic_source
+
+        context = SyntheticContext(width=cal.width, height=cal.height,
+                                   fps=src.fps or settings.fps, calibration=cal,
+                                   camera=settings.name, options=dict(src.options), bus=bus)
+        return make_synthetic_source(src.factory, context)
+    except ValueError as exc:
+        if isinstance(exc, SourceConfigError):
+            raise
+        raise SourceConfigError(str(exc)) from exc

@@ -1,0 +1,49 @@
+"""Shared test material for the camera: image folders and config files."""
+
+from pathlib import Path
+
+from common.imaging import encode_jpeg
+from services.camera.synthetic import MovingBoxSource
+
+CALIBRATION = "deploy/calibration/d435_848x480.toml"
+WIDTH, HEIGHT = 848, 480
+
+
+def write_folder(folder: Path, n: int, width: int = WIDTH, height: int = HEIGHT,
+                 corrupt: tuple[str, ...] = ()) -> list[Path]:
+    """`n` JPEG frames named frame0.jpg .. frame<n-1>.jpg (box moved by 10 frames each),
+    plus the named corrupt files: a truncated JPEG ("*.jpg") or bytes that are no image.
+    Returns the good files in order."""
+    folder.mkdir(parents=True, exist_ok=True)
+    scene = MovingBoxSource(width, height, 30.0, box_size_px=min(96, height // 2))
+    good = []
+    for i in range(n):
+        path = folder / f"frame{i}.jpg"
+        path.write_bytes(encode_jpeg(scene.render(10 * i), 80))
+        good.append(path)
+    for name in corrupt:
+        whole = encode_jpeg(scene.render(0), 80)
+        (folder / name).write_bytes(whole[: len(whole) // 2] if name.endswith(".jpg")
+                                    else b"this is not an image")
+    return good
+
+
+def folder_config(path: Path, endpoint: str, folder: Path, fps: float = 30.0,
+                  name: str = "front", extra: str = "") -> Path:
+    path.write_text(f"""
+[zenoh]
+connect = ["{endpoint}"]
+
+[camera]
+name = "{name}"
+calibration = "{CALIBRATION}"
+fps = {fps}
+stats_period_s = 0
+{extra}
+
+[camera.source]
+kind = "folder"
+path = "{folder}"
+loop = true
+""")
+    return path
