@@ -94,7 +94,7 @@ class FramePipeline:
 
     def _capture_loop(self) -> None:
         try:
-            while not self._stopping.is_set():
+            while not self._stopping.is_set() and not self.finished:
                 if self._open():
                     self._read_until_failure()
         finally:
@@ -125,8 +125,7 @@ class FramePipeline:
                 with self.lock:
                     self.health.ended()
                 _log.info(kv("end_of_stream", detail=str(exc)))
-                self.ended.set()
-                self._stopping.set()
+                self.ended.set()   # the publish thread still sends the pending frame
                 return
             except SourceConfigError as exc:
                 self._fatal(exc)
@@ -160,7 +159,6 @@ class FramePipeline:
     def _fatal(self, exc: SourceConfigError) -> None:
         _log.error(kv("source_unusable", error=str(exc)))
         self.fatal = exc
-        self._stopping.set()
 
     def _publish_loop(self) -> None:
         while True:
