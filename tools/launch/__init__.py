@@ -1,0 +1,1 @@
+"""`aeb up`: the process table, the restart policy and the process supervisor."""

@@ -1,0 +1,68 @@
+"""`aeb up`: start a local Zenoh router and the services of a process table, each in its
+own process; restart crashed services with backoff; prefix every output line with the
+process's name; stop everything on Ctrl-C or SIGTERM.
+
+    aeb up                                   # deploy/single-host.toml
+    aeb up --table deploy/ecu-a.toml         # one ECU's share
+    aeb up --only radar,camera               # some services (and the table's router)
+    aeb up --check                           # validate and print the commands
+"""
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from common.config.loader import ConfigError
+from common.service import stop_event_on_signals
+from tools.launch.supervisor import LinePrinter, Supervisor
+from tools.launch.table import load_table, resolve_launches
+
+DEFAULT_TABLE = Path(__file__).resolve().parent.parent / "deploy" / "single-host.toml"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="aeb up", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--table", "-t", default=str(DEFAULT_TABLE),
+                        help="process table (TOML), default deploy/single-host.toml")
+    parser.add_argument("--only", default="",
+                        help="comma-separated service names to start (router still starts)")
+    parser.add_argument("--no-router", action="store_true",
+                        help="do not start the table's router (one runs elsewhere)")
+    parser.add_argument("--check", action="store_true",
+                        help="validate the table, print the commands, start nothing")
+    parser.add_argument("--colour", choices=["auto", "always", "never"], default="auto")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Returns 0 after a requested stop, 1 when every process ended and one failed, and 2
+    for an invalid table (named file and field on stderr)."""
+    args = parse_args(argv)
+    only = {n.strip() for n in args.only.split(",") if n.strip()} or None
+    try:
+        table, workdir = load_table(args.table)
+        launches = resolve_launches(table, workdir, args.table, only, not args.no_router)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not launches:
+        print(f"error: {args.table}: nothing to start", file=sys.stderr)
+        return 2
+    if args.check:
+        for launch in launches:
+            env = " ".join(f"{k}={shlex.quote(v)}" for k, v in launch.env.items())
+            print(f"{launch.name}: {env + ' ' if env else ''}{shlex.join(launch.argv)}"
+                  f"  [restart={launch.restart.value}]")
+        return 0
+    colour = {"auto": None, "always": True, "never": False}[args.colour]
+    printer = LinePrinter(sys.stdout, ["up", *(launch.name for launch in launches)], colour)
+    stop = stop_event_on_signals()
+    supervisor = Supervisor(launches, printer)
+    supervisor.say(f"table {args.table}: {', '.join(launch.name for launch in launches)}")
+    return supervisor.run(stop)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
