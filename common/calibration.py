@@ -27,6 +27,14 @@ GROUND_TO_OPTICAL = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0
 
 _DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 _ORTHO_TOL = 1e-4
+# A field of view outside these bounds is a unit mistake (focal length in mm, not pixels)
+# or a lens the pinhole model cannot describe.
+FOV_MIN_DEG = 0.5
+FOV_MAX_DEG = 170.0
+# Plausibility bounds behind Calibration.warnings() (not errors: unusual rigs exist).
+WARN_AXIS_DEG = 60.0
+WARN_OFFSET_M = 5.0
+WARN_PITCH_DEG = 30.0
 
 Positive = Annotated[float, msgspec.Meta(gt=0)]
 
@@ -41,6 +49,7 @@ class Intrinsics(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     distortion: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        _require_finite("camera", (self.fx, self.fy, self.cx, self.cy, *self.distortion))
         if not 0 <= self.cx < self.width or not 0 <= self.cy < self.height:
             raise ValueError(
                 f"principal point ({self.cx}, {self.cy}) outside the {self.width}x{self.height}"
@@ -51,6 +60,14 @@ class Intrinsics(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
                 f"distortion has {len(self.distortion)} coefficients; OpenCV takes "
                 f"{', '.join(map(str, _DIST_LENGTHS))}"
             )
+        for axis, f, size in (("horizontal", self.fx, self.width),
+                              ("vertical", self.fy, self.height)):
+            fov = math.degrees(2 * math.atan(size / (2 * f)))
+            if not FOV_MIN_DEG <= fov <= FOV_MAX_DEG:
+                raise ValueError(
+                    f"{axis} field of view {fov:.3g} deg (size {size} px, focal {f} px) is "
+                    f"outside {FOV_MIN_DEG}-{FOV_MAX_DEG} deg: focal lengths are in pixels"
+                )
 
 
 class Pose(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -60,9 +77,12 @@ class Pose(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """
 
     position_m: tuple[float, float, float]
-    yaw_deg: float = 0.0
-    pitch_deg: float = 0.0
-    roll_deg: float = 0.0
+    yaw_deg: Annotated[float, msgspec.Meta(ge=-180, le=180)] = 0.0
+    pitch_deg: Annotated[float, msgspec.Meta(gt=-90, lt=90)] = 0.0
+    roll_deg: Annotated[float, msgspec.Meta(ge=-180, le=180)] = 0.0
+
+    def __post_init__(self) -> None:
+        _require_finite("pose", self.position_m)
 
 
 class Extrinsics(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -78,13 +98,21 @@ class Extrinsics(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError("give either `pose` or `r` with `t_m`, not both and not neither")
         if self.r is not None and self.t_m is None:
             raise ValueError("`r` needs `t_m`")
+        if self.t_m is not None:
+            _require_finite("t_m", self.t_m)
         if self.r is not None:
             r = np.array(self.r, dtype=float)
+            _require_finite("r", r.ravel())
             err = float(np.abs(r @ r.T - np.eye(3)).max())
             if err > _ORTHO_TOL:
                 raise ValueError(f"`r` is not orthonormal (|R R^T - I| = {err:.2g})")
             if np.linalg.det(r) < 0:
                 raise ValueError("`r` is a reflection (det < 0), not a rotation")
+
+
+def _require_finite(what: str, values: "tuple[float, ...] | np.ndarray") -> None:
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"`{what}` has a value that is not a finite number")
 
 
 class CalibrationFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -153,6 +181,37 @@ class Calibration:
                            "t_m": [float(v) for v in np.ravel(t)]},
         }
         return cls(parse_config(data, CalibrationFile, name or "<matrices>"), name)
+
+    @property
+    def camera_position_m(self) -> np.ndarray:
+        """The camera's optical centre in the radar ground frame: -R^T t."""
+        return -self.r.T @ self.t
+
+    def warnings(self) -> list[str]:
+        """Plausibility checks for a forward AEB rig, as sentences (empty: nothing odd).
+
+        Not errors, because unusual rigs exist; the camera logs them at start and
+        `aeb calib-check` prints them. Each one usually means a sign or frame mistake.
+        """
+        out = []
+        forward_depth = float(self.r[2, 0])   # optical z of the radar's forward axis
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, forward_depth))))
+        if angle > WARN_AXIS_DEG:
+            out.append(
+                f"the optical axis is {angle:.0f} deg away from the radar's forward axis: "
+                "is R inverted or given camera-to-radar? (X_cam = R X_radar + t)")
+        offset = float(np.linalg.norm(self.camera_position_m))
+        if offset > WARN_OFFSET_M:
+            out.append(f"the camera is {offset:.1f} m from the radar's ground origin: "
+                       "is t given in the wrong frame or unit? (metres; t = -R C)")
+        optical_z_in_ground = self.r[2]        # the optical axis in ground coordinates
+        pitch = math.degrees(math.asin(max(-1.0, min(1.0, -float(optical_z_in_ground[2])))))
+        if abs(pitch) > WARN_PITCH_DEG:
+            out.append(f"the camera is pitched {pitch:.0f} deg (positive: down)")
+        position = self.camera_position_m
+        if position[2] < 0:
+            out.append(f"the camera is {-position[2]:.2f} m below the ground (z is up)")
+        return out
 
     def to_camera(self, points_ground: np.ndarray) -> np.ndarray:
         """(N, 3) ground-frame points to (N, 3) camera-frame points."""

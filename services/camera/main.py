@@ -10,7 +10,7 @@ from common.log import kv, setup_logging
 from common.service import load_service_config, service_argparser, stop_event_on_signals
 from services.camera.node import EXIT_CONFIG, CameraNode
 from services.camera.source import SourceConfigError
-from services.camera.sources import build_source
+from services.camera.sources import build_source, check_source
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -22,9 +22,12 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals()
     try:
         cal = Calibration.load(settings.calibration)
-    except ConfigError as exc:
+        check_source(settings)
+    except (ConfigError, SourceConfigError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_CONFIG
+    for warning in cal.warnings():
+        log.warning(kv("calibration_implausible", file=settings.calibration, detail=warning))
     try:
         with Bus.open(cfg.zenoh, cfg.vehicle, f"camera/{settings.name}") as bus:
             try:
@@ -32,7 +35,10 @@ def main(argv: list[str] | None = None) -> int:
             except SourceConfigError as exc:
                 print(f"error: camera.source: {exc}", file=sys.stderr)
                 return EXIT_CONFIG
-            code = CameraNode(settings, cal, source, bus).run(stop)
+            node = CameraNode(settings, cal, source, bus)
+            code = node.run(stop)
+            if node.pipeline.fatal is not None:
+                print(f"error: camera.source: {node.pipeline.fatal}", file=sys.stderr)
     except BusError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_CONFIG

@@ -10,6 +10,19 @@ if TYPE_CHECKING:
     from common.bus import Bus
 
 
+def check_source(settings: cfg.CameraSettings) -> None:
+    """Checks that need no bus, so that main fails fast: a synthetic factory must import,
+    the realsense source needs pyrealsense2. Raises SourceConfigError."""
+    if isinstance(settings.source, cfg.RealSenseSource):
+        from services.camera.realsense import import_pyrealsense2
+
+        import_pyrealsense2()
+    if isinstance(settings.source, cfg.SyntheticSource):
+        from services.camera.synthetic import load_factory
+
+        load_factory(settings.source.factory)
+
+
 def build_source(settings: cfg.CameraSettings, cal: Calibration,
                  bus: "Bus | None" = None) -> FrameSource:
     """The source for `settings.source`; a source `fps` of 0 means the camera's fps.

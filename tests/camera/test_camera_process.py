@@ -65,3 +65,46 @@ def test_camera_process_publishes_frames_and_answers_info_queries(router, tmp_pa
             wait_for(lambda: not watch.is_alive("camera", "front"), 30, what="token gone")
         finally:
             cam.stop()
+
+
+def test_a_stalling_camera_is_reported_unhealthy_and_reopened(router, tmp_path):
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text(f"""
+[zenoh]
+connect = ["{router}"]
+[camera]
+name = "sim"
+calibration = "{CALIBRATION}"
+fps = 30.0
+stall_timeout_s = 0.3
+info_period_s = 0.1
+reopen_initial_s = 0.2
+stats_period_s = 0
+[camera.source]
+kind = "synthetic"
+factory = "tests.camera.plugins:stalling"
+options = {{ frames_per_open = 5, stall_s = 1.0 }}
+""")
+    with open_bus(router) as bus:
+        watch = HealthWatch(bus)
+        infos = Collector()
+        bus.subscribe(CAMERA_INFO, infos, camera="sim")
+        frames = Collector()
+        bus.subscribe(CAMERA_JPEG, frames, camera="sim")
+        cam = ServiceProcess("camera-sim", python_module("services.camera", "-c", str(cfg)),
+                             tmp_path)
+        try:
+            watch.wait_alive("camera", "sim")
+            stalled = infos.wait_until(lambda m: not m.healthy and "no frame" in m.status, 60)
+            assert stalled.source == "synthetic"
+            failed = infos.wait_until(lambda m: "reopening in" in m.status, 60)
+            assert "no frame within 1.0 s" in failed.status
+            back = infos.wait_until(lambda m: m.healthy and m.reopens >= 1, 60)
+            assert back.errors["source_error"] >= 1
+            # Frames flowed before and after the reopen, numbered without gaps.
+            frames.wait_count(6, 60)
+            seqs = [m.header.seq for m in frames.messages]
+            assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+        finally:
+            cam.stop()
+        assert cam.proc.returncode == 0, cam.output()

@@ -71,3 +71,50 @@ def test_invalid_calibration_names_the_problem(tmp_path, camera, extr, named):
     with pytest.raises(ConfigError) as err:
         Calibration.load(p)
     assert named in str(err.value)
+
+
+def write_cal(tmp_path, camera: str = "", extrinsics: str = "") -> str:
+    p = tmp_path / "cal.toml"
+    p.write_text("[camera]\nwidth = 848\nheight = 480\n"
+                 + (camera or "fx = 615.0\nfy = 615.0\ncx = 424.0\ncy = 240.0\n")
+                 + "[extrinsics.pose]\n"
+                 + (extrinsics or "position_m = [-0.8, 0.0, 1.3]\n"))
+    return str(p)
+
+
+@pytest.mark.parametrize(
+    ("camera", "extrinsics", "named"),
+    [
+        # A focal length in millimetres (the D435's 1.93 mm) instead of pixels.
+        ("fx = 1.93\nfy = 1.93\ncx = 424.0\ncy = 240.0\n", "", "focal lengths are in pixels"),
+        ("fx = 615.0\nfy = 615.0\ncx = 424.0\ncy = 240.0\ndistortion = [0.0, nan, 0.0, 0.0]\n",
+         "", "`camera` has a value that is not a finite number"),
+        ("", "position_m = [0.0, inf, 1.3]\n", "`pose` has a value that is not a finite"),
+        ("", "position_m = [0.0, 0.0, 1.3]\npitch_deg = 90.0\n", "$.extrinsics.pose.pitch_deg"),
+        ("", "position_m = [0.0, 0.0, 1.3]\nyaw_deg = 270.0\n", "$.extrinsics.pose.yaw_deg"),
+    ],
+)
+def test_unit_and_range_mistakes_are_rejected(tmp_path, camera, extrinsics, named):
+    with pytest.raises(ConfigError) as err:
+        Calibration.load(write_cal(tmp_path, camera, extrinsics))
+    assert named in str(err.value)
+
+
+def test_example_is_plausible_and_its_camera_sits_where_the_pose_says():
+    cal = Calibration.load(REPO_CAL)
+    assert cal.warnings() == []
+    np.testing.assert_allclose(cal.camera_position_m, [-0.8, 0.0, 1.3], atol=1e-12)
+    # D435 colour at 848x480: about 69 x 42 degrees.
+    assert math.degrees(2 * math.atan(424 / cal.k[0, 0])) == pytest.approx(69.2, abs=0.1)
+
+
+def test_warnings_catch_an_inverted_rotation_and_a_translation_in_millimetres(tmp_path):
+    good = Calibration.load(REPO_CAL)
+    # R given camera-to-radar (transposed) instead of radar-to-camera.
+    inverted = Calibration.from_matrices(848, 480, good.k, good.dist, good.r.T, good.t)
+    assert any("is R inverted" in w for w in inverted.warnings())
+    in_mm = Calibration.from_matrices(848, 480, good.k, good.dist, good.r, good.t * 1000)
+    assert any("wrong frame or unit" in w for w in in_mm.warnings())
+    pitched = Calibration.load(write_cal(
+        tmp_path, "", "position_m = [0.0, 0.0, 1.3]\npitch_deg = 45.0\n"))
+    assert pitched.warnings() == ["the camera is pitched 45 deg (positive: down)"]
