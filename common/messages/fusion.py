@@ -32,8 +32,11 @@ class VerifierStatus(enum.Enum):
 class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """One confirmed radar track after verification and decision.
 
-    Positions are the track predicted to the frame's capture time. `roi_xywh` is in pixels
-    of the frame, empty when not visible.
+    `x_m`, `y_m` are the track predicted to the frame's capture time (what was projected;
+    the prediction interval is -`frame_age_ms`). `range_m` and `range_rate_mps` are the
+    radar cycle's own values (what the decision used). `roi_xywh` is in pixels of the
+    frame, empty when not visible or not projected. `gate_detail` holds what a verifier
+    derived for this ROI (e.g. adapted thresholds), empty for fixed-parameter verifiers.
     """
 
     track_id: int
@@ -50,7 +53,8 @@ class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     decision: Decision
     reason: str                    # why this decision, for people and logs
     frame_seq: int | None
-    frame_age_ms: float | None     # frame capture to radar cycle stamp
+    frame_age_ms: float | None     # radar cycle stamp - frame capture (negative: newer frame)
+    gate_detail: dict[str, float] = msgspec.field(default_factory=dict)
 
 
 class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -63,6 +67,12 @@ class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     verifier_status: VerifierStatus
     targets: tuple[VerifiedTarget, ...]
     processing_ns: int             # tracks received -> decision made
+    camera: str = ""
+    unavailable_reason: str = ""   # why the verifier is unavailable, empty when OK
+    radar_age_ms: float | None = None  # radar cycle stamp -> processing (wall clocks)
+    frames_received: int = 0       # camera frames seen by this instance since start
+    frames_undecodable: int = 0    # ... of which could not be decoded (counted, skipped)
+    frames_dropped: int = 0        # ... dropped before decoding because the decoder lagged
 
 
 class BrakeCommand(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

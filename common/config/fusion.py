@@ -1,0 +1,118 @@
+"""Configuration of a fusion (verifier) instance: the `[fusion]` table.
+
+Defaults are what we would ship on a vehicle; `deploy/fusion-paper.toml` turns every
+addition to the paper's method off. docs/fusion.md says which field is which.
+"""
+
+import enum
+import re
+from typing import Annotated
+
+import msgspec
+
+from common.config.base import ServiceConfig
+from common.keys import RADAR_TRACKS
+
+_CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
+
+NonNegative = Annotated[float, msgspec.Meta(ge=0)]
+Positive = Annotated[float, msgspec.Meta(gt=0)]
+ParamValue = float | int | str | bool
+
+
+class UnverifiablePolicy(enum.Enum):
+    """What a threat becomes when the camera cannot check it (no usable frame, or the
+    track projects outside the image)."""
+
+    WARN = "warn"              # never brake on radar alone; raise a WARNING instead
+    IGNORE = "ignore"          # as if the camera had rejected it: NONE
+    RADAR_ONLY = "radar_only"  # decide on radar alone (BRAKE without the camera)
+
+
+class GateScope(enum.Enum):
+    CANDIDATES = "candidates"  # run the gate only where it can change the decision
+    ALL = "all"                # every visible confirmed track (densities for every track)
+
+
+class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Which camera, and how a frame is matched to a radar cycle."""
+
+    camera: str = "front"
+    # |frame capture - radar cycle| allowed; farther frames make the verifier unavailable.
+    max_skew_s: Positive = 0.1
+    # True: the frame nearest the radar cycle, with each track predicted (constant
+    # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
+    align: bool = True
+    ring_size: Annotated[int, msgspec.Meta(ge=1, le=64)] = 4
+    # Frames waiting for the decoder; the oldest is dropped (and counted) when full.
+    decode_queue: Annotated[int, msgspec.Meta(ge=1, le=16)] = 2
+
+
+class RoiSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    column_height_m: Positive = 2.2
+    # 0: the paper's column (a vertical line at the track); > 0 widens it to a box.
+    column_half_width_m: NonNegative = 0.0
+    padding_px: Annotated[int, msgspec.Meta(ge=0, le=500)] = 22
+
+
+class VerifierSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A verifier from the registry (services/fusion/verifiers.py) and its parameters;
+    parameters not given take the verifier's defaults."""
+
+    name: str = "edge_density"
+    params: dict[str, ParamValue] = msgspec.field(default_factory=dict)
+
+
+class CorridorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """In path iff |y - center_y_m| <= half_width_m + margin_m (radar frame, y left)."""
+
+    enabled: bool = True
+    half_width_m: NonNegative = 0.9
+    margin_m: NonNegative = 0.3
+    center_y_m: float = 0.0    # the vehicle's centre line in the radar frame
+
+
+class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    min_range_m: NonNegative = 3.0
+    max_range_m: Positive = 25.0
+    ttc_offset_s: NonNegative = 1.0        # TTC_eff = TTC - offset
+    brake_ttc_eff_s: float = 2.5           # BRAKE iff TTC_eff < this (and verified, in range)
+    warning_ttc_eff_s: float = 4.0         # WARNING iff TTC_eff < this
+    brake_level_pct: Annotated[float, msgspec.Meta(gt=0, le=100)] = 100.0
+    hold_s: NonNegative = 1.0              # a BRAKE is kept at least this long
+    unverifiable_policy: UnverifiablePolicy = UnverifiablePolicy.WARN
+    # Radar cycles older than this at processing time never start a brake (~2 cycles).
+    radar_max_age_s: Positive = RADAR_TRACKS.max_age_s or 0.16
+    corridor: CorridorSettings = msgspec.field(default_factory=CorridorSettings)
+
+    def __post_init__(self) -> None:
+        if self.min_range_m >= self.max_range_m:
+            raise ValueError("min_range_m must be below max_range_m")
+        if self.warning_ttc_eff_s < self.brake_ttc_eff_s:
+            raise ValueError("warning_ttc_eff_s must be at least brake_ttc_eff_s")
+
+
+class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    # Every key this instance publishes is under fusion/<instance>/.
+    instance: str = "primary"
+    radar_sensor: str = "front"
+    # Calibration TOML (common/calibration.py); relative paths are from the working directory.
+    calibration: str = "deploy/calibration/d435_848x480.toml"
+    gate_scope: GateScope = GateScope.CANDIDATES
+    frames: FrameSettings = msgspec.field(default_factory=FrameSettings)
+    roi: RoiSettings = msgspec.field(default_factory=RoiSettings)
+    verifier: VerifierSettings = msgspec.field(default_factory=VerifierSettings)
+    decision: DecisionSettings = msgspec.field(default_factory=DecisionSettings)
+    stats_interval_s: Positive = 10.0      # how often counters are logged
+
+    def __post_init__(self) -> None:
+        for field, value in (("instance", self.instance), ("radar_sensor", self.radar_sensor),
+                             ("frames.camera", self.frames.camera)):
+            if not _CHUNK.match(value):
+                raise ValueError(f"{field} {value!r} must be letters, digits, '_', '-' or '.'")
+        if not self.calibration:
+            raise ValueError("calibration must name a calibration TOML file")
+
+
+class FusionConfig(ServiceConfig, frozen=True, forbid_unknown_fields=True):
+    fusion: FusionSettings = msgspec.field(default_factory=FusionSettings)

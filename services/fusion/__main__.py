@@ -1,0 +1,5 @@
+import sys
+
+from services.fusion.main import main
+
+sys.exit(main())

@@ -1,0 +1,224 @@
+"""The fusion core: one radar cycle and the decoded frames in, VerifiedTargets and
+exactly one BrakeCommand out. Pure: no Zenoh, no clocks (the shell passes the time), no
+threads; its only state is the brake hold and the sequence number.
+
+Per confirmed track: kinematics and the radar's threat (decision.py); the frame nearest
+the cycle within the skew bound (frames.py), the track predicted to that frame's time,
+its column projected to a ROI (roi.py), the verifier (verifiers.py), the decision. The
+command is the most severe decision (ties: the smallest TTC_eff), or a heartbeat.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.config.fusion import FusionSettings, GateScope
+from common.messages import (
+    BrakeCommand,
+    Decision,
+    Header,
+    RadarTrack,
+    RadarTracks,
+    Verification,
+    VerifiedTarget,
+    VerifiedTargets,
+    VerifierStatus,
+)
+from services.fusion.decision import SEVERITY, BrakeHold, decide, kinematics, radar_threat
+from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
+from services.fusion.roi import ColumnProjector, Roi
+from services.fusion.verifiers import Verifier
+
+_NO_ROI: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class CycleResult:
+    targets: VerifiedTargets
+    command: BrakeCommand
+
+
+class FusionCore:
+    def __init__(self, settings: FusionSettings, projector: ColumnProjector,
+                 verifier: Verifier) -> None:
+        self.s = settings
+        self.projector = projector
+        self.verifier = verifier
+        self.verifier_params = verifier.params()
+        self.source = f"fusion/{settings.instance}"
+        self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
+        self._seq = 0
+        self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
+        self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
+
+    def process(self, tracks: RadarTracks, feed: FrameFeed, now_wall_ns: int,
+                now_mono_ns: int) -> CycleResult:
+        """Decide one radar cycle. `now_wall_ns` judges the radar's age; `now_mono_ns`
+        stamps the messages' pub_mono_ns (the shell refreshes it at publish)."""
+        s = self.s
+        confirmed = [t for t in tracks.tracks if t.confirmed]
+        age_ns = now_wall_ns - tracks.header.stamp_ns
+        # A stamp from the future beyond the bound means unsynchronised clocks: the age
+        # is unknown, so the cycle is treated as stale.
+        radar_stale = abs(age_ns) > self._radar_max_age_ns
+        frame: DecodedFrame | None = None
+        reason_unavailable = ""
+        if radar_stale:
+            status = VerifierStatus.STALE_RADAR
+        else:
+            frame = select_frame(feed.frames, tracks.header.stamp_ns, self._max_skew_ns,
+                                 s.frames.align)
+            if frame is None:
+                status = VerifierStatus.UNAVAILABLE
+                reason_unavailable = unavailable_reason(feed, tracks.header.stamp_ns,
+                                                        self._max_skew_ns)
+            else:
+                status = VerifierStatus.OK
+
+        if radar_stale:
+            targets = [self._stale_target(t, age_ns) for t in confirmed]
+        else:
+            targets = self._verify_all(confirmed, tracks.header.stamp_ns, frame,
+                                       reason_unavailable)
+
+        command = self._command(tracks, targets, status, reason_unavailable, age_ns,
+                                now_wall_ns, now_mono_ns)
+        header = Header(seq=command.header.seq, source=self.source,
+                        stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
+        verified = VerifiedTargets(
+            header=header, instance=s.instance, radar_sensor=tracks.sensor,
+            radar_seq=tracks.header.seq, verifier=self.verifier.name,
+            verifier_params=self.verifier_params, verifier_status=status,
+            targets=tuple(targets), processing_ns=0, camera=s.frames.camera,
+            unavailable_reason=reason_unavailable, radar_age_ms=age_ns / 1e6,
+            frames_received=feed.received, frames_undecodable=feed.undecodable,
+            frames_dropped=feed.dropped)
+        return CycleResult(verified, command)
+
+    def _stale_target(self, t: RadarTrack, age_ns: int) -> VerifiedTarget:
+        k = kinematics(t, self.s.decision)
+        reason = (f"radar stale (age {age_ns / 1e6:.0f} ms, max "
+                  f"{self._radar_max_age_ns / 1e6:.0f} ms)")
+        return VerifiedTarget(
+            track_id=t.track_id, x_m=t.x_m, y_m=t.y_m, range_m=t.range_m,
+            range_rate_mps=t.range_rate_mps, in_path=k.in_path,
+            verification=Verification.NOT_CHECKED, roi_xywh=_NO_ROI, density=None,
+            ttc_s=k.ttc_s, ttc_eff_s=k.ttc_eff_s, decision=Decision.NONE, reason=reason,
+            frame_seq=None, frame_age_ms=None)
+
+    def _verify_all(self, confirmed: list[RadarTrack], radar_stamp_ns: int,
+                    frame: DecodedFrame | None, reason_unavailable: str
+                    ) -> list[VerifiedTarget]:
+        ds = self.s.decision
+        if frame is not None and self.s.frames.align:
+            dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9
+        else:
+            dt_s = 0.0
+        xy = np.array([(t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s) for t in confirmed])
+        rois: list[Roi | None] = (self.projector.rois(xy) if frame is not None and confirmed
+                                  else [None] * len(confirmed))
+        frame_seq = frame.seq if frame is not None else None
+        frame_age_ms = (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None
+        gate_all = self.s.gate_scope is GateScope.ALL
+        out = []
+        for i, t in enumerate(confirmed):
+            k = kinematics(t, ds)
+            threat, threat_reason = radar_threat(k, ds)
+            roi = rois[i]
+            density: float | None = None
+            detail: dict[str, float] = {}
+            if frame is None:
+                verification = Verification.UNAVAILABLE
+                if threat is not Decision.NONE:
+                    threat_reason = f"{threat_reason}; {reason_unavailable}"
+            elif roi is None:
+                verification = Verification.NOT_VISIBLE
+            elif threat is Decision.NONE and not gate_all:
+                verification = Verification.NOT_CHECKED
+            else:
+                result = self.verifier.verify(frame.gray, roi)
+                density, detail = result.density, result.detail
+                verification = (Verification.VERIFIED if result.verified
+                                else Verification.REJECTED)
+            decision, reason = decide(threat, threat_reason, verification,
+                                      ds.unverifiable_policy)
+            if verification is Verification.REJECTED and density is not None:
+                reason = f"{reason}; density {density:.4f}"
+            out.append(VerifiedTarget(
+                track_id=t.track_id, x_m=float(xy[i, 0]), y_m=float(xy[i, 1]),
+                range_m=t.range_m, range_rate_mps=t.range_rate_mps, in_path=k.in_path,
+                verification=verification, roi_xywh=tuple(roi) if roi is not None else _NO_ROI,
+                density=density, ttc_s=k.ttc_s, ttc_eff_s=k.ttc_eff_s, decision=decision,
+                reason=reason, frame_seq=frame_seq, frame_age_ms=frame_age_ms,
+                gate_detail=detail))
+        return out
+
+    def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
+                     now_mono_ns: int) -> CycleResult:
+        """The cycle's command when processing raised: still exactly one command (NONE, or
+        the held BRAKE), the verifier unavailable, the error as the reason."""
+        age_ns = now_wall_ns - tracks.header.stamp_ns
+        reason = f"fusion error: {error}"
+        command = self._command(tracks, [], VerifierStatus.UNAVAILABLE, reason, age_ns,
+                                now_wall_ns, now_mono_ns, summary=reason)
+        header = Header(seq=command.header.seq, source=self.source,
+                        stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
+        targets = VerifiedTargets(
+            header=header, instance=self.s.instance, radar_sensor=tracks.sensor,
+            radar_seq=tracks.header.seq, verifier=self.verifier.name,
+            verifier_params=self.verifier_params, verifier_status=VerifierStatus.UNAVAILABLE,
+            targets=(), processing_ns=0, camera=self.s.frames.camera,
+            unavailable_reason=reason, radar_age_ms=age_ns / 1e6)
+        return CycleResult(targets, command)
+
+    def _command(self, tracks: RadarTracks, targets: list[VerifiedTarget],
+                 status: VerifierStatus, reason_unavailable: str, age_ns: int,
+                 now_wall_ns: int, now_mono_ns: int, summary: str = "") -> BrakeCommand:
+        ds = self.s.decision
+        worst: VerifiedTarget | None = None
+        for tgt in targets:
+            if worst is None or _more_severe(tgt, worst):
+                worst = tgt
+        decision = worst.decision if worst is not None else Decision.NONE
+        if summary:
+            reason = summary
+        elif worst is None:
+            reason = "no confirmed tracks"
+        elif decision is Decision.NONE:
+            reason = f"no threat among {len(targets)} confirmed tracks"
+        else:
+            reason = f"track {worst.track_id}: {worst.reason}"
+        if status is VerifierStatus.STALE_RADAR:
+            reason = f"radar stale (age {age_ns / 1e6:.0f} ms): {reason}"
+        elif status is VerifierStatus.UNAVAILABLE and decision is Decision.NONE and not summary:
+            reason = f"verifier unavailable ({reason_unavailable}): {reason}"
+        track_id = worst.track_id if worst is not None and decision is not Decision.NONE else -1
+        held = self.hold.update(decision, track_id, now_wall_ns)
+        if held:
+            track_id = self.hold.track_id
+            left_ms = self.hold.remaining_ns(now_wall_ns) / 1e6
+            reason = f"BRAKE held {left_ms:.0f} ms more; this cycle: {decision.value}, {reason}"
+            decision = Decision.BRAKE
+            worst = next((t for t in targets if t.track_id == track_id), None)
+        seq = self._seq
+        self._seq += 1
+        return BrakeCommand(
+            header=Header(seq=seq, source=self.source, stamp_ns=tracks.header.stamp_ns,
+                          pub_mono_ns=now_mono_ns),
+            instance=self.s.instance, decision=decision,
+            brake_level_pct=ds.brake_level_pct if decision is Decision.BRAKE else 0.0,
+            verifier_status=status, held=held, track_id=track_id,
+            range_m=worst.range_m if worst is not None and track_id >= 0 else None,
+            ttc_s=worst.ttc_s if worst is not None and track_id >= 0 else None,
+            reason=reason, radar_seq=tracks.header.seq,
+            radar_last_frame_mono_ns=tracks.last_frame_mono_ns)
+
+
+def _more_severe(a: VerifiedTarget, b: VerifiedTarget) -> bool:
+    sa, sb = SEVERITY[a.decision], SEVERITY[b.decision]
+    if sa != sb:
+        return sa > sb
+    inf = float("inf")
+    ta = a.ttc_eff_s if a.ttc_eff_s is not None else inf
+    tb = b.ttc_eff_s if b.ttc_eff_s is not None else inf
+    return ta < tb

@@ -1,0 +1,174 @@
+"""Camera frames for fusion: decoded to grayscale on arrival, in a worker thread, into a
+small ring of recent frames; and the pure choice of the frame for a radar cycle.
+
+The radar callback never waits for a JPEG decode: it takes a snapshot of the ring (a
+tuple of references, under a lock held for microseconds) and works on frames already
+decoded. Decoding goes through common.imaging.decode_gray, the project's one path.
+"""
+
+import logging
+import threading
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.imaging import ImageDecodeError, decode_gray
+from common.log import RateLimitedLog
+from common.messages import CompressedFrame, DecodeError, decode
+
+
+@dataclass(frozen=True, slots=True)
+class DecodedFrame:
+    camera: str
+    seq: int
+    stamp_ns: int          # capture time (wall clock)
+    rx_mono_ns: int        # when fusion received it
+    gray: np.ndarray       # 2-D uint8, never modified after decoding
+
+
+@dataclass(frozen=True, slots=True)
+class FrameFeed:
+    """What the decoder holds at one instant: recent frames (oldest first) and counters."""
+
+    frames: tuple[DecodedFrame, ...] = ()
+    received: int = 0
+    undecodable: int = 0
+    dropped: int = 0
+    last_error: str = ""
+    last_error_rx_mono_ns: int | None = None
+
+
+class FrameError(ValueError):
+    """A frame that cannot be used; `reason` is a short counter name."""
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+def decode_frame(payload: bytes, rx_mono_ns: int, width: int, height: int) -> DecodedFrame:
+    """A CompressedFrame payload to a grayscale frame of the calibration's size.
+
+    Raises FrameError (reasons: "message", "jpeg", "size").
+    """
+    try:
+        msg = decode(payload, CompressedFrame)
+    except DecodeError as exc:
+        raise FrameError("message", str(exc)) from exc
+    if (msg.width, msg.height) != (width, height):
+        raise FrameError("size", f"frame is {msg.width}x{msg.height}, calibration "
+                                 f"{width}x{height}")
+    try:
+        gray = decode_gray(msg.jpeg, width, height)
+    except ImageDecodeError as exc:
+        raise FrameError("jpeg", f"frame seq {msg.header.seq}: {exc}") from exc
+    return DecodedFrame(msg.camera, msg.header.seq, msg.header.stamp_ns, rx_mono_ns, gray)
+
+
+def select_frame(frames: tuple[DecodedFrame, ...], radar_stamp_ns: int, max_skew_ns: int,
+                 align: bool) -> DecodedFrame | None:
+    """The frame to verify a radar cycle with, or None.
+
+    align: the frame nearest in capture time to the radar cycle. Otherwise (the paper):
+    the newest frame. Either way the frame must be within max_skew_ns of the cycle.
+    """
+    if not frames:
+        return None
+    if align:
+        best = min(frames, key=lambda f: abs(f.stamp_ns - radar_stamp_ns))
+    else:
+        best = max(frames, key=lambda f: f.rx_mono_ns)
+    return best if abs(best.stamp_ns - radar_stamp_ns) <= max_skew_ns else None
+
+
+def unavailable_reason(feed: FrameFeed, radar_stamp_ns: int, max_skew_ns: int) -> str:
+    """Why no frame could be used for this cycle (for people and logs)."""
+    newest = max(feed.frames, key=lambda f: f.rx_mono_ns) if feed.frames else None
+    if feed.last_error_rx_mono_ns is not None and (
+            newest is None or feed.last_error_rx_mono_ns > newest.rx_mono_ns):
+        return f"newest frame unusable: {feed.last_error}"
+    if newest is None:
+        return "no camera frame received"
+    nearest = min(feed.frames, key=lambda f: abs(f.stamp_ns - radar_stamp_ns))
+    skew_ms = (nearest.stamp_ns - radar_stamp_ns) / 1e6
+    return (f"nearest frame {skew_ms:+.0f} ms from the radar cycle "
+            f"(max {max_skew_ns / 1e6:.0f} ms)")
+
+
+class FrameDecoder:
+    """Decodes frames in its own thread; `submit` (from Zenoh's thread) never blocks."""
+
+    def __init__(self, width: int, height: int, ring_size: int, queue_size: int,
+                 log: logging.Logger) -> None:
+        self.width = width
+        self.height = height
+        self._pending: deque[tuple[bytes, int]] = deque()
+        self._queue_size = queue_size
+        self._ring: deque[DecodedFrame] = deque(maxlen=ring_size)
+        self._cond = threading.Condition()
+        self._received = 0
+        self._undecodable = 0
+        self._dropped = 0
+        self._last_error = ""
+        self._last_error_rx: int | None = None
+        self.errors_by_reason: dict[str, int] = {}
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="frame-decoder", daemon=True)
+        self._log = log
+        self._rl = RateLimitedLog(log)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+
+    def submit(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        """Queue a raw CompressedFrame; when the queue is full the oldest waiting frame is
+        dropped (and counted): a newer frame is always worth more."""
+        with self._cond:
+            self._received += 1
+            if len(self._pending) >= self._queue_size:
+                self._pending.popleft()
+                self._dropped += 1
+            self._pending.append((payload, rx_mono_ns))
+            self._cond.notify()
+
+    def decode_now(self, payload: bytes, rx_mono_ns: int) -> None:
+        """Decode one payload in the caller's thread (the worker's body; also for tests)."""
+        try:
+            frame = decode_frame(payload, rx_mono_ns, self.width, self.height)
+        except FrameError as exc:
+            with self._cond:
+                self._undecodable += 1
+                self.errors_by_reason[exc.reason] = self.errors_by_reason.get(exc.reason, 0) + 1
+                self._last_error = str(exc)
+                self._last_error_rx = rx_mono_ns
+            self._rl.warning(f"frame:{exc.reason}", "frame_unusable", reason=exc.reason,
+                             error=str(exc))
+            return
+        with self._cond:
+            self._ring.append(frame)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._pending and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                payload, rx = self._pending.popleft()
+            try:
+                self.decode_now(payload, rx)
+            except Exception as exc:  # a decoder bug must not end frame delivery silently
+                self._rl.error("frame:bug", "frame_decoder_failed", error=repr(exc))
+
+    def snapshot(self) -> FrameFeed:
+        with self._cond:
+            return FrameFeed(tuple(self._ring), self._received, self._undecodable,
+                             self._dropped, self._last_error, self._last_error_rx)

@@ -1,0 +1,87 @@
+"""`aeb fusion`: verify radar tracks in the camera image and decide NONE / WARNING / BRAKE.
+
+    aeb fusion --config deploy/fusion.toml
+    aeb fusion --config deploy/fusion-candidate.toml     # a shadow A/B instance
+
+Exit codes: 0 after SIGINT/SIGTERM, 2 for an invalid configuration or calibration
+(named on stderr), 1 when the bus cannot be opened.
+"""
+
+import sys
+
+import msgspec
+
+from common.bus import Bus, BusError
+from common.calibration import Calibration
+from common.config.fusion import FusionConfig
+from common.config.loader import ConfigError
+from common.log import kv, setup_logging
+from common.service import load_service_config, service_argparser, stop_event_on_signals
+from services.fusion.core import FusionCore
+from services.fusion.frames import FrameDecoder
+from services.fusion.node import FusionNode, run_until
+from services.fusion.roi import ColumnGeometry, ColumnProjector
+from services.fusion.verifiers import VerifierConfigError, create
+
+
+def build_core(cfg: FusionConfig) -> tuple[FusionCore, Calibration]:
+    """The core of a configured instance. Raises ConfigError or VerifierConfigError."""
+    s = cfg.fusion
+    cal = Calibration.load(s.calibration)
+    verifier = create(s.verifier.name, s.verifier.params)
+    geometry = ColumnGeometry(s.roi.column_height_m, s.roi.column_half_width_m,
+                              s.roi.padding_px)
+    return FusionCore(s, ColumnProjector(cal, geometry), verifier), cal
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = service_argparser("fusion", __doc__ or "")
+    parser.add_argument("--instance", help="instance name, overrides fusion.instance")
+    parser.add_argument("--calibration", help="calibration TOML, overrides fusion.calibration")
+    args = parser.parse_args(argv)
+    cfg = load_service_config(args, FusionConfig)
+    overrides = {k: v for k, v in (("instance", args.instance),
+                                   ("calibration", args.calibration)) if v}
+    if overrides:
+        try:
+            cfg = msgspec.convert(
+                msgspec.to_builtins(msgspec.structs.replace(
+                    cfg, fusion=msgspec.structs.replace(cfg.fusion, **overrides))),
+                FusionConfig)
+        except msgspec.ValidationError as exc:
+            print(f"error: invalid command-line override: {exc}", file=sys.stderr)
+            return 2
+    s = cfg.fusion
+    log = setup_logging(f"fusion.{s.instance}", cfg.log.level.value)
+    try:
+        core, cal = build_core(cfg)
+    except (ConfigError, VerifierConfigError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = stop_event_on_signals()
+    try:
+        bus = Bus.open(cfg.zenoh, cfg.vehicle, core.source)
+    except BusError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    with bus:
+        decoder = FrameDecoder(cal.width, cal.height, s.frames.ring_size,
+                               s.frames.decode_queue, log)
+        node = FusionNode(bus, s, core, decoder, log)
+        node.start()
+        token = bus.declare_health("fusion", s.instance)
+        log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,
+                    params=core.verifier_params, radar=s.radar_sensor,
+                    camera=s.frames.camera, calibration=s.calibration))
+        try:
+            run_until(stop, node, s.stats_interval_s)
+        finally:
+            token.undeclare()
+            node.stop()
+            node.log_stats()
+    log.info(kv("fusion_stopped"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
