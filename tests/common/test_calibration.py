@@ -118,3 +118,15 @@ def test_warnings_catch_an_inverted_rotation_and_a_translation_in_millimetres(tm
     pitched = Calibration.load(write_cal(
         tmp_path, "", "position_m = [0.0, 0.0, 1.3]\npitch_deg = 45.0\n"))
     assert pitched.warnings() == ["the camera is pitched 45 deg (positive: down)"]
+
+
+def test_the_documented_r_and_t_equal_the_example_pose(tmp_path):
+    """docs/calibration.md shows both forms of the example; they must agree."""
+    p = tmp_path / "cal.toml"
+    p.write_text("[camera]\nwidth = 848\nheight = 480\nfx = 615.0\nfy = 615.0\n"
+                 "cx = 424.0\ncy = 240.0\n[extrinsics]\n"
+                 "r = [[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]\n"
+                 "t_m = [0.0, 1.3, 0.8]\n")
+    matrices, pose = Calibration.load(p), Calibration.load(REPO_CAL)
+    np.testing.assert_allclose(matrices.r, pose.r, atol=1e-12)
+    np.testing.assert_allclose(matrices.t, pose.t, atol=1e-12)
