@@ -25,7 +25,7 @@ class RealSenseSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, t
     """
 
     serial: str = ""            # empty: the first device found
-    bag: str = ""               # a .bag recording to play instead of a device
+    bag: str = ""               # a recording (.bag, or .db3 from librealsense 2.59) to play
     loop: bool = False          # bag only: play again from the start at its end
     width: Annotated[int, msgspec.Meta(gt=0)] = 848
     height: Annotated[int, msgspec.Meta(gt=0)] = 480
