@@ -11,7 +11,7 @@ The road is rendered with the pinhole model (distortion ignored); obstacles are 
 with the full calibration.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import cv2
@@ -52,7 +52,6 @@ class Scene:
     seed: int = 0
     clutter: bool = True           # buildings and trees near the horizon
     lane_half_width_m: float = 1.75
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 def _ground_coordinates(cal: Calibration) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -10,9 +10,10 @@ records the verifier's name and parameters.
   verified iff d >= tau (0.025).
 - `adaptive_edge_density`: the same gate made robust to night scenes, the paper's weak
   point (precision 0.27 in the evening, from street lights and sensor noise). Canny
-  thresholds rise with the ROI's measured noise, and edges around saturated highlights
-  (lamps, headlight glare, reflections) are not counted. On a clean, well-lit ROI it
-  equals `edge_density` exactly.
+  thresholds rise with the ROI's measured noise; in a dark ROI, edges around small
+  saturated blobs (lamps, headlights, reflections) are not counted and the density is
+  compared with its own threshold. On a lit ROI with little noise it equals
+  `edge_density` exactly.
 
 To add one: write a class with `name`, `params()` and `verify()`, a msgspec Struct for its
 parameters, and register a factory with `@register("name")` (see docs/fusion.md).
@@ -155,9 +156,9 @@ class AdaptiveEdgeDensityParams(msgspec.Struct, frozen=True, forbid_unknown_fiel
     tau_dark: Fraction = 0.0175
     saturation: Annotated[int, msgspec.Meta(ge=1, le=255)] = 235
     highlight_px: Annotated[int, msgspec.Meta(ge=0, le=50)] = 4
-    # More of the ROI than this saturated is a large bright object (a lit truck, a white
-    # wall), not a lamp: nothing is masked then.
-    max_masked: Fraction = 0.5
+    # A saturated blob larger than this share of the ROI is an object (a white box in the
+    # headlights, a lit truck), not a lamp: it is never masked.
+    max_light: Fraction = 0.05
 
     def __post_init__(self) -> None:
         _check_thresholds(self.low, self.high)
@@ -194,6 +195,17 @@ class AdaptiveEdgeDensity:
         diff = cv2.absdiff(patch[:, 1:], patch[:, :-1])
         return _median_u8(diff) * _MAD_TO_SIGMA
 
+    def _lights(self, patch: np.ndarray, area: int) -> np.ndarray | None:
+        """Mask (255) of the small saturated blobs and their rims, or None if none."""
+        sat = cv2.threshold(patch, self.p.saturation - 1, 255, cv2.THRESH_BINARY)[1]
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(sat, connectivity=8)
+        small = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] <= self.p.max_light * area) + 1
+        if len(small) == 0:
+            return None
+        if len(small) < n - 1:
+            sat = np.where(np.isin(labels, small), np.uint8(255), np.uint8(0))
+        return cv2.dilate(sat, self._kernel) if self._kernel is not None else sat
+
     def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
         p = self.p
         patch = gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
@@ -206,11 +218,9 @@ class AdaptiveEdgeDensity:
         dark = _median_u8(patch) <= p.dark_median
         masked_frac = 0.0
         if dark and cv2.minMaxLoc(patch)[1] >= p.saturation:
-            mask = cv2.threshold(patch, p.saturation - 1, 255, cv2.THRESH_BINARY)[1]
-            if self._kernel is not None:
-                mask = cv2.dilate(mask, self._kernel)
-            n_masked = cv2.countNonZero(mask)
-            if n_masked <= p.max_masked * pixels:
+            mask = self._lights(patch, roi.area)
+            if mask is not None:
+                n_masked = cv2.countNonZero(mask)
                 n_edges -= cv2.countNonZero(cv2.bitwise_and(edges, mask))
                 pixels -= n_masked
                 masked_frac = n_masked / roi.area
