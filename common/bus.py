@@ -247,7 +247,9 @@ class Bus:
             sample = reply.ok
             try:
                 if sample is None:
-                    raise DecodeError(f"error reply: {reply.err}")
+                    err = reply.err
+                    raise DecodeError(
+                        f"error reply: {err.payload.to_string() if err is not None else '?'}")
                 out.append((decode(sample.payload.to_bytes(), msg_type), str(sample.key_expr)))
             except DecodeError as exc:
                 self.decode_errors.add(spec.name)

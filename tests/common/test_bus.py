@@ -89,3 +89,40 @@ def test_client_started_before_its_router_connects_when_it_appears(tmp_path):
                 return bus.decode_errors.get("brake_status")
 
             wait_for(garbage_counted, 30, 0.05)
+
+
+def test_queryable_answers_typed_queries_and_failures_are_counted(router):
+    """Bus.declare_queryable / Bus.query (added for CameraInfo)."""
+    from common.keys import CAMERA_INFO
+    from common.messages import CameraInfo
+
+    def info(camera: str) -> CameraInfo:
+        return CameraInfo(
+            header=Header(seq=0, source=f"camera/{camera}", stamp_ns=1, pub_mono_ns=2),
+            camera=camera, width=848, height=480, k=(1.0,) * 9, dist=(), r=(1.0,) * 9,
+            t_m=(0.0,) * 3, fps=30.0, source="folder", frames_published=0,
+            frames_dropped=0, read_errors=0, healthy=True, status="")
+
+    def broken() -> CameraInfo:
+        raise RuntimeError("no calibration")
+
+    with open_bus(router, source="srv") as srv, open_bus(router, source="cli") as cli:
+        q1 = srv.declare_queryable(CAMERA_INFO, lambda: info("front"), camera="front")
+        q2 = srv.declare_queryable(CAMERA_INFO, broken, camera="rear")
+        try:
+            replies = wait_for(lambda: cli.query(CAMERA_INFO, 5.0, camera="front"), 30)
+            assert [(m.camera, key) for m, key in replies] == [
+                ("front", "aeb/ego/camera/front/info")]
+            # Wildcard: the good reply arrives, the failing one is counted on both sides.
+            seen: list[list[str]] = []
+
+            def wildcard_saw_the_failure() -> bool:
+                seen.append([m.camera for m, _ in cli.query(CAMERA_INFO, 5.0)])
+                return cli.decode_errors.get("camera_info") >= 1
+
+            wait_for(wildcard_saw_the_failure, 30)
+            assert seen[-1] == ["front"]
+            assert srv.callback_errors.get("camera_info") == cli.decode_errors.get("camera_info")
+        finally:
+            q1.undeclare()
+            q2.undeclare()
