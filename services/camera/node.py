@@ -76,6 +76,8 @@ class CameraNode:
                 if self.pipeline.fatal is not None:
                     return EXIT_CONFIG
                 if self.pipeline.ended.is_set() and self.settings.exit_at_end:
+                    self.pipeline.wait_idle(timeout_s=5.0)   # publish the last frame
+                    self._info_pub.put(self.info())
                     return EXIT_OK
                 if self.settings.stats_period_s and mono_ns() >= next_stats:
                     next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9)

@@ -21,7 +21,7 @@ from common.imaging import encode_jpeg
 from common.log import RateLimitedLog, kv
 from common.messages import CompressedFrame
 from services.camera.core import Backoff, Health, Offer, PublishCore
-from services.camera.source import EndOfStream, FrameSource, SourceConfigError
+from services.camera.source import EndOfStream, Frame, FrameSource, SourceConfigError
 
 _log = logging.getLogger("camera")
 
@@ -68,6 +68,7 @@ class FramePipeline:
         self._encode = encode
         self._clock = clock
         self._stopping = threading.Event()
+        self._busy = False   # the publish thread holds a frame (guarded by lock)
         self._rl = RateLimitedLog(_log)
         self._threads = [
             threading.Thread(target=self._capture_loop, name="camera-capture", daemon=True),
@@ -82,6 +83,13 @@ class FramePipeline:
     def start(self) -> None:
         for t in self._threads:
             t.start()
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until no frame is pending or being encoded/published (e.g. to flush the
+        last frame of a finished source). Returns False on timeout."""
+        with self.lock:
+            return self.lock.wait_for(
+                lambda: self.core.pending is None and not self._busy, timeout_s)
 
     def stop(self, timeout_s: float = 3.0) -> None:
         """Stop both threads. A source blocked in read() longer than `timeout_s` is left
@@ -142,7 +150,7 @@ class FramePipeline:
                     continue
                 self.health.frame(now)
                 if result is Offer.PENDING:
-                    self.lock.notify()
+                    self.lock.notify_all()   # the publish thread, and wait_idle callers
             if first:
                 self.backoff.reset()
                 first = False
@@ -168,25 +176,34 @@ class FramePipeline:
                 if self._stopping.is_set():
                     return
                 frame = self.core.take()
+                self._busy = True
             assert frame is not None
-            t0 = self._clock()
             try:
-                jpeg = self._encode(frame.image, self._quality)
-            except Exception as exc:
+                self._encode_and_publish(frame)
+            finally:
                 with self.lock:
-                    self.core.stats.errors.add("encode_error")
-                self._rl.error("encode", "encode_failed", error=repr(exc))
-                continue
-            t1 = self._clock()
+                    self._busy = False
+                    self.lock.notify_all()
+
+    def _encode_and_publish(self, frame: Frame) -> None:
+        t0 = self._clock()
+        try:
+            jpeg = self._encode(frame.image, self._quality)
+        except Exception as exc:
             with self.lock:
-                msg = self.core.message(frame, jpeg, self._clock())
-            try:
-                self._publish(msg)
-            except Exception as exc:
-                with self.lock:
-                    self.core.stats.errors.add("publish_error")
-                self._rl.error("publish", "publish_failed", error=repr(exc))
-                continue
+                self.core.stats.errors.add("encode_error")
+            self._rl.error("encode", "encode_failed", error=repr(exc))
+            return
+        t1 = self._clock()
+        with self.lock:
+            msg = self.core.message(frame, jpeg, self._clock())
+        try:
+            self._publish(msg)
+        except Exception as exc:
             with self.lock:
-                self.timing.encode_ns.append(t1 - t0)
-                self.timing.publish_mono_ns.append(msg.header.pub_mono_ns)
+                self.core.stats.errors.add("publish_error")
+            self._rl.error("publish", "publish_failed", error=repr(exc))
+            return
+        with self.lock:
+            self.timing.encode_ns.append(t1 - t0)
+            self.timing.publish_mono_ns.append(msg.header.pub_mono_ns)
