@@ -1,0 +1,8 @@
+"""The closed-loop scenario simulator (A SIMULATION of the vehicle, the radar, the camera
+and the road; the real paths are the services' CAN, camera and serial inputs).
+
+Pure parts: `scenario` (data files), `world` (ego and object kinematics, collisions),
+`radar_model` (what an ARS408 would report), `render` (camera frames), `verdict`.
+Shells: `radar_feed` (CAN frames on a python-can bus), `camera_source` (the camera
+service's synthetic-source plugin), `runner` (the real-time closed loop), `plot`.
+"""

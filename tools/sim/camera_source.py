@@ -1,0 +1,134 @@
+"""The simulator's camera: a synthetic-source plugin of the camera service that renders
+the simulated world. A SIMULATION (the real sources are RealSense, OpenCV, folders).
+
+Camera config::
+
+    [camera.source]
+    kind = "synthetic"
+    factory = "tools.sim.camera_source:make_source"
+
+The source follows `sim/world` (published by the simulator) on the camera's own bus,
+extrapolates the latest world state to each frame's capture time (objects at their
+velocities, the ego with its acceleration) and renders it with the camera's calibration,
+so the frame matches what fusion projects radar tracks into. Before the first world
+state arrives it renders the empty road (so the camera is up before the simulator);
+once the simulator has been seen, a world older than `stale_after_s` is a camera failure
+(`SourceError`): fusion then sees no fresh frames, as with a real camera that stopped.
+"""
+
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from common.calibration import Calibration
+from common.clock import wall_ns
+from common.keys import SIM_WORLD
+from common.messages.sim import SimWorld
+from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError, SourceError
+from services.camera.synthetic import SyntheticContext
+from tools.sim.render import Renderer
+from tools.sim.scenario import CameraLook, ObjectKind
+from tools.sim.world import Body
+
+MAX_EXTRAPOLATION_S = 0.25
+
+
+def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
+    """The world's bodies and ego x extrapolated to `stamp_ns` (at most 0.25 s ahead)."""
+    dt = min(max((stamp_ns - world.header.stamp_ns) / 1e9, 0.0), MAX_EXTRAPOLATION_S)
+    v = world.ego_speed_mps
+    a = world.ego_accel_mps2
+    if a < 0 and v + a * dt < 0:          # stops within dt
+        ego_x = world.ego_x_m + v * v / (-2 * a)
+    else:
+        ego_x = world.ego_x_m + v * dt + 0.5 * a * dt * dt
+    bodies = [Body(o.index, ObjectKind(o.kind), o.x_m + o.vx_mps * dt, o.y_m + o.vy_mps * dt,
+                   o.yaw_deg, o.length_m, o.width_m, o.height_m, o.vx_mps, o.vy_mps)
+              for o in world.objects]
+    return bodies, ego_x
+
+
+class SimCameraSource(FrameSource):
+    """Renders `sim/world` at a fixed rate. A SIMULATION."""
+
+    kind = "synthetic"
+
+    def __init__(self, calibration: Calibration, fps: float,
+                 subscribe: Callable[[Callable[[SimWorld, str], None]], object] | None,
+                 stale_after_s: float = 1.0,
+                 clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep,
+                 wall_clock: Callable[[], int] = wall_ns) -> None:
+        super().__init__()
+        self.renderer = Renderer(calibration)
+        self.fps = fps
+        self.stale_after_s = stale_after_s
+        self._pacer = Pacer(fps, clock, sleep)
+        self._clock = clock
+        self._wall = wall_clock
+        self._lock = threading.Lock()
+        self._world: SimWorld | None = None
+        self._world_at = 0.0
+        self._scene = (-1, -1)
+        self._subscription = subscribe(self.on_world) if subscribe is not None else None
+
+    def describe(self) -> str:
+        return (f"simulated camera {self.renderer.width}x{self.renderer.height} at "
+                f"{self.fps:g} fps, rendering sim/world (simulation)")
+
+    def on_world(self, world: SimWorld, key: str = "") -> None:
+        with self._lock:
+            if self._world is None or world.header.stamp_ns >= self._world.header.stamp_ns:
+                self._world = world
+                self._world_at = self._clock()
+
+    def open(self) -> None:
+        self._pacer.reset()
+
+    def frame_at(self, stamp_ns: int) -> np.ndarray:
+        """The rendered frame for the latest world at `stamp_ns`. Raises SourceError when
+        the simulator went silent."""
+        with self._lock:
+            world, seen_at = self._world, self._world_at
+        if world is None:
+            return self.renderer.render([], 0.0)
+        age = self._clock() - seen_at
+        if age > self.stale_after_s:
+            raise SourceError(f"no simulator world for {age:.1f} s (is the simulator running?)")
+        if (world.run, world.seed) != self._scene:
+            self._scene = (world.run, world.seed)
+            self.renderer.new_scene(world.seed)
+        self.renderer.set_look(CameraLook(brightness=world.brightness, noise=world.noise))
+        bodies, ego_x = bodies_at(world, stamp_ns)
+        return self.renderer.render(bodies, ego_x)
+
+    def read(self) -> Frame:
+        self._pacer.wait()
+        stamp = self._wall()
+        return Frame(image=self.frame_at(stamp), stamp_ns=stamp)
+
+
+def make_source(context: SyntheticContext) -> SimCameraSource:
+    """The camera plugin factory. Options: `stale_after_s` (default 1.0).
+
+    Raises SourceConfigError without a calibration or a bus (it must run inside the
+    camera service), or for unknown options.
+    """
+    unknown = set(context.options) - {"stale_after_s"}
+    if unknown:
+        raise SourceConfigError(f"tools.sim.camera_source: unknown options {sorted(unknown)}")
+    if context.calibration is None:
+        raise SourceConfigError("tools.sim.camera_source needs the camera's calibration")
+    bus = context.bus
+    if bus is None:
+        raise SourceConfigError("tools.sim.camera_source needs the camera's bus "
+                                "(it follows sim/world)")
+    if (context.calibration.width, context.calibration.height) != (context.width,
+                                                                    context.height):
+        raise SourceConfigError("calibration size differs from the camera's frame size")
+    return SimCameraSource(
+        context.calibration, context.fps,
+        lambda cb: bus.subscribe(SIM_WORLD, cb),
+        stale_after_s=float(context.options.get("stale_after_s", 1.0)))

@@ -1,0 +1,267 @@
+"""What a Continental ARS408-21 would report about the simulated world, pure.
+
+A SIMULATION of the sensor's output (the real path is the radar on CAN). Per radar cycle
+it returns the objects (object mode) or clusters (cluster mode) in the radar frame: x
+forward, y left, origin at the radar on the ego's front; velocities relative to the ego.
+Imperfections, from `RadarLook`: measurement noise, occasional ghost returns, dropouts,
+several returns per large object (split objects, several clusters), occlusion by nearer
+objects, object IDs that are stable but sometimes swap.
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from tools.sim.scenario import ObjectKind, RadarLook
+from tools.sim.world import Body, nearest_point
+
+# Field of view of the ARS408-21: near scan 0.2..70 m within +-60 deg (narrowing with
+# range), far scan to 250 m within +-9 deg.
+NEAR_RANGE_M = 70.0
+NEAR_HALF_FOV_DEG = 60.0
+FAR_RANGE_M = 250.0
+FAR_HALF_FOV_DEG = 9.0
+MIN_RANGE_M = 0.2
+
+# Typical radar cross sections (dBsm) seen from behind or the side.
+RCS_DBSM = {ObjectKind.CAR: 10.0, ObjectKind.BOX: -8.0, ObjectKind.PEDESTRIAN: -5.0,
+            ObjectKind.BICYCLE: -2.0}
+# 0x60D Class codes
+OBJ_CLASS = {ObjectKind.CAR: 1, ObjectKind.BOX: 0, ObjectKind.PEDESTRIAN: 3,
+             ObjectKind.BICYCLE: 5}
+CLUSTERS_PER_OBJECT = {ObjectKind.CAR: (3, 5), ObjectKind.BOX: (1, 1),
+                       ObjectKind.PEDESTRIAN: (1, 2), ObjectKind.BICYCLE: (1, 2)}
+OCCLUDED_FRACTION = 0.7     # an object mostly hidden behind nearer ones is not seen
+LARGE_OBJECT_M = 1.5        # objects wider or longer than this may split
+
+
+class DynProp:
+    MOVING = 0
+    STATIONARY = 1
+    ONCOMING = 2
+    CROSSING_MOVING = 6
+
+
+@dataclass(frozen=True)
+class RadarReturn:
+    """One object or cluster of a cycle, in the radar frame."""
+
+    id: int
+    x_m: float
+    y_m: float
+    vx_mps: float               # relative to the ego
+    vy_mps: float
+    rcs_dbsm: float
+    dyn_prop: int
+    obj_class: int
+    length_m: float
+    width_m: float
+    orientation_deg: float
+    prob_of_exist: int          # 0x60C code, 7: <= 100 %
+    meas_state: int             # 0x60C code: 1 new, 2 measured
+    source: int                 # the scene object's index, -1 for a ghost
+
+
+def dyn_prop(vx_abs: float, vy_abs: float) -> int:
+    if abs(vx_abs) < 0.3 and abs(vy_abs) < 0.3:
+        return DynProp.STATIONARY
+    if vx_abs < -0.3:
+        return DynProp.ONCOMING
+    if abs(vy_abs) > abs(vx_abs):
+        return DynProp.CROSSING_MOVING
+    return DynProp.MOVING
+
+
+def in_field_of_view(x: float, y: float) -> bool:
+    r = math.hypot(x, y)
+    if x <= 0 or r < MIN_RANGE_M:
+        return False
+    az = abs(math.degrees(math.atan2(y, x)))
+    return (r <= NEAR_RANGE_M and az <= NEAR_HALF_FOV_DEG) or (
+        r <= FAR_RANGE_M and az <= FAR_HALF_FOV_DEG)
+
+
+@dataclass(frozen=True)
+class _Seen:
+    body: Body
+    corners: np.ndarray     # radar frame
+    near: tuple[float, float]
+    range_m: float
+    az_lo: float
+    az_hi: float
+
+
+def _visible(bodies: list[Body], ego_x: float) -> list[_Seen]:
+    """Bodies in the field of view and not hidden behind nearer ones, nearest first."""
+    seen: list[_Seen] = []
+    for b in bodies:
+        c = b.corners() - np.array([ego_x, 0.0])
+        if c[:, 0].max() <= 0:
+            continue
+        nx, ny = nearest_point(c, 0.0, 0.0)
+        if not in_field_of_view(nx, ny):
+            continue
+        az = np.arctan2(c[:, 1], np.maximum(c[:, 0], 1e-3))
+        seen.append(_Seen(b, c, (nx, ny), math.hypot(nx, ny), float(az.min()),
+                          float(az.max())))
+    seen.sort(key=lambda s: s.range_m)
+    out: list[_Seen] = []
+    for s in seen:
+        width = max(s.az_hi - s.az_lo, 1e-6)
+        covered = 0.0
+        # Union of the nearer visible objects' angular intervals over this one.
+        spans = sorted((max(o.az_lo, s.az_lo), min(o.az_hi, s.az_hi)) for o in out
+                       if o.range_m < s.range_m and o.az_hi > s.az_lo and o.az_lo < s.az_hi)
+        end = s.az_lo
+        for lo, hi in spans:
+            lo = max(lo, end)
+            if hi > lo:
+                covered += hi - lo
+                end = hi
+        if covered / width < OCCLUDED_FRACTION:
+            out.append(s)
+    return out
+
+
+def _face_points(seen: _Seen, n: int, rng: np.random.Generator) -> list[tuple[float, float]]:
+    """n points spread over the edges of a footprint that face the radar."""
+    c = seen.corners
+    edges = []
+    for i in range(4):
+        a, b = c[i], c[(i + 1) % 4]
+        mid = (a + b) / 2
+        normal = np.array([b[1] - a[1], a[0] - b[0]])   # outward for counter-clockwise
+        if np.dot(normal, -mid) > 0:
+            edges.append((a, b, float(np.hypot(*(b - a)))))
+    if not edges:
+        return [seen.near] * n
+    total = sum(length for _, _, length in edges)
+    points = []
+    for k in range(n):
+        s = (k + rng.uniform(0.2, 0.8)) / n * total
+        for i, (a, b, length) in enumerate(edges):
+            if s <= length or i == len(edges) - 1:
+                p = a + min(s / max(length, 1e-9), 1.0) * (b - a)
+                points.append((float(p[0]), float(p[1])))
+                break
+            s -= length
+    return points
+
+
+class RadarModel:
+    """Stateful across cycles only for what the real radar keeps: object IDs, ghosts
+    that live a cycle or two, and the random generator (seeded: runs repeat)."""
+
+    def __init__(self, look: RadarLook, seed: int = 0) -> None:
+        self.look = look
+        self.rng = np.random.default_rng(seed)
+        self._ids: dict[tuple[int, int], int] = {}
+        self._next_id = 0
+        self._ghosts: list[tuple[int, RadarReturn]] = []   # (cycles left, return)
+
+    def _new_id(self) -> int:
+        used = set(self._ids.values()) | {g.id for _, g in self._ghosts}
+        for _ in range(256):
+            candidate = self._next_id
+            self._next_id = (self._next_id + 1) % 256
+            if candidate not in used:
+                return candidate
+        raise RuntimeError("more than 256 radar objects")
+
+    def _object_id(self, key: tuple[int, int]) -> tuple[int, bool]:
+        if key in self._ids:
+            return self._ids[key], False
+        self._ids[key] = self._new_id()
+        return self._ids[key], True
+
+    def _noisy(self, x: float, y: float, vx: float, vy: float, rcs: float
+               ) -> tuple[float, float, float, float, float]:
+        look, rng = self.look, self.rng
+        return (x + rng.normal(0, look.range_sigma_m), y + rng.normal(0, look.lateral_sigma_m),
+                vx + rng.normal(0, look.velocity_sigma_mps),
+                vy + rng.normal(0, look.velocity_sigma_mps),
+                rcs + rng.normal(0, look.rcs_sigma_dbsm))
+
+    def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float
+              ) -> list[RadarReturn]:
+        """The returns of one radar cycle for the world as it is now."""
+        visible = _visible(bodies, ego_x_m)
+        if self.look.mode == "objects":
+            returns = self._objects(visible, ego_speed_mps)
+        else:
+            returns = self._clusters(visible, ego_speed_mps)
+        returns += self._ghost_returns(ego_speed_mps)
+        returns.sort(key=lambda r: math.hypot(r.x_m, r.y_m))   # sort index 1: by range
+        if self.look.mode == "clusters":
+            returns = [_with_id(r, i) for i, r in enumerate(returns)]
+        return returns
+
+    def _objects(self, visible: list[_Seen], ego_speed: float) -> list[RadarReturn]:
+        look, rng = self.look, self.rng
+        out = []
+        alive_keys: set[tuple[int, int]] = set()
+        for s in visible:
+            b = s.body
+            alive_keys.add((b.index, 0))
+            if rng.random() < look.dropout_probability:
+                continue
+            points = [s.near]
+            large = max(b.length_m, b.width_m) > LARGE_OBJECT_M
+            if large and rng.random() < look.split_probability:
+                points += _face_points(s, 1, rng)
+                alive_keys.add((b.index, 1))
+            for part, (px, py) in enumerate(points):
+                oid, new = self._object_id((b.index, part))
+                x, y, vx, vy, rcs = self._noisy(px, py, b.vx_mps - ego_speed, b.vy_mps,
+                                                RCS_DBSM[b.kind] - 3.0 * part)
+                out.append(RadarReturn(
+                    oid, x, y, vx, vy, rcs, dyn_prop(b.vx_mps, b.vy_mps), OBJ_CLASS[b.kind],
+                    b.length_m, b.width_m, b.yaw_deg, 7, 1 if new else 2, b.index))
+        for key in [k for k in self._ids if k not in alive_keys and k[1] == 0]:
+            del self._ids[key]
+        for key in [k for k in self._ids if k[1] == 1 and k not in alive_keys]:
+            del self._ids[key]
+        if len(self._ids) >= 2 and rng.random() < look.id_swap_probability:
+            a, b2 = rng.choice(len(self._ids), 2, replace=False)
+            keys = list(self._ids)
+            ka, kb = keys[int(a)], keys[int(b2)]
+            self._ids[ka], self._ids[kb] = self._ids[kb], self._ids[ka]
+        return out
+
+    def _clusters(self, visible: list[_Seen], ego_speed: float) -> list[RadarReturn]:
+        rng = self.rng
+        out = []
+        for s in visible:
+            b = s.body
+            if rng.random() < self.look.dropout_probability:
+                continue
+            lo, hi = CLUSTERS_PER_OBJECT[b.kind]
+            n = int(rng.integers(lo, hi + 1))
+            points = [s.near] + (_face_points(s, n - 1, rng) if n > 1 else [])
+            rcs0 = RCS_DBSM[b.kind] - 10 * math.log10(n)
+            for px, py in points:
+                x, y, vx, vy, rcs = self._noisy(px, py, b.vx_mps - ego_speed, b.vy_mps, rcs0)
+                out.append(RadarReturn(0, x, y, vx, vy, rcs, dyn_prop(b.vx_mps, b.vy_mps), 0,
+                                       0.0, 0.0, 0.0, 7, 2, b.index))
+        return out
+
+    def _ghost_returns(self, ego_speed: float) -> list[RadarReturn]:
+        """Clutter that looks like a stationary target for one cycle (two in object
+        mode, where the radar's own tracker holds it briefly)."""
+        rng = self.rng
+        self._ghosts = [(left - 1, g) for left, g in self._ghosts if left > 1]
+        for _ in range(int(rng.poisson(self.look.ghost_rate_per_cycle))):
+            r = rng.uniform(2.0, 60.0)
+            az = math.radians(rng.uniform(-45.0, 45.0))
+            ghost = RadarReturn(
+                self._new_id() if self.look.mode == "objects" else 0,
+                r * math.cos(az), r * math.sin(az),
+                -ego_speed + rng.normal(0, 0.5), rng.normal(0, 0.5), rng.uniform(-15.0, 3.0),
+                DynProp.STATIONARY, 0, 0.5, 0.5, 0.0, int(rng.integers(1, 4)), 1, -1)
+            self._ghosts.append((2 if self.look.mode == "objects" else 1, ghost))
+        return [g for _, g in self._ghosts]
+
+
+def _with_id(r: RadarReturn, new_id: int) -> RadarReturn:
+    return replace(r, id=new_id)

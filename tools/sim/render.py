@@ -1,0 +1,291 @@
+"""The simulated camera, pure: 848x480 BGR frames of the simulated world, rendered with
+the same calibration (K, distortion, radar-to-camera R and t) that fusion projects with.
+
+A SIMULATION of the camera (the real path is the RealSense/OpenCV sources). The road is
+a textured ground plane (asphalt, lane markings, shoulders, grass) mapped per pixel by
+intersecting each pixel's ray with the ground, with coarser texture levels far away so
+that distant texels do not alias into false edges, and a haze that blends the ground
+into the sky at the horizon. Cars and boxes are textured 3-D boxes; pedestrians and
+bicycles are camera-facing cut-outs. Objects are drawn far to near, so nearer ones hide
+farther ones as a camera would see them.
+"""
+
+import math
+
+import cv2
+import numpy as np
+
+from common.calibration import Calibration
+from tools.sim import sprites
+from tools.sim.scenario import CameraLook, ObjectKind
+from tools.sim.world import Body
+
+MAX_GROUND_M = 250.0
+HAZE_M = 120.0
+_MIP_FACTORS = (1, 4, 16)        # texture levels: 2 cm, 8 cm, 32 cm per texel
+_SHADE_REAR, _SHADE_SIDE, _SHADE_TOP = 1.0, 0.78, 1.12
+_NOISE_BANK = 4
+
+
+class Renderer:
+    """Renders frames for one calibration. Building it precomputes the per-pixel ground
+    geometry and the textures (about a second); `render` then costs a few ms."""
+
+    def __init__(self, calibration: Calibration, seed: int = 0,
+                 look: CameraLook | None = None) -> None:
+        self.cal = calibration
+        self.look = look or CameraLook()
+        self.width, self.height = calibration.width, calibration.height
+        self.cam_pos = -calibration.r.T @ calibration.t      # camera centre, ground frame
+        self._rng = np.random.default_rng(seed)
+        self._seed = seed
+        self._ground_geometry()
+        self._textures()
+        self._sprites: dict[tuple[int, str, str], sprites.Sprite] = {}
+        self._noise: list[tuple[np.ndarray, np.ndarray]] = []
+        self._frame = 0
+        self.set_look(self.look)
+
+    def new_scene(self, seed: int) -> None:
+        """Forget the objects' textures: the next objects get their own, from `seed`."""
+        self._seed = seed
+        self._sprites.clear()
+
+    def set_look(self, look: CameraLook) -> None:
+        """Change brightness and sensor noise (cheap: the geometry and textures stay)."""
+        if look == self.look and (self._noise or look.noise == 0):
+            return
+        self.look = look
+        # Sensor noise, the same on the three channels, added and subtracted with
+        # saturation (uint8 throughout: rendering must keep up with 30 fps).
+        self._noise = []
+        for _ in range(_NOISE_BANK if look.noise > 0 else 0):
+            n = np.repeat(np.round(self._rng.normal(0, look.noise, (self.height, self.width, 1))),
+                          3, axis=2)
+            self._noise.append((np.clip(n, 0, 255).astype(np.uint8),
+                                np.clip(-n, 0, 255).astype(np.uint8)))
+
+    # -- static geometry ----------------------------------------------------------------
+
+    def _ground_geometry(self) -> None:
+        h, w = self.height, self.width
+        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        pix = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
+        norm = cv2.undistortPoints(pix, self.cal.k, self.cal.dist).reshape(h, w, 2)
+        rays = np.concatenate([norm, np.ones((h, w, 1))], axis=2) @ self.cal.r  # R^T d
+        dz = rays[..., 2]
+        cz = self.cam_pos[2]
+        hits = dz < -1e-6
+        s = np.where(hits, -cz / np.where(hits, dz, -1.0), 0.0)
+        gx = self.cam_pos[0] + s * rays[..., 0]
+        gy = self.cam_pos[1] + s * rays[..., 1]
+        dist = np.hypot(gx - self.cam_pos[0], gy - self.cam_pos[1])
+        self.ground = hits & (dist < MAX_GROUND_M)
+        gx = np.where(self.ground, gx, 0.0)
+        gy = np.where(self.ground, gy, 0.0)
+        # Texture coordinates (texels of level 0): column from +y (left) to -y.
+        col0 = ((sprites.ROAD_HALF_WIDTH_M - gy) / sprites.ROAD_RES_M).astype(np.float32)
+        row0 = (gx / sprites.ROAD_RES_M).astype(np.float32)
+        # A texture level per image row, from the row's largest texel footprint (on a
+        # level road the footprint grows row by row towards the horizon).
+        step = np.abs(np.diff(gx, axis=0, append=gx[-1:])) / sprites.ROAD_RES_M
+        step = np.where(self.ground, step, 0.0).max(axis=1)
+        row_level = np.where(step > 10.0, 2, np.where(step > 2.5, 1, 0))
+        ground_rows = np.nonzero(self.ground.any(axis=1))[0]
+        self._bands: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []
+        if len(ground_rows):
+            r = int(ground_rows[0])
+            last = int(ground_rows[-1]) + 1
+            while r < last:
+                lv = int(row_level[r])
+                r_end = r + 1
+                while r_end < last and int(row_level[r_end]) == lv:
+                    r_end += 1
+                f = _MIP_FACTORS[lv]
+                self._bands.append((lv, r, r_end, np.ascontiguousarray(col0[r:r_end] / f),
+                                    np.ascontiguousarray(row0[r:r_end] / f)))
+                r = r_end
+        # out = road * weight + bias: haze over distant ground, the sky where no ground.
+        fog = 1.0 - np.exp(-np.where(self.ground, dist, MAX_GROUND_M) / HAZE_M)
+        ground = self.ground[..., None]
+        self._weight = np.where(self.ground, 1.0 - fog, 0.0).astype(np.float32)
+        self._weight_bg = (1.0 - self._weight).astype(np.float32)
+        elev = np.degrees(np.arctan2(dz, np.hypot(rays[..., 0], rays[..., 1])))
+        t = np.clip(elev / 35.0, 0.0, 1.0)[..., None]
+        top = np.array([215, 170, 120], np.float64)
+        sky = sprites.HAZE_BGR * (1 - t) + top * t
+        self._background = np.where(ground, sprites.HAZE_BGR, sky).round().astype(np.uint8)
+
+    def _textures(self) -> None:
+        base = sprites.road_texture(self._rng)
+        self._tex = []
+        for f in _MIP_FACTORS:
+            tex = base
+            if f > 1:
+                tex = cv2.resize(cv2.GaussianBlur(base, (0, 0), f * 0.6),
+                                 (base.shape[1] // f, base.shape[0] // f),
+                                 interpolation=cv2.INTER_AREA)
+            self._tex.append(tex)
+
+    # -- per frame ------------------------------------------------------------------------
+
+    def _road(self, ego_x_m: float) -> np.ndarray:
+        img = self._background.copy()
+        if not self._bands:
+            return img
+        shift = np.float32((ego_x_m % sprites.ROAD_TILE_M) / sprites.ROAD_RES_M)
+        for lv, r0, r1, mx, my in self._bands:
+            texels = cv2.remap(self._tex[lv], mx, my + shift / _MIP_FACTORS[lv],
+                               cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+            img[r0:r1] = cv2.blendLinear(texels, self._background[r0:r1],
+                                         self._weight[r0:r1], self._weight_bg[r0:r1])
+        return img
+
+    def render(self, bodies: list[Body], ego_x_m: float) -> np.ndarray:
+        """One BGR uint8 frame of `bodies` (world frame) seen from the ego at `ego_x_m`."""
+        img = self._road(ego_x_m)
+        rel = [(b, np.array([b.x_m - ego_x_m, b.y_m])) for b in bodies]
+        cam = self.cam_pos[:2]
+        rel.sort(key=lambda item: -float(np.hypot(*(item[1] - cam))))
+        for body, centre in rel:
+            if centre[0] - cam[0] < 0.3:
+                continue    # behind the camera
+            self._shadow(img, body, centre)
+            if body.kind in (ObjectKind.CAR, ObjectKind.BOX):
+                self._box(img, body, centre)
+            else:
+                self._cutout(img, body, centre)
+        brightness = self.look.brightness
+        if brightness != 1.0:
+            img = cv2.convertScaleAbs(img, alpha=brightness)
+        if self._noise:
+            up, down = self._noise[self._frame % len(self._noise)]
+            cv2.add(img, up, dst=img)
+            cv2.subtract(img, down, dst=img)
+            self._frame += 1
+        return img
+
+    # -- objects --------------------------------------------------------------------------
+
+    def _project(self, points: np.ndarray) -> np.ndarray | None:
+        uv, in_front = self.cal.project(points)
+        if not in_front.all():
+            return None
+        return uv.astype(np.float32)
+
+    def _paste(self, img: np.ndarray, sprite: np.ndarray, quad: np.ndarray, shade: float) -> None:
+        """Warp a BGRA sprite onto an image quad (TL, TR, BR, BL) and blend by alpha."""
+        x0 = max(math.floor(quad[:, 0].min()), 0)
+        y0 = max(math.floor(quad[:, 1].min()), 0)
+        x1 = min(math.ceil(quad[:, 0].max()) + 1, self.width)
+        y1 = min(math.ceil(quad[:, 1].max()) + 1, self.height)
+        if x1 <= x0 or y1 <= y0:
+            return
+        sh, sw = sprite.shape[:2]
+        src = np.array([[0, 0], [sw, 0], [sw, sh], [0, sh]], np.float32)
+        m = cv2.getPerspectiveTransform(src, quad - np.array([x0, y0], np.float32))
+        warped = cv2.warpPerspective(sprite, m, (x1 - x0, y1 - y0), flags=cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0))
+        alpha = warped[:, :, 3].astype(np.float32)
+        colour = warped[:, :, :3]
+        if shade != 1.0:
+            colour = cv2.convertScaleAbs(colour, alpha=shade)
+        region = img[y0:y1, x0:x1]
+        region[:] = cv2.blendLinear(colour, region, alpha, 255.0 - alpha)
+
+    def _sprite(self, body: Body, face: str) -> sprites.Sprite:
+        key = (body.index, body.kind.value, face)
+        if key not in self._sprites:
+            rng = np.random.default_rng((self._seed, body.index, hash(face) % 1000))
+            colour = sprites.CAR_COLOURS[(body.index + self._seed) % len(sprites.CAR_COLOURS)]
+            h = body.height_m
+            if body.kind is ObjectKind.BOX:
+                size = body.width_m if face in ("rear", "front") else body.length_m
+                sprite = sprites.cardboard(rng, size, h if face != "top" else body.width_m)
+            elif face == "top":
+                sprite = sprites.plain(colour, body.width_m, body.length_m)
+            elif face == "side":
+                sprite = sprites.car_side(colour, rng, body.length_m, h)
+            else:
+                sprite = sprites.car_rear(colour, rng, body.width_m, h, front=face == "front")
+            self._sprites[key] = sprite
+        return self._sprites[key]
+
+    def _box(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
+        c = body.corners() - np.array([body.x_m, body.y_m]) + centre
+        cam = self.cam_pos
+        h = body.height_m
+        faces = {0: "side", 1: "rear", 2: "side", 3: "front"}
+        for i, face in faces.items():
+            a, b = c[i], c[(i + 1) % 4]
+            normal = np.array([b[1] - a[1], a[0] - b[0]])
+            if np.dot(normal, cam[:2] - (a + b) / 2) <= 0:
+                continue
+            quad3 = np.array([[a[0], a[1], h], [b[0], b[1], h], [b[0], b[1], 0.0],
+                              [a[0], a[1], 0.0]])
+            quad = self._project(quad3)
+            if quad is None:
+                continue
+            shade = _SHADE_REAR if face != "side" else _SHADE_SIDE
+            self._paste(img, self._sprite(body, face).image, quad, shade)
+        if cam[2] > h:
+            top = np.array([[c[k][0], c[k][1], h] for k in (3, 0, 1, 2)])
+            quad = self._project(top)
+            if quad is not None:
+                self._paste(img, self._sprite(body, "top").image, quad, _SHADE_TOP)
+
+    def _cutout(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
+        cam = self.cam_pos[:2]
+        view = centre - cam
+        view /= max(float(np.hypot(*view)), 1e-6)
+        right = np.array([view[1], -view[0]])
+        speed = math.hypot(body.vx_mps, body.vy_mps)
+        heading = (np.array([body.vx_mps, body.vy_mps]) / speed if speed > 0.1 else
+                   np.array([math.cos(math.radians(body.yaw_deg)),
+                             math.sin(math.radians(body.yaw_deg))]))
+        side = abs(float(np.dot(heading, right))) > 0.7
+        stride = 0
+        if body.kind is ObjectKind.PEDESTRIAN and side and speed > 0.1:
+            stride = round(2 * math.sin(2 * math.pi * (abs(body.x_m) + abs(body.y_m)) / 1.4))
+        key = f"{'side' if side else 'front'}{stride}"
+        cache = (body.index, body.kind.value, key)
+        if cache not in self._sprites:
+            rng = np.random.default_rng((self._seed, body.index))
+            if body.kind is ObjectKind.PEDESTRIAN:
+                self._sprites[cache] = sprites.pedestrian(rng, side, stride / 2)
+            else:
+                self._sprites[cache] = sprites.bicycle(rng, side)
+        sprite = self._sprites[cache]
+        image = sprite.image
+        if side and float(np.dot(heading, right)) < 0:
+            flipped = (body.index, body.kind.value, key + "-flipped")
+            if flipped not in self._sprites:
+                self._sprites[flipped] = sprites.Sprite(
+                    np.ascontiguousarray(image[:, ::-1]), sprite.width_m, sprite.height_m)
+            image = self._sprites[flipped].image
+        scale = body.height_m / 1.75
+        half = sprite.width_m * scale / 2
+        top = sprite.height_m * scale
+        quad3 = np.array([[*(centre - right * half), top], [*(centre + right * half), top],
+                          [*(centre + right * half), 0.0], [*(centre - right * half), 0.0]])
+        quad = self._project(quad3)
+        if quad is not None:
+            self._paste(img, image, quad, 1.0)
+
+    def _shadow(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
+        c = (body.corners() - np.array([body.x_m, body.y_m])) * 1.08 + centre
+        quad = self._project(np.column_stack([c, np.zeros(4)]))
+        if quad is None:
+            return
+        x0 = max(int(quad[:, 0].min()) - 3, 0)
+        y0 = max(int(quad[:, 1].min()) - 3, 0)
+        x1 = min(int(quad[:, 0].max()) + 4, self.width)
+        y1 = min(int(quad[:, 1].max()) + 4, self.height)
+        if x1 <= x0 or y1 <= y0:
+            return
+        poly = np.zeros((y1 - y0, x1 - x0), np.float32)
+        cv2.fillConvexPoly(poly, np.round(quad - [x0, y0]).astype(np.int32), 1.0)
+        mask = np.asarray(cv2.GaussianBlur(poly, (0, 0), 1.5), np.float32)
+        region = img[y0:y1, x0:x1]
+        region[:] = cv2.blendLinear(region, np.zeros_like(region), 1.0 - 0.45 * mask,
+                                    0.45 * mask)

@@ -1,0 +1,155 @@
+"""Scenarios as data: TOML files under tools/sim/scenarios/, validated at load.
+
+World frame: x along the road (forward), y left, z up, origin on the ground below the
+ego's radar at t = 0. The ego drives along y = 0 and never steers. An object's `x_m`,
+`y_m` is the centre of its footprint; `yaw_deg` turns its body (0: lengthwise along the
+road, 90: across it). See docs/simulator.md for the format.
+"""
+
+import enum
+import tomllib
+from pathlib import Path
+from typing import Annotated
+
+import msgspec
+
+from common.config.loader import ConfigError, parse_config
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+Positive = Annotated[float, msgspec.Meta(gt=0)]
+NonNeg = Annotated[float, msgspec.Meta(ge=0)]
+
+
+class ScenarioKind(enum.Enum):
+    THREAT = "threat"          # a brake is needed: pass iff no collision
+    NO_THREAT = "no_threat"    # no brake is needed: pass iff no brake was applied
+
+
+class ObjectKind(enum.Enum):
+    CAR = "car"
+    BOX = "box"                # e.g. the paper's cardboard box
+    PEDESTRIAN = "pedestrian"
+    BICYCLE = "bicycle"        # with its rider
+
+
+# length (along the body), width, height in metres
+DEFAULT_SIZE: dict[ObjectKind, tuple[float, float, float]] = {
+    ObjectKind.CAR: (4.4, 1.8, 1.5),
+    ObjectKind.BOX: (0.6, 0.6, 0.6),
+    ObjectKind.PEDESTRIAN: (0.35, 0.55, 1.75),
+    ObjectKind.BICYCLE: (1.75, 0.6, 1.75),
+}
+
+
+class Motion(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Constant-speed motion, optionally started by the ego's approach and limited in
+    distance (a pedestrian who steps into the lane and stops)."""
+
+    speed_mps: NonNeg
+    heading_deg: float = 0.0             # direction of travel: 0 forward, 90 left, -90 right
+    trigger_gap_m: NonNeg | None = None  # start when ego radar x >= object x - gap; None: t=0
+    distance_m: Positive | None = None   # stop after this far; None: never
+
+
+class SceneObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    kind: ObjectKind
+    x_m: float
+    y_m: float = 0.0
+    yaw_deg: float = 0.0
+    size_m: tuple[Positive, Positive, Positive] | None = None   # length, width, height
+    motion: Motion | None = None
+    name: str = ""
+
+    def size(self) -> tuple[float, float, float]:
+        return self.size_m or DEFAULT_SIZE[self.kind]
+
+
+class EgoSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The ego vehicle (defaults: a car 1.8 m wide, as fusion's default corridor assumes).
+
+    Deceleration follows the actuator's brake position: decel = max_decel * position/100,
+    through a first-order lag `brake_lag_s` (brake line and tyres). Without braking the
+    ego keeps its speed (a driver holding the throttle); it never re-accelerates after
+    braking.
+    """
+
+    speed_kph: Annotated[float, msgspec.Meta(ge=10, le=30)]   # the paper's test range
+    width_m: Positive = 1.8
+    length_m: Positive = 4.2
+    max_decel_mps2: Positive = 6.0
+    brake_lag_s: NonNeg = 0.15
+
+
+class CameraLook(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """How the rendered scene looks: `brightness` scales the light (1 day, 0.3 dusk),
+    `noise` is the sensor noise standard deviation in grey levels."""
+
+    brightness: Annotated[float, msgspec.Meta(gt=0, le=2)] = 1.0
+    noise: Annotated[float, msgspec.Meta(ge=0, le=30)] = 2.0
+
+
+class RadarLook(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The simulated ARS408's output and imperfections."""
+
+    mode: str = "objects"                 # objects | clusters
+    range_sigma_m: NonNeg = 0.10
+    lateral_sigma_m: NonNeg = 0.15
+    velocity_sigma_mps: NonNeg = 0.10
+    rcs_sigma_dbsm: NonNeg = 2.0
+    ghost_rate_per_cycle: Annotated[float, msgspec.Meta(ge=0, le=5)] = 0.3
+    split_probability: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.15   # objects mode
+    dropout_probability: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.02
+    id_swap_probability: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.01
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("objects", "clusters"):
+            raise ValueError(f"radar.mode {self.mode!r}: expected 'objects' or 'clusters'")
+
+
+class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    name: str
+    kind: ScenarioKind
+    ego: EgoSpec
+    object: tuple[SceneObject, ...]
+    description: str = ""
+    duration_s: Annotated[float, msgspec.Meta(gt=0, le=120)] = 20.0
+    seed: int = 0
+    radar: RadarLook = msgspec.field(default_factory=RadarLook)
+    camera: CameraLook = msgspec.field(default_factory=CameraLook)
+
+    def __post_init__(self) -> None:
+        if not self.object:
+            raise ValueError("a scenario needs at least one [[object]]")
+        for i, obj in enumerate(self.object):
+            if obj.x_m <= 0:
+                raise ValueError(f"object[{i}] ({obj.kind.value}) must start ahead of the "
+                                 f"ego (x_m > 0), got {obj.x_m}")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file. Raises ConfigError naming the file and field."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read scenario: {exc.strerror}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+    return parse_config(data, Scenario, str(p))
+
+
+def find_scenario(name_or_path: str) -> Path:
+    """A scenario by file path or by name in tools/sim/scenarios/. Raises ConfigError."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    candidate = SCENARIO_DIR / f"{name_or_path}.toml"
+    if candidate.is_file():
+        return candidate
+    known = ", ".join(sorted(f.stem for f in SCENARIO_DIR.glob("*.toml")))
+    raise ConfigError(f"no scenario {name_or_path!r} (a file, or one of: {known})")
+
+
+def all_scenarios() -> list[Path]:
+    return sorted(SCENARIO_DIR.glob("*.toml"))

@@ -1,0 +1,229 @@
+"""The simulated world, pure: ego and object kinematics, footprints, collisions and the
+ground truth (gap, TTC) the verdict uses. No clocks: `step(dt, brake position)`.
+
+Frames: world (x along the road, y left, origin below the ego's radar at t = 0) and the
+radar frame (x forward, y left, origin at the radar on the ego's front; the ego never
+steers, so radar = world shifted by the ego's x).
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tools.sim.scenario import ObjectKind, Scenario, SceneObject
+
+
+@dataclass(frozen=True)
+class Body:
+    """An object at one instant, in the world frame."""
+
+    index: int
+    kind: ObjectKind
+    x_m: float
+    y_m: float
+    yaw_deg: float
+    length_m: float
+    width_m: float
+    height_m: float
+    vx_mps: float
+    vy_mps: float
+
+    def corners(self) -> np.ndarray:
+        """(4, 2) footprint corners, counter-clockwise."""
+        return footprint(self.x_m, self.y_m, self.yaw_deg, self.length_m, self.width_m)
+
+    def shifted(self, dt_s: float) -> "Body":
+        """Where this body is after `dt_s` at its current velocity (for extrapolation)."""
+        return Body(self.index, self.kind, self.x_m + self.vx_mps * dt_s,
+                    self.y_m + self.vy_mps * dt_s, self.yaw_deg, self.length_m,
+                    self.width_m, self.height_m, self.vx_mps, self.vy_mps)
+
+
+def footprint(x: float, y: float, yaw_deg: float, length: float, width: float) -> np.ndarray:
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    half = np.array([[length / 2, width / 2], [-length / 2, width / 2],
+                     [-length / 2, -width / 2], [length / 2, -width / 2]])
+    rot = np.array([[c, -s], [s, c]])
+    return half @ rot.T + np.array([x, y])
+
+
+def rectangles_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Separating-axis test for two convex quadrilaterals given as (4, 2) corners."""
+    for poly in (a, b):
+        for i in range(4):
+            edge = poly[(i + 1) % 4] - poly[i]
+            axis = np.array([-edge[1], edge[0]])
+            pa, pb = a @ axis, b @ axis
+            if pa.max() < pb.min() or pb.max() < pa.min():
+                return False
+    return True
+
+
+def nearest_point(corners: np.ndarray, x: float, y: float) -> tuple[float, float]:
+    """The point of a (convex, 4-corner) footprint nearest to (x, y)."""
+    p = np.array([x, y])
+    best, best_d = corners[0], math.inf
+    for i in range(4):
+        a, b = corners[i], corners[(i + 1) % 4]
+        ab = b - a
+        t = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-12), 0.0, 1.0))
+        q = a + t * ab
+        d = float(np.hypot(*(q - p)))
+        if d < best_d:
+            best, best_d = q, d
+    return float(best[0]), float(best[1])
+
+
+@dataclass
+class _Mover:
+    spec: SceneObject
+    x_m: float
+    y_m: float
+    started: bool = False
+    travelled_m: float = 0.0
+    moving: bool = False
+
+
+@dataclass(frozen=True)
+class Collision:
+    t_s: float
+    object_index: int
+    kind: ObjectKind
+    ego_speed_mps: float
+    relative_speed_mps: float   # closing speed along the road at impact
+
+
+@dataclass(frozen=True)
+class Threat:
+    """The nearest object overlapping the ego's corridor, ahead of it."""
+
+    object_index: int
+    gap_m: float                # radar (ego front) to the object's nearest point, along x
+    closing_mps: float          # ego speed minus the object's speed along x
+    ttc_s: float | None         # gap / closing, None when not closing
+
+
+@dataclass
+class EgoState:
+    x_m: float = 0.0
+    speed_mps: float = 0.0
+    decel_mps2: float = 0.0     # current (lagged) deceleration
+    odometer_m: float = 0.0
+
+
+@dataclass
+class World:
+    """A scenario in motion. Call `step` with the actuator's brake position."""
+
+    scenario: Scenario
+    t_s: float = 0.0
+    ego: EgoState = field(default_factory=EgoState)
+    collision: Collision | None = None
+    _movers: list[_Mover] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.ego = EgoState(speed_mps=self.scenario.ego.speed_kph / 3.6)
+        self._movers = [_Mover(o, o.x_m, o.y_m) for o in self.scenario.object]
+        self._update_triggers()
+
+    # -- kinematics ---------------------------------------------------------------------
+
+    def step(self, dt_s: float, brake_position_pct: float) -> None:
+        """Advance by `dt_s`. The deceleration follows `brake_position_pct` (0..100)
+        through the ego's brake lag. Raises ValueError for a negative step."""
+        if dt_s < 0:
+            raise ValueError(f"negative time step {dt_s}")
+        if self.collision is not None or dt_s == 0:
+            return
+        spec = self.scenario.ego
+        target = spec.max_decel_mps2 * min(max(brake_position_pct, 0.0), 100.0) / 100.0
+        ego = self.ego
+        if spec.brake_lag_s > 0:
+            ego.decel_mps2 += (target - ego.decel_mps2) * (1 - math.exp(-dt_s / spec.brake_lag_s))
+        else:
+            ego.decel_mps2 = target
+        v0 = ego.speed_mps
+        v1 = max(0.0, v0 - ego.decel_mps2 * dt_s)
+        moved = (v0 + v1) / 2 * dt_s
+        ego.speed_mps = v1
+        ego.x_m += moved
+        ego.odometer_m += moved
+        for m in self._movers:
+            motion = m.spec.motion
+            m.moving = False
+            if motion is None or not m.started or motion.speed_mps == 0:
+                continue
+            step = motion.speed_mps * dt_s
+            if motion.distance_m is not None:
+                step = min(step, motion.distance_m - m.travelled_m)
+            if step <= 0:
+                continue
+            h = math.radians(motion.heading_deg)
+            m.x_m += step * math.cos(h)
+            m.y_m += step * math.sin(h)
+            m.travelled_m += step
+            m.moving = True
+        self.t_s += dt_s
+        self._update_triggers()
+        self._check_collision()
+
+    def _update_triggers(self) -> None:
+        for m in self._movers:
+            motion = m.spec.motion
+            if motion is None or m.started:
+                continue
+            if motion.trigger_gap_m is None or self.ego.x_m >= m.x_m - motion.trigger_gap_m:
+                m.started = True
+                m.moving = motion.speed_mps > 0
+
+    # -- what is where ------------------------------------------------------------------
+
+    def bodies(self) -> list[Body]:
+        out = []
+        for i, m in enumerate(self._movers):
+            length, width, height = m.spec.size()
+            vx = vy = 0.0
+            motion = m.spec.motion
+            if motion is not None and m.moving:
+                h = math.radians(motion.heading_deg)
+                vx, vy = motion.speed_mps * math.cos(h), motion.speed_mps * math.sin(h)
+            out.append(Body(i, m.spec.kind, m.x_m, m.y_m, m.spec.yaw_deg, length, width,
+                            height, vx, vy))
+        return out
+
+    def ego_corners(self) -> np.ndarray:
+        spec = self.scenario.ego
+        return footprint(self.ego.x_m - spec.length_m / 2, 0.0, 0.0, spec.length_m,
+                         spec.width_m)
+
+    def _check_collision(self) -> None:
+        ego = self.ego_corners()
+        for body in self.bodies():
+            if rectangles_overlap(ego, body.corners()):
+                self.collision = Collision(
+                    self.t_s, body.index, body.kind, self.ego.speed_mps,
+                    self.ego.speed_mps - body.vx_mps)
+                return
+
+    def threat(self) -> Threat | None:
+        """The nearest body ahead that overlaps the ego's corridor now."""
+        half = self.scenario.ego.width_m / 2
+        best: Threat | None = None
+        for body in self.bodies():
+            c = body.corners()
+            if c[:, 1].max() < -half or c[:, 1].min() > half:
+                continue
+            gap = float(c[:, 0].min()) - self.ego.x_m
+            if gap < -body.length_m:
+                continue    # already passed
+            if best is None or gap < best.gap_m:
+                closing = self.ego.speed_mps - body.vx_mps
+                ttc = max(gap, 0.0) / closing if closing > 1e-6 else None
+                best = Threat(body.index, gap, closing, ttc)
+        return best
+
+    def passed_everything(self, margin_m: float = 5.0) -> bool:
+        """The ego's rear is beyond every object (a no-threat run is over)."""
+        rear = self.ego.x_m - self.scenario.ego.length_m
+        return all(float(b.corners()[:, 0].max()) + margin_m < rear for b in self.bodies())
