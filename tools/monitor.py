@@ -1,0 +1,137 @@
+"""`aeb monitor`: watch a running stack over the network.
+
+Subscribes (through the key registry) to every key of one vehicle and shows, refreshed:
+each service's liveliness, the rate and latency of every key, the brake's state, each
+fusion instance's last command and verified targets, the radar's tracks and status, the
+camera's status, and the simulator's ground truth when one runs.
+
+    aeb monitor --connect tcp/192.168.10.1:7447          # live, refreshing table
+    aeb monitor --once --duration 5                      # one table after 5 s (scripts)
+    aeb monitor --once --json                            # the same as JSON
+    aeb monitor --zenoh-config deploy/zenoh/secure/client-monitor.json5 \
+        --connect tls/192.168.10.1:7447                  # secure profile
+"""
+
+import argparse
+import json
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from common.bus import Bus, BusError
+from common.clock import mono_ns, wall_ns
+from common.config.base import ZenohMode, ZenohSettings
+from common.keys import REGISTRY, KeySpec
+from common.log import setup_logging
+from common.service import stop_event_on_signals
+from tools.monitoring.state import MonitorState
+from tools.monitoring.view import render_text, snapshot
+
+_LOOPBACK = ("127.", "localhost", "[::1]")
+_CLEAR = "\x1b[H\x1b[2J"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="aeb monitor", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                        help="router endpoint (repeatable), default tcp/127.0.0.1:7447")
+    parser.add_argument("--vehicle", default="ego")
+    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
+    parser.add_argument("--once", action="store_true",
+                        help="collect for --duration (default 3 s), print once, exit")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="stop after this many seconds")
+    parser.add_argument("--interval", type=float, default=1.0, help="refresh period (s)")
+    parser.add_argument("--json", action="store_true", help="print snapshots as JSON lines")
+    parser.add_argument("--plain", action="store_true",
+                        help="append snapshots instead of redrawing (default when not a TTY)")
+    parser.add_argument("--connect-timeout", type=float, default=10.0,
+                        help="give up when no router answers within this many seconds")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--same-host", dest="same_host", action="store_true", default=None,
+                       help="publishers share this host's monotonic clock (hop latency)")
+    where.add_argument("--remote", dest="same_host", action="store_false")
+    return parser.parse_args(argv)
+
+
+def subscribe_all(bus: Bus, state: MonitorState, lock: threading.Lock) -> list[Any]:
+    """One subscription per message key of the registry (every parameter a wildcard)."""
+    subs = []
+    for spec in REGISTRY.values():
+        if spec.msg_type is None:
+            continue
+
+        def on_msg(msg: Any, key: str, spec: KeySpec[Any] = spec) -> None:
+            rx_mono, rx_wall = mono_ns(), wall_ns()
+            with lock:
+                state.observe(spec, key, msg, rx_mono, rx_wall)
+
+        subs.append(bus.subscribe(spec, on_msg))
+
+    def on_health(service: str, instance: str, alive: bool) -> None:
+        with lock:
+            state.on_health(service, instance, alive, mono_ns())
+
+    subs.append(bus.subscribe_health(on_health))
+    return subs
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Returns 0, or 2 when the bus cannot be opened (bad endpoint, no router in time)."""
+    args = parse_args(argv)
+    setup_logging("monitor", "WARNING")
+    connect = tuple(args.connect or ["tcp/127.0.0.1:7447"])
+    same_host = args.same_host
+    if same_host is None:
+        same_host = all(ep.split("/", 1)[-1].startswith(_LOOPBACK) for ep in connect)
+    try:
+        settings = ZenohSettings(
+            mode=ZenohMode.CLIENT, connect=connect, config_file=args.zenoh_config,
+            overrides={"connect/timeout_ms": int(args.connect_timeout * 1000)})
+        bus = Bus.open(settings, args.vehicle, "monitor")
+    except (BusError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = stop_event_on_signals()
+    state = MonitorState(same_host)
+    lock = threading.Lock()
+    endpoint = ",".join(connect)
+    redraw = sys.stdout.isatty() and not (args.plain or args.json or args.once)
+
+    def show() -> None:
+        with lock:
+            state.decode_errors = bus.decode_errors.snapshot()
+            snap = snapshot(state, mono_ns(), args.vehicle, endpoint)
+        if args.json:
+            print(json.dumps(snap), flush=True)
+            return
+        text = render_text(snap)
+        print((_CLEAR + text) if redraw else text + "\n", flush=True)
+
+    with bus:
+        subscribe_all(bus, state, lock)
+        if args.once:
+            stop.wait(3.0 if args.duration is None else args.duration)
+            show()
+            return 0
+        run_until(stop, args.duration, args.interval, show)
+    return 0
+
+
+def run_until(stop: threading.Event, duration: float | None, interval: float,
+              show: Callable[[], None]) -> None:
+    end = None if duration is None else time.monotonic() + duration
+    while not stop.is_set():
+        left = interval if end is None else min(interval, end - time.monotonic())
+        if left > 0:
+            stop.wait(left)
+        show()
+        if end is not None and time.monotonic() >= end:
+            break
+
+
+if __name__ == "__main__":
+    sys.exit(main())

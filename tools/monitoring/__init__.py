@@ -1,0 +1,1 @@
+"""`aeb monitor`: what the bus carries, aggregated (state) and shown (view)."""
