@@ -24,7 +24,7 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
-from services.fusion.decision import SEVERITY, BrakeHold, decide, kinematics, radar_threat
+from services.fusion.decision import BrakeHold, DecisionRule, decide, severity
 from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
 from services.fusion.roi import ColumnProjector, Roi
 from services.fusion.verifiers import Verifier
@@ -47,6 +47,7 @@ class FusionCore:
         self.verifier_params = verifier.params()
         self.source = f"fusion/{settings.instance}"
         self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
+        self.rule = DecisionRule(settings.decision)
         self._seq = 0
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
@@ -96,35 +97,33 @@ class FusionCore:
         return CycleResult(verified, command)
 
     def _stale_target(self, t: RadarTrack, age_ns: int) -> VerifiedTarget:
-        k = kinematics(t, self.s.decision)
+        k = self.rule.kinematics(t)
         reason = (f"radar stale (age {age_ns / 1e6:.0f} ms, max "
                   f"{self._radar_max_age_ns / 1e6:.0f} ms)")
         return VerifiedTarget(
-            track_id=t.track_id, x_m=t.x_m, y_m=t.y_m, range_m=t.range_m,
-            range_rate_mps=t.range_rate_mps, in_path=k.in_path,
-            verification=Verification.NOT_CHECKED, roi_xywh=_NO_ROI, density=None,
-            ttc_s=k.ttc_s, ttc_eff_s=k.ttc_eff_s, decision=Decision.NONE, reason=reason,
-            frame_seq=None, frame_age_ms=None)
+            t.track_id, t.x_m, t.y_m, t.range_m, t.range_rate_mps, k.in_path,
+            Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
+            reason, None, None)
 
     def _verify_all(self, confirmed: list[RadarTrack], radar_stamp_ns: int,
                     frame: DecodedFrame | None, reason_unavailable: str
                     ) -> list[VerifiedTarget]:
-        ds = self.s.decision
+        rule = self.rule
         if frame is not None and self.s.frames.align:
             dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9
         else:
             dt_s = 0.0
-        xy = np.array([(t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s) for t in confirmed])
-        rois: list[Roi | None] = (self.projector.rois(xy) if frame is not None and confirmed
-                                  else [None] * len(confirmed))
+        xy = [(t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s) for t in confirmed]
+        rois: list[Roi | None] = (self.projector.rois(np.array(xy))
+                                  if frame is not None and confirmed else [None] * len(confirmed))
         frame_seq = frame.seq if frame is not None else None
         frame_age_ms = (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None
         gate_all = self.s.gate_scope is GateScope.ALL
+        verify = self.verifier.verify
         out = []
-        for i, t in enumerate(confirmed):
-            k = kinematics(t, ds)
-            threat, threat_reason = radar_threat(k, ds)
-            roi = rois[i]
+        for t, (x, y), roi in zip(confirmed, xy, rois, strict=True):
+            k = rule.kinematics(t)
+            threat, threat_reason = rule.threat(k)
             density: float | None = None
             detail: dict[str, float] = {}
             if frame is None:
@@ -136,21 +135,17 @@ class FusionCore:
             elif threat is Decision.NONE and not gate_all:
                 verification = Verification.NOT_CHECKED
             else:
-                result = self.verifier.verify(frame.gray, roi)
+                result = verify(frame.gray, roi)
                 density, detail = result.density, result.detail
                 verification = (Verification.VERIFIED if result.verified
                                 else Verification.REJECTED)
-            decision, reason = decide(threat, threat_reason, verification,
-                                      ds.unverifiable_policy)
-            if verification is Verification.REJECTED and density is not None:
+            decision, reason = decide(threat, threat_reason, verification, rule.policy)
+            if verification is Verification.REJECTED:
                 reason = f"{reason}; density {density:.4f}"
             out.append(VerifiedTarget(
-                track_id=t.track_id, x_m=float(xy[i, 0]), y_m=float(xy[i, 1]),
-                range_m=t.range_m, range_rate_mps=t.range_rate_mps, in_path=k.in_path,
-                verification=verification, roi_xywh=tuple(roi) if roi is not None else _NO_ROI,
-                density=density, ttc_s=k.ttc_s, ttc_eff_s=k.ttc_eff_s, decision=decision,
-                reason=reason, frame_seq=frame_seq, frame_age_ms=frame_age_ms,
-                gate_detail=detail))
+                t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
+                _NO_ROI if roi is None else tuple(roi), density, k.ttc_s, k.ttc_eff_s,
+                decision, reason, frame_seq, frame_age_ms, detail))
         return out
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
@@ -215,7 +210,7 @@ class FusionCore:
 
 
 def _more_severe(a: VerifiedTarget, b: VerifiedTarget) -> bool:
-    sa, sb = SEVERITY[a.decision], SEVERITY[b.decision]
+    sa, sb = severity(a.decision), severity(b.decision)
     if sa != sb:
         return sa > sb
     inf = float("inf")

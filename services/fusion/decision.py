@@ -11,11 +11,16 @@ from dataclasses import dataclass
 from common.config.fusion import DecisionSettings, UnverifiablePolicy
 from common.messages import Decision, RadarTrack, Verification
 
-SEVERITY = {Decision.NONE: 0, Decision.WARNING: 1, Decision.BRAKE: 2}
+
+def severity(d: Decision) -> int:
+    """NONE 0, WARNING 1, BRAKE 2 (identity tests: much cheaper than hashing an enum)."""
+    return 2 if d is Decision.BRAKE else 1 if d is Decision.WARNING else 0
 
 
 @dataclass(frozen=True, slots=True)
 class Kinematics:
+    """A track's range, closing and lateral figures as the decision sees them."""
+
     range_m: float
     range_rate_mps: float
     lateral_m: float          # offset from the vehicle's centre line (left positive)
@@ -25,38 +30,45 @@ class Kinematics:
     in_path: bool             # always True when the corridor check is off
 
 
-def kinematics(track: RadarTrack, s: DecisionSettings) -> Kinematics:
-    closing = track.range_rate_mps < 0.0
-    ttc = track.range_m / -track.range_rate_mps if closing else None
-    lateral = track.y_m - s.corridor.center_y_m
-    corridor = s.corridor.half_width_m + s.corridor.margin_m
-    return Kinematics(
-        range_m=track.range_m,
-        range_rate_mps=track.range_rate_mps,
-        lateral_m=lateral,
-        ttc_s=ttc,
-        ttc_eff_s=None if ttc is None else ttc - s.ttc_offset_s,
-        in_range=s.min_range_m <= track.range_m <= s.max_range_m,
-        in_path=not s.corridor.enabled or abs(lateral) <= corridor,
-    )
+class DecisionRule:
+    """The settings' numbers, read once: this runs for every track of every cycle."""
 
+    def __init__(self, s: DecisionSettings) -> None:
+        self.min_range = s.min_range_m
+        self.max_range = s.max_range_m
+        self.offset = s.ttc_offset_s
+        self.brake = s.brake_ttc_eff_s
+        self.warning = s.warning_ttc_eff_s
+        self.corridor_on = s.corridor.enabled
+        self.centre = s.corridor.center_y_m
+        self.corridor = s.corridor.half_width_m + s.corridor.margin_m
+        self.policy = s.unverifiable_policy
 
-def radar_threat(k: Kinematics, s: DecisionSettings) -> tuple[Decision, str]:
-    """What the radar alone asks for, before the camera: NONE, WARNING or BRAKE."""
-    if not k.in_range:
-        return Decision.NONE, (f"range {k.range_m:.2f} m outside "
-                               f"[{s.min_range_m:g}, {s.max_range_m:g}] m")
-    if k.ttc_eff_s is None:
-        return Decision.NONE, f"not closing (range rate {k.range_rate_mps:+.2f} m/s)"
-    if k.ttc_eff_s >= s.warning_ttc_eff_s:
-        return Decision.NONE, f"TTC_eff {k.ttc_eff_s:.2f} s >= {s.warning_ttc_eff_s:g} s"
-    if not k.in_path:
-        limit = s.corridor.half_width_m + s.corridor.margin_m
-        return Decision.NONE, (f"out of corridor (lateral {k.lateral_m:+.2f} m, "
-                               f"limit {limit:g} m)")
-    if k.ttc_eff_s < s.brake_ttc_eff_s:
-        return Decision.BRAKE, f"TTC_eff {k.ttc_eff_s:.2f} s < {s.brake_ttc_eff_s:g} s"
-    return Decision.WARNING, f"TTC_eff {k.ttc_eff_s:.2f} s < {s.warning_ttc_eff_s:g} s"
+    def kinematics(self, track: RadarTrack) -> Kinematics:
+        rate = track.range_rate_mps
+        r = track.range_m
+        ttc = r / -rate if rate < 0.0 else None
+        lateral = track.y_m - self.centre
+        return Kinematics(
+            r, rate, lateral, ttc, None if ttc is None else ttc - self.offset,
+            self.min_range <= r <= self.max_range,
+            not self.corridor_on or abs(lateral) <= self.corridor)
+
+    def threat(self, k: Kinematics) -> tuple[Decision, str]:
+        """What the radar alone asks for, before the camera: NONE, WARNING or BRAKE."""
+        if not k.in_range:
+            return Decision.NONE, (f"range {k.range_m:.2f} m outside "
+                                   f"[{self.min_range:g}, {self.max_range:g}] m")
+        if k.ttc_eff_s is None:
+            return Decision.NONE, f"not closing (range rate {k.range_rate_mps:+.2f} m/s)"
+        if k.ttc_eff_s >= self.warning:
+            return Decision.NONE, f"TTC_eff {k.ttc_eff_s:.2f} s >= {self.warning:g} s"
+        if not k.in_path:
+            return Decision.NONE, (f"out of corridor (lateral {k.lateral_m:+.2f} m, "
+                                   f"limit {self.corridor:g} m)")
+        if k.ttc_eff_s < self.brake:
+            return Decision.BRAKE, f"TTC_eff {k.ttc_eff_s:.2f} s < {self.brake:g} s"
+        return Decision.WARNING, f"TTC_eff {k.ttc_eff_s:.2f} s < {self.warning:g} s"
 
 
 def decide(threat: Decision, threat_reason: str, verification: Verification,

@@ -42,7 +42,7 @@ class FusionNode:
         self.decoder.start()
         self._subs.append(self.bus.subscribe_raw(CAMERA_JPEG, self.decoder.submit,
                                                  camera=self.s.frames.camera))
-        self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self.on_tracks_payload,
+        self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
                                                  sensor=self.s.radar_sensor))
 
     def stop(self) -> None:
@@ -51,16 +51,20 @@ class FusionNode:
         self._subs.clear()
         self.decoder.stop()
 
-    def on_tracks_payload(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
-        """Zenoh's callback for a radar cycle: decode, decide, publish."""
+    def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        self.on_tracks_payload(payload, key, rx_mono_ns)
+
+    def on_tracks_payload(self, payload: bytes, key: str, rx_mono_ns: int) -> CycleResult | None:
+        """Zenoh's callback for a radar cycle: decode, decide, publish. Returns what was
+        published (None for a payload that is not a RadarTracks)."""
         try:
             tracks = decode(payload, RadarTracks)
         except DecodeError as exc:
             # Not a radar cycle: nothing to answer, but never silent.
             self.counters.add("radar_undecodable")
             self._rl.warning("radar:decode", "radar_tracks_undecodable", key=key, error=exc)
-            return
-        self.handle(tracks, rx_mono_ns)
+            return None
+        return self.handle(tracks, rx_mono_ns)
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
         with self._lock:

@@ -62,6 +62,16 @@ class ColumnProjector:
         self._offsets = np.array([(dy, z) for dy in ys for z in zs])
         self._lim = self._normalised_limits() * _FOV_MARGIN
         self._zero = np.zeros(3)
+        self._distorted = distorted
+        self._focal = np.array([calibration.k[0, 0], calibration.k[1, 1]])
+        self._centre = np.array([calibration.k[0, 2], calibration.k[1, 2]])
+        # Clip bounds of (x0, y0, x1, y1): x1, y1 are exclusive ends.
+        self._size2 = np.array([self.width, self.height, self.width, self.height], float)
+        self._last_px = np.array([self.width - 0.5, self.height - 0.5])
+        r = calibration.r
+        self._r0, self._r1 = r[:, 0], r[:, 1]
+        self._sample_cam = (self._offsets[:, 0:1] * r[:, 1] + self._offsets[:, 1:2] * r[:, 2]
+                            + calibration.t)
 
     def _normalised_limits(self) -> np.ndarray:
         """Largest |x/z| and |y/z| of the image's border pixels, undistorted."""
@@ -71,34 +81,33 @@ class ColumnProjector:
         norm = cv2.undistortPoints(border, self.cal.k, self.cal.dist).reshape(-1, 2)
         return np.abs(norm).max(axis=0)
 
-    def column_points(self, xy: np.ndarray) -> np.ndarray:
-        """(N, S, 3) ground-frame samples of the columns at (N, 2) track positions."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        pts = np.empty((len(xy), len(self._offsets), 3))
-        pts[:, :, 0] = xy[:, None, 0]
-        pts[:, :, 1] = xy[:, None, 1] + self._offsets[None, :, 0]
-        pts[:, :, 2] = self._offsets[None, :, 1]
-        return pts
-
     def project_columns(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels of every column sample: (uv (N, S, 2), valid (N, S)).
 
         A sample behind the camera is invalid (uv NaN). Samples far outside the image are
         clamped to a ray just outside it, so their pixels stay outside the image.
         """
-        pts = self.column_points(xy)
-        n, s, _ = pts.shape
-        cam = self.cal.to_camera(pts.reshape(-1, 3))
-        valid = cam[:, 2] >= _MIN_DEPTH_M
-        uv = np.full((n * s, 2), np.nan)
-        if valid.any():
-            front = cam[valid]
-            norm = front[:, :2] / front[:, 2:3]
-            np.clip(norm, -self._lim, self._lim, out=norm)
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        n, s = len(xy), len(self._offsets)
+        # X_cam = R (x, y + dy, z) + t = x R[:, 0] + y R[:, 1] + (dy R[:, 1] + z R[:, 2] + t):
+        # the last term is the same for every track, computed once.
+        cam = (xy[:, None, 0:1] * self._r0 + xy[:, None, 1:2] * self._r1
+               + self._sample_cam).reshape(-1, 3)
+        depth = cam[:, 2:3]
+        valid = depth[:, 0] >= _MIN_DEPTH_M
+        all_valid = bool(valid.all())
+        norm = cam[:, :2] / (depth if all_valid else np.where(depth >= _MIN_DEPTH_M, depth, 1.0))
+        np.clip(norm, -self._lim, self._lim, out=norm)
+        if self._distorted:
             rays = np.concatenate([norm, np.ones((len(norm), 1))], axis=1)
             proj, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), self._zero, self._zero,
                                         self.cal.k, self.cal.dist)
-            uv[valid] = proj.reshape(-1, 2)
+            uv = proj.reshape(-1, 2)
+        else:
+            # cv2.projectPoints without distortion, without its per-call overhead.
+            uv = norm * self._focal + self._centre
+        if not all_valid:
+            uv[~valid] = np.nan
         return uv.reshape(n, s, 2), valid.reshape(n, s)
 
     def rois(self, xy: np.ndarray) -> list[Roi | None]:
@@ -111,24 +120,25 @@ class ColumnProjector:
         uv, valid = self.project_columns(xy)
         if len(uv) == 0:
             return []
-        u, v = uv[:, :, 0], uv[:, :, 1]
-        umin = np.min(u, axis=1, initial=np.inf, where=valid)
-        umax = np.max(u, axis=1, initial=-np.inf, where=valid)
-        vmin = np.min(v, axis=1, initial=np.inf, where=valid)
-        vmax = np.max(v, axis=1, initial=-np.inf, where=valid)
-        visible = (valid.any(axis=1) & (umax > -0.5) & (vmax > -0.5)
-                   & (umin < self.width - 0.5) & (vmin < self.height - 0.5))
+        if valid.all():
+            lo, hi = uv.min(axis=1), uv.max(axis=1)
+            visible = ((hi > -0.5).all(axis=1) & (lo < self._last_px).all(axis=1))
+        else:
+            lo = np.min(uv, axis=1, initial=np.inf, where=valid[:, :, None])
+            hi = np.max(uv, axis=1, initial=-np.inf, where=valid[:, :, None])
+            visible = (valid.any(axis=1) & (hi > -0.5).all(axis=1)
+                       & (lo < self._last_px).all(axis=1))
         pad = self.geometry.padding_px
-        # Only visible rows are converted: the others hold infinities.
-        rows = np.flatnonzero(visible)
-        out: list[Roi | None] = [None] * len(uv)
-        if len(rows):
-            x0 = np.maximum(0, np.floor(umin[rows] + 0.5).astype(np.int64) - pad)
-            y0 = np.maximum(0, np.floor(vmin[rows] + 0.5).astype(np.int64) - pad)
-            x1 = np.minimum(self.width, np.floor(umax[rows] + 0.5).astype(np.int64) + pad + 1)
-            y1 = np.minimum(self.height, np.floor(vmax[rows] + 0.5).astype(np.int64) + pad + 1)
-            for j, i in enumerate(rows.tolist()):
-                out[i] = Roi(int(x0[j]), int(y0[j]), int(x1[j] - x0[j]), int(y1[j] - y0[j]))
+        box = np.concatenate([lo, hi], axis=1)
+        box[~visible] = 0.0
+        box = np.floor(box + 0.5)
+        box[:, :2] -= pad
+        box[:, 2:] += pad + 1
+        np.clip(box, 0, self._size2, out=box)
+        out: list[Roi | None] = []
+        for (x0, y0, x1, y1), vis in zip(box.astype(np.int64).tolist(), visible.tolist(),
+                                         strict=True):
+            out.append(Roi(x0, y0, x1 - x0, y1 - y0) if vis else None)
         return out
 
 
