@@ -40,6 +40,8 @@ class RadarTrack(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     x_var_m2: float
     y_var_m2: float
     radar_object_id: int = -1  # the radar's own ID in object mode, -1 when unknown
+    dyn_prop: int = -1         # ARS408 dynamic property (0 moving, 1 stationary, ...), -1 unknown
+    obj_class: int = -1        # ARS408 object class (0x60D: 0 point, 1 car, ...), -1 when unknown
 
 
 class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -99,3 +101,7 @@ class RadarStatus(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     cycles_incomplete: int
     bus_reopens: int
     rejected: dict[str, int]   # frames rejected, by reason
+    sensor_id: int = -1        # the radar's SensorID (CAN IDs are ID + 0x10 * sensor_id)
+    meas_counter_gaps: int = 0         # cycles the radar counted that never arrived
+    tracker_resets: int = 0            # gaps or time jumps that restarted the tracker
+    ego_motion_frames_sent: int = 0    # 0x300 / 0x301 frames written to this radar

@@ -1,0 +1,5 @@
+import sys
+
+from services.radar.main import main
+
+sys.exit(main())

@@ -1,0 +1,148 @@
+"""Where frames come from: any python-can bus, or a recorded log replayed through
+python-can's readers (candump .log, .asc, .blf, .trc, ...), paced in real time or as fast
+as possible, optionally looping."""
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Protocol
+
+import can
+
+from common.config.radar import CanSettings, Pace, ReplaySettings
+
+REPLAY = "replay"
+_LOOP_GAP_S = 0.075   # time inserted between the end of a log and its restart (one cycle)
+
+
+class CanPort(Protocol):
+    """What the service needs from a bus: python-can's BusABC satisfies it."""
+
+    def recv(self, timeout: float | None = None) -> can.Message | None: ...
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
+
+    def shutdown(self) -> None: ...
+
+
+class ConfigurationError(ValueError):
+    """A CAN setting that can never work (unknown interface, missing replay file)."""
+
+
+def check_settings(c: CanSettings, r: ReplaySettings) -> None:
+    """Fail fast on settings no retry can fix. Raises ConfigurationError."""
+    if c.interface == REPLAY:
+        if not Path(r.file).is_file():
+            raise ConfigurationError(f"radar.replay.file {r.file!r} is not a readable file")
+    elif c.interface not in can.interfaces.VALID_INTERFACES:
+        raise ConfigurationError(
+            f"radar.can.interface {c.interface!r} is not a python-can interface "
+            f"(one of: {', '.join(sorted(can.interfaces.VALID_INTERFACES))}, or 'replay')"
+        )
+
+
+def open_port(c: CanSettings, r: ReplaySettings) -> CanPort:
+    """Open the configured bus. Raises whatever python-can raises when the device is not
+    there (CanError, OSError, ...): the service retries with backoff."""
+    if c.interface == REPLAY:
+        return ReplayPort(r.file, pace=r.pace, loop=r.loop)
+    kwargs = dict(c.options)
+    if c.bitrate:
+        kwargs.setdefault("bitrate", c.bitrate)
+    bus: CanPort = can.Bus(interface=c.interface, channel=c.channel, **kwargs)
+    return bus
+
+
+def describe(c: CanSettings, r: ReplaySettings) -> tuple[str, str]:
+    """(interface, channel) as RadarStatus reports them."""
+    if c.interface == REPLAY:
+        return REPLAY, r.file
+    return c.interface, c.channel
+
+
+class ReplayPort:
+    """A recorded log as a receive-only bus.
+
+    Frames keep their recorded timestamps (plus an offset per loop, so that time never
+    goes backwards); with `Pace.REALTIME` each frame is returned at its recorded spacing
+    from the first one. `ended` turns true when a non-looping log is exhausted. `send`
+    drops the frame and counts it in `dropped_sends` (nobody listens on a recording).
+    """
+
+    def __init__(
+        self, path: str, pace: Pace = Pace.REALTIME, loop: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        self.path = path
+        self.pace = pace
+        self.loop = loop
+        self.ended = False
+        self.loops = 0
+        self.dropped_sends = 0
+        self._clock = clock
+        self._sleep = sleep
+        self._offset = 0.0
+        self._first_t: float | None = None
+        self._first_t_raw = 0.0
+        self._last_t = 0.0
+        self._start_clock = 0.0
+        self._pending: can.Message | None = None
+        self._reader: can.io.generic.MessageReader | None = None
+        self._frames = self._open()
+
+    def _open(self) -> Iterator[can.Message]:
+        self._close_reader()
+        self._reader = can.LogReader(self.path)
+        return iter(self._reader)
+
+    def _close_reader(self) -> None:
+        if self._reader is not None:
+            self._reader.stop()
+            self._reader = None
+
+    def _next(self) -> can.Message | None:
+        while True:
+            msg = next(self._frames, None)
+            if msg is not None:
+                break
+            if not self.loop or self._first_t is None:
+                self.ended = True
+                return None
+            # Restart the log one cycle after its last frame, on the same time line.
+            self.loops += 1
+            self._offset = self._last_t + _LOOP_GAP_S - self._first_t_raw
+            self._frames = self._open()
+        if self._first_t is None:
+            self._first_t = msg.timestamp
+            self._first_t_raw = msg.timestamp
+            self._start_clock = self._clock()
+        msg.timestamp += self._offset
+        self._last_t = msg.timestamp
+        return msg
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        if self._pending is None and not self.ended:
+            self._pending = self._next()
+        msg = self._pending
+        if msg is None:
+            if timeout:
+                self._sleep(timeout)   # behave like an idle bus, not a busy loop
+            return None
+        if self.pace is Pace.REALTIME:
+            assert self._first_t is not None
+            wait = self._start_clock + (msg.timestamp - self._first_t) - self._clock()
+            if wait > 0:
+                if timeout is not None and wait > timeout:
+                    self._sleep(timeout)
+                    return None
+                self._sleep(wait)
+        self._pending = None
+        return msg
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.dropped_sends += 1
+
+    def shutdown(self) -> None:
+        self._close_reader()
+        self._frames = iter(())

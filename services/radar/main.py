@@ -1,0 +1,72 @@
+"""`aeb radar --config FILE`: ARS408 radars on one CAN bus to tracks and status on Zenoh.
+
+Exit codes: 0 stopped by a signal (or a replay ended with exit_at_end), 1 the Zenoh
+session could not be opened, 2 invalid configuration.
+"""
+
+import sys
+
+import zenoh
+
+from common.bus import Bus, BusError, TypedPublisher
+from common.config.radar import RadarConfig
+from common.keys import EGO_MOTION, RADAR_STATUS, RADAR_TRACKS
+from common.log import kv, setup_logging
+from common.messages.radar import RadarStatus, RadarTracks
+from common.service import load_service_config, service_argparser, stop_event_on_signals
+from services.radar.can_io import ConfigurationError, check_settings
+from services.radar.service import RadarService
+
+
+class ZenohRadarOutput:
+    """Publishes through the key registry; declares one health token per radar."""
+
+    def __init__(self, bus: Bus, sensors: list[str]) -> None:
+        self._bus = bus
+        self._sensors = sensors
+        self._tracks: dict[str, TypedPublisher[RadarTracks]] = {
+            s: bus.publisher(RADAR_TRACKS, sensor=s) for s in sensors}
+        self._status: dict[str, TypedPublisher[RadarStatus]] = {
+            s: bus.publisher(RADAR_STATUS, sensor=s) for s in sensors}
+        self._tokens: list[zenoh.LivelinessToken] = []
+
+    def tracks(self, sensor: str, msg: RadarTracks) -> None:
+        self._tracks[sensor].put(msg)
+
+    def status(self, sensor: str, msg: RadarStatus) -> None:
+        self._status[sensor].put(msg)
+
+    def serving(self) -> None:
+        self._tokens = [self._bus.declare_health("radar", s) for s in self._sensors]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = service_argparser("radar", __doc__ or "")
+    args = parser.parse_args(argv)
+    cfg = load_service_config(args, RadarConfig)
+    log = setup_logging("radar", cfg.log.level.value)
+    try:
+        check_settings(cfg.radar.can, cfg.radar.replay)
+    except ConfigurationError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = stop_event_on_signals()
+    sensors = [s.name for s in cfg.radar.sensors]
+    try:
+        bus = Bus.open(cfg.zenoh, cfg.vehicle, source="radar")
+    except BusError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    with bus:
+        service = RadarService(cfg.radar, ZenohRadarOutput(bus, sensors))
+        if cfg.radar.ego_motion.forward:
+            bus.subscribe(EGO_MOTION, lambda msg, key: service.on_ego_motion(msg))
+        log.info(kv("radar_start", sensors=",".join(sensors),
+                    interface=service.interface, channel=service.channel))
+        code = service.run(stop)
+    log.info(kv("radar_stopped", code=code))
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,325 @@
+"""The radar service's I/O shell: reads the CAN bus, feeds each radar's core, publishes
+tracks as soon as a cycle is complete and status at a fixed period and on change, writes
+0x200 / 0x300 / 0x301, and reopens a lost bus with exponential backoff.
+
+One thread reads the bus and runs the cores (so a cycle is processed the moment its last
+frame arrives); ego-motion frames are written from the caller's thread (a Zenoh
+callback) under a lock shared with the configuration writes.
+"""
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Protocol
+
+import can
+
+from common.clock import NS_PER_S, mono_ns, wall_ns
+from common.config.radar import RadarSettings
+from common.counters import ReasonCounter
+from common.log import RateLimitedLog, kv
+from common.messages.header import Header
+from common.messages.radar import BusState, RadarStatus, RadarTracks
+from common.messages.vehicle import EgoMotion
+from services.radar.ars408.codec import Frame
+from services.radar.ars408.table import classify
+from services.radar.can_io import CanPort, describe, open_port
+from services.radar.core import CycleResult, SensorCore
+from services.radar.ego import EgoMotionForwarder
+
+_log = logging.getLogger("radar")
+
+_HOUSEKEEPING_NS = 10_000_000
+
+
+class RadarOutput(Protocol):
+    """Where the service publishes (Zenoh in production, a list in tests)."""
+
+    def tracks(self, sensor: str, msg: RadarTracks) -> None: ...
+
+    def status(self, sensor: str, msg: RadarStatus) -> None: ...
+
+    def serving(self) -> None:
+        """Called once, when the bus first opened: the service now serves."""
+
+
+class RadarService:
+    """Rejections that belong to no single radar are counted in `bus_rejected`
+    (``error_frame``, ``remote_frame``, ``extended_id``, ``unknown_id``, ``host_frame``,
+    ``unconfigured_sensor_id``, ``internal_error``, ``bus_failure``) and reported in every
+    radar's status under a ``bus:`` prefix."""
+
+    def __init__(
+        self,
+        settings: RadarSettings,
+        output: RadarOutput,
+        port_factory: Callable[[], CanPort] | None = None,
+    ) -> None:
+        self.settings = settings
+        self.output = output
+        self._factory = port_factory or (lambda: open_port(settings.can, settings.replay))
+        self.interface, self.channel = describe(settings.can, settings.replay)
+        self.cores = {s.sensor_id: SensorCore(s, settings) for s in settings.sensors}
+        self.bus_rejected = ReasonCounter()
+        self.ego = EgoMotionForwarder(settings.ego_motion, list(self.cores))
+        self.ego_sent: dict[int, int] = dict.fromkeys(self.cores, 0)
+        self.bus_state = BusState.SILENT
+        self.bus_reopens = 0
+        self.ended = False
+        self._port: CanPort | None = None
+        self._send_lock = threading.Lock()
+        self._served = False
+        self._last_frame_mono: int | None = None
+        self._error_until = 0
+        self._seq: dict[str, int] = {}
+        self._status_due: dict[int, int] = dict.fromkeys(self.cores, 0)
+        self._status_key: dict[int, object] = {}
+        self._ready: dict[int, bool] = {}
+        self._fps_sample: dict[int, tuple[int, int, float]] = {}
+        self._rl = RateLimitedLog(_log)
+        self._period_ns = int(settings.status_period_s * NS_PER_S)
+
+    # -- main loop ----------------------------------------------------------------------
+
+    def run(self, stop: threading.Event) -> int:
+        """Serve until `stop` is set (or a non-looping replay ends with exit_at_end)."""
+        can_cfg = self.settings.can
+        backoff = can_cfg.reopen_backoff_initial_s
+        lost = False
+        while not stop.is_set():
+            if lost:
+                self._status_tick(mono_ns(), wall_ns())
+                if stop.wait(backoff):
+                    break
+                backoff = min(2 * backoff, can_cfg.reopen_backoff_max_s)
+            try:
+                port = self._factory()
+            except Exception as exc:   # python-can raises many types for a missing device
+                self._set_bus_state(BusState.REOPENING, mono_ns())
+                self._rl.warning("open", "can_open_failed", interface=self.interface,
+                                 channel=self.channel, error=repr(exc), retry_s=backoff)
+                lost = True
+                continue
+            if lost:
+                self.bus_reopens += 1
+            _log.info(kv("can_open", interface=self.interface, channel=self.channel))
+            ended = self._serve_port(port, stop)
+            if ended:
+                return self._after_end(stop)
+            if self._last_frame_mono is not None:
+                backoff = can_cfg.reopen_backoff_initial_s   # it worked for a while
+            lost = True
+        self._publish_all_status(mono_ns(), wall_ns())
+        return 0
+
+    def _serve_port(self, port: CanPort, stop: threading.Event) -> bool:
+        """Serve one open port; True when a replay ended, False on stop or bus failure."""
+        with self._send_lock:
+            self._port = port
+        try:
+            now = mono_ns()
+            self._last_frame_mono = None
+            self._set_bus_state(BusState.SILENT, now)
+            if not self._served:
+                self._served = True
+                self.output.serving()
+            for core in self.cores.values():
+                self._send_frames(core.config_frames(now, start=True))
+            return self._serve(port, stop)
+        except (can.CanError, OSError) as exc:
+            self.bus_rejected.add("bus_failure")
+            _log.warning(kv("can_lost", interface=self.interface, channel=self.channel,
+                            error=repr(exc)))
+            self._set_bus_state(BusState.REOPENING, mono_ns())
+            return False
+        finally:
+            with self._send_lock:
+                self._port = None
+            try:
+                port.shutdown()
+            except Exception as exc:
+                _log.debug(kv("can_shutdown_failed", error=repr(exc)))
+
+    def _serve(self, port: CanPort, stop: threading.Event) -> bool:
+        timeout = self.settings.can.receive_timeout_s
+        next_housekeeping = 0
+        while not stop.is_set():
+            msg = port.recv(timeout)
+            mono, wall = mono_ns(), wall_ns()
+            if msg is not None:
+                self._on_message(msg, wall, mono)
+            elif getattr(port, "ended", False):
+                return True
+            if mono >= next_housekeeping:
+                self._housekeeping(mono, wall)
+                next_housekeeping = mono + _HOUSEKEEPING_NS
+        return False
+
+    def _after_end(self, stop: threading.Event) -> int:
+        self.ended = True
+        for core in self.cores.values():
+            self._publish_results(core, core.flush(), 0)
+        self._set_bus_state(BusState.ENDED, mono_ns())
+        _log.info(kv("replay_ended", cycles=sum(c.cycles_total for c in self.cores.values())))
+        if not self.settings.replay.exit_at_end:
+            while not stop.wait(self.settings.status_period_s):
+                self._publish_all_status(mono_ns(), wall_ns())
+        return 0
+
+    # -- frames -------------------------------------------------------------------------
+
+    def _on_message(self, msg: can.Message, wall: int, mono: int) -> None:
+        if msg.is_error_frame:
+            self.bus_rejected.add("error_frame")
+            self._error_until = mono + int(self.settings.can.error_hold_s * NS_PER_S)
+            self._rl.warning("error_frame", "can_error_frame", channel=self.channel)
+            return
+        self._last_frame_mono = mono
+        if self.bus_state is not BusState.ACTIVE and mono >= self._error_until:
+            self._set_bus_state(BusState.ACTIVE, mono)
+        if msg.is_remote_frame or msg.is_extended_id:
+            self.bus_rejected.add("remote_frame" if msg.is_remote_frame else "extended_id")
+            return
+        found = classify(msg.arbitration_id)
+        if found is None:
+            self.bus_rejected.add("unknown_id")
+            return
+        spec, sensor_id = found
+        if spec.sender != "ARS408":
+            self.bus_rejected.add("host_frame")   # another host's (or our echoed) command
+            return
+        core = self.cores.get(sensor_id)
+        if core is None:
+            self.bus_rejected.add("unconfigured_sensor_id")
+            return
+        t_s = msg.timestamp if msg.timestamp > 0 else mono / NS_PER_S
+        try:
+            results = core.on_frame(spec, bytes(msg.data), t_s, wall, mono)
+        except Exception:
+            # A bug must not stop the radar for the following cycles: count, log, go on.
+            self.bus_rejected.add("internal_error")
+            if self._rl.error("internal", "core_failed", arb_id=hex(msg.arbitration_id)):
+                _log.exception("core traceback")
+            return
+        if results:
+            self._publish_results(core, results, mono_ns() - mono)
+
+    def _publish_results(self, core: SensorCore, results: list[CycleResult],
+                         processing_ns: int) -> None:
+        name = core.sensor.name
+        for r in results:
+            if not r.complete:
+                self._rl.warning(f"incomplete:{name}", "cycle_incomplete", sensor=name,
+                                 closed_by=r.closed_by, meas_counter=r.meas_counter)
+            msg = RadarTracks(
+                header=self._header(f"tracks/{name}", name, r.stamp_wall_ns),
+                sensor=name, mode=r.mode, meas_counter=r.meas_counter, complete=r.complete,
+                n_detections=r.n_detections, n_prefiltered=r.n_prefiltered,
+                last_frame_mono_ns=r.last_frame_mono_ns, processing_ns=processing_ns,
+                tracks=r.tracks,
+            )
+            self.output.tracks(name, msg)
+
+    def _header(self, stream: str, sensor: str, stamp_ns: int) -> Header:
+        seq = self._seq.get(stream, 0)
+        self._seq[stream] = seq + 1
+        return Header(seq=seq, source=f"radar/{sensor}", stamp_ns=stamp_ns,
+                      pub_mono_ns=mono_ns())
+
+    # -- writing ------------------------------------------------------------------------
+
+    def _send_frames(self, frames: list[Frame]) -> int:
+        """Write frames if the bus is open; returns how many went out."""
+        sent = 0
+        with self._send_lock:
+            port = self._port
+            if port is None:
+                if frames:
+                    self.bus_rejected.add("send_while_closed", len(frames))
+                return 0
+            for f in frames:
+                try:
+                    port.send(can.Message(arbitration_id=f.arb_id, data=f.data,
+                                          is_extended_id=False))
+                    sent += 1
+                except (can.CanError, OSError) as exc:
+                    self.bus_rejected.add("send_failed")
+                    self._rl.warning("send", "can_send_failed", arb_id=hex(f.arb_id),
+                                     error=repr(exc))
+        return sent
+
+    def on_ego_motion(self, msg: EgoMotion) -> None:
+        """EgoMotion from the bus (any thread): forward as 0x300/0x301 when enabled."""
+        frames = self.ego.on_motion(msg, wall_ns(), mono_ns())
+        if frames and self._send_frames(frames) == len(frames):
+            for f in frames:
+                found = classify(f.arb_id)
+                if found is not None:
+                    self.ego_sent[found[1]] += 1
+
+    # -- status -------------------------------------------------------------------------
+
+    def _set_bus_state(self, state: BusState, mono: int) -> None:
+        if state is not self.bus_state:
+            _log.info(kv("bus_state", old=self.bus_state.value, new=state.value))
+            self.bus_state = state
+            self._publish_all_status(mono, wall_ns())
+
+    def _current_bus_state(self, mono: int) -> BusState:
+        if self.ended:
+            return BusState.ENDED
+        if mono < self._error_until:
+            return BusState.ERROR
+        silent_ns = int(self.settings.can.silent_after_s * NS_PER_S)
+        if self._last_frame_mono is None or mono - self._last_frame_mono > silent_ns:
+            return BusState.SILENT
+        return BusState.ACTIVE
+
+    def _housekeeping(self, mono: int, wall: int) -> None:
+        for core in self.cores.values():
+            results = core.poll(mono)
+            if results:
+                self._publish_results(core, results, 0)
+            self._send_frames(core.config_frames(mono))
+        self._set_bus_state(self._current_bus_state(mono), mono)
+        self._status_tick(mono, wall)
+
+    def _status_tick(self, mono: int, wall: int) -> None:
+        """Publish each radar's status when it changed or its period elapsed."""
+        for sid, core in self.cores.items():
+            key = (core.not_ready_reason(self.bus_state, mono), self.bus_state,
+                   core.radar_state, core.firmware)
+            if key != self._status_key.get(sid) or mono >= self._status_due[sid]:
+                self._publish_status(core, mono, wall)
+
+    def _frames_per_s(self, core: SensorCore, mono: int) -> float:
+        sid = core.sensor.sensor_id
+        frames, at, rate = self._fps_sample.get(sid, (0, mono, 0.0))
+        if mono - at >= NS_PER_S // 2:
+            rate = (core.frames_total - frames) * NS_PER_S / (mono - at)
+            frames, at = core.frames_total, mono
+        self._fps_sample[sid] = (frames, at, rate)
+        return rate
+
+    def _publish_status(self, core: SensorCore, mono: int, wall: int) -> None:
+        sid = core.sensor.sensor_id
+        bus = {f"bus:{k}": v for k, v in self.bus_rejected.snapshot().items()}
+        ego = {f"ego_motion:{k}": v for k, v in self.ego.rejected.snapshot().items()}
+        msg = core.status(
+            self._header(f"status/{core.sensor.name}", core.sensor.name, wall),
+            self.bus_state, mono, self.interface, self.channel,
+            self._frames_per_s(core, mono), self.bus_reopens, {**bus, **ego},
+            self.ego_sent[sid],
+        )
+        self._status_key[sid] = (msg.not_ready_reason, self.bus_state, core.radar_state,
+                                 core.firmware)
+        self._status_due[sid] = mono + self._period_ns
+        if msg.ready != self._ready.get(sid):
+            _log.info(kv("radar_ready" if msg.ready else "radar_not_ready",
+                         sensor=core.sensor.name, reason=msg.not_ready_reason))
+            self._ready[sid] = msg.ready
+        self.output.status(core.sensor.name, msg)
+
+    def _publish_all_status(self, mono: int, wall: int) -> None:
+        for core in self.cores.values():
+            self._publish_status(core, mono, wall)
