@@ -58,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, VerifierConfigError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    for warning in cal.warnings():
+        log.warning(kv("calibration_implausible", file=s.calibration, detail=warning))
     stop = stop_event_on_signals()
     try:
         bus = Bus.open(cfg.zenoh, cfg.vehicle, core.source)

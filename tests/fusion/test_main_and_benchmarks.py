@@ -1,0 +1,60 @@
+"""`aeb fusion` fails fast on bad configuration; the benchmarks run (--quick)."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from benchmarks import bench_fusion, bench_gate
+from common.config.fusion import FusionConfig
+from common.config.loader import load_config
+from services.fusion.main import build_core
+
+
+@pytest.mark.parametrize(("toml", "named"), [
+    ("[fusion.verifier]\nname = 'sobel'\n", "unknown verifier 'sobel'"),
+    ("[fusion.verifier]\nparams = { tau = 2.0 }\n", "tau"),
+    ("[fusion]\ncalibration = 'nope.toml'\n", "nope.toml"),
+    ("[fusion.decision]\nhold_s = -1.0\n", "$.fusion.decision.hold_s"),
+    ("[fusion]\ninstance = 'a/b'\n", "instance"),
+])
+def test_bad_configuration_exits_2_naming_the_problem(tmp_path, toml, named):
+    cfg = tmp_path / "fusion.toml"
+    cfg.write_text(toml)
+    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c", str(cfg)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert named in proc.stderr
+
+
+@pytest.mark.parametrize("path", ["deploy/fusion.toml", "deploy/fusion-candidate.toml",
+                                  "deploy/fusion-paper.toml"])
+def test_shipped_configs_build(path):
+    core, _ = build_core(load_config(path, FusionConfig))
+    assert core.source == f"fusion/{core.s.instance}"
+
+
+def test_paper_profile_turns_every_addition_off():
+    s = load_config("deploy/fusion-paper.toml", FusionConfig).fusion
+    d = s.decision
+    assert not d.corridor.enabled and d.hold_s == 0 and not s.frames.align
+    assert d.unverifiable_policy.value == "ignore" and s.gate_scope.value == "all"
+    assert (s.verifier.name, s.verifier.params) == (
+        "edge_density", {"low": 40, "high": 120, "tau": 0.025})
+    assert (d.min_range_m, d.max_range_m, d.ttc_offset_s, d.brake_ttc_eff_s) == (
+        3.0, 25.0, 1.0, 2.5)
+    assert (s.roi.column_height_m, s.roi.padding_px, s.roi.column_half_width_m) == (2.2, 22, 0)
+
+
+@pytest.mark.slow
+def test_benchmarks_run_quick_and_write_their_results(tmp_path, capsys):
+    assert bench_gate.main(["--quick", "--out", str(tmp_path)]) == 0
+    gate = json.loads((tmp_path / "bench_gate.json").read_text())
+    assert gate["densities"]["identical_densities"] is True
+    assert (tmp_path / "bench_gate.png").stat().st_size > 0
+    assert bench_fusion.main(["--quick", "--out", str(tmp_path)]) == 0
+    fusion = json.loads((tmp_path / "bench_fusion.json").read_text())
+    assert fusion["worst 64"]["gated_mean"] == 64
+    assert (tmp_path / "bench_fusion.png").stat().st_size > 0
+    assert "64 tracks, worst" in capsys.readouterr().out
