@@ -1,0 +1,1 @@
+"""`aeb ab-report`: where a primary and a candidate fusion instance disagreed."""

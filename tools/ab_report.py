@@ -1,0 +1,147 @@
+"""`aeb ab-report`: where a primary and a candidate fusion instance disagreed.
+
+Both instances run on the same radar and camera inputs (shadow mode: the brake follows
+only the primary). This command pairs their outputs by radar cycle and reports every
+disagreement: the command's decision, and per track the verification and decision.
+
+    aeb ab-report --duration 60                        # live, then the report
+    aeb ab-report --duration 600 --record ab.rec       # also keep what was received
+    aeb ab-report --from ab.rec                        # the report of a recording
+    aeb ab-report --from ab.rec --json
+"""
+
+import argparse
+import json
+import sys
+import threading
+from dataclasses import asdict
+from pathlib import Path
+from typing import IO, Any
+
+from common.bus import Bus, BusError
+from common.clock import wall_ns
+from common.config.base import ZenohMode, ZenohSettings
+from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, KeySpec
+from common.log import setup_logging
+from common.messages import BrakeCommand, DecodeError, VerifiedTargets, decode
+from common.service import stop_event_on_signals
+from tools.ab.compare import Comparator, Report, render
+from tools.ab.recording import RecordingError, read_records, write_record
+
+SPECS: dict[str, KeySpec[Any]] = {s.name: s for s in (FUSION_TARGETS, FUSION_BRAKE_CMD)}
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="aeb ab-report", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT")
+    parser.add_argument("--vehicle", default="ego")
+    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
+    parser.add_argument("--primary", default="primary")
+    parser.add_argument("--candidate", default="candidate")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="listen this long (default: until Ctrl-C)")
+    parser.add_argument("--record", default="", help="also write what was received here")
+    parser.add_argument("--from", dest="source", default="", help="report on a recording")
+    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--episodes", type=int, default=20, help="episodes to list")
+    return parser.parse_args(argv)
+
+
+class Feeder:
+    """Decodes payloads and feeds the comparator; counts what does not decode."""
+
+    def __init__(self, comparator: Comparator) -> None:
+        self.comparator = comparator
+        self.undecodable = 0
+        self._lock = threading.Lock()
+
+    def feed(self, spec_name: str, payload: bytes) -> None:
+        with self._lock:
+            try:
+                if spec_name == FUSION_TARGETS.name:
+                    self.comparator.add_targets(decode(payload, VerifiedTargets))
+                elif spec_name == FUSION_BRAKE_CMD.name:
+                    self.comparator.add_command(decode(payload, BrakeCommand))
+            except DecodeError:
+                self.undecodable += 1
+
+
+def report_json(report: Report, undecodable: int) -> str:
+    data = asdict(report)
+    data["kinds"] = dict(report.kinds)
+    data["verification"] = {f"{a}->{b}": n for (a, b), n in report.verification.items()}
+    data["undecodable"] = undecodable
+    return json.dumps(data)
+
+
+def listen(args: argparse.Namespace, feeder: Feeder) -> int:
+    connect = tuple(args.connect or ["tcp/127.0.0.1:7447"])
+    try:
+        settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=connect,
+                                 config_file=args.zenoh_config,
+                                 overrides={"connect/timeout_ms": 10000})
+        bus = Bus.open(settings, args.vehicle, "ab-report")
+    except (BusError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = stop_event_on_signals()
+    record: IO[bytes] | None = open(args.record, "wb") if args.record else None  # noqa: SIM115
+    write_lock = threading.Lock()
+    try:
+        with bus:
+            for spec in SPECS.values():
+                for instance in (args.primary, args.candidate):
+                    def on_raw(payload: bytes, key: str, _rx: int,
+                               spec: KeySpec[Any] = spec) -> None:
+                        # One lock for both: the recording keeps the order fed, so that
+                        # its report is this report.
+                        with write_lock:
+                            if record is not None:
+                                write_record(record, spec.name, key, wall_ns(), payload)
+                            feeder.feed(spec.name, payload)
+
+                    bus.subscribe_raw(spec, on_raw, instance=instance)
+            stop.wait(args.duration)
+    finally:
+        if record is not None:
+            record.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Returns 0, or 2 for an unreadable recording or a bus that cannot be opened."""
+    args = parse_args(argv)
+    setup_logging("ab-report", "WARNING")
+    try:
+        comparator = Comparator(args.primary, args.candidate)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    feeder = Feeder(comparator)
+    if args.source:
+        if not Path(args.source).is_file():
+            print(f"error: recording {args.source} not found", file=sys.stderr)
+            return 2
+        try:
+            for spec_name, _key, _rx, payload in read_records(args.source):
+                feeder.feed(spec_name, payload)
+        except RecordingError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    else:
+        code = listen(args, feeder)
+        if code:
+            return code
+    report = comparator.report()
+    if args.json:
+        print(report_json(report, feeder.undecodable))
+    else:
+        print(render(report, args.episodes))
+        if feeder.undecodable:
+            print(f"undecodable payloads skipped: {feeder.undecodable}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
