@@ -38,3 +38,7 @@ class BrakeStatus(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     radar_to_serial_us: float | None  # last CAN frame -> bytes written (same host only)
     rejected: dict[str, int]       # commands rejected, by reason
     counters: dict[str, int]       # deadline misses, acks, ack timeouts, reconnects, ...
+    # Added by the brake service (defaults keep older payloads decodable):
+    state_since_mono_ns: int = 0   # brake host's monotonic time `state` was entered
+    last_cmd_rx_mono_ns: int = 0   # brake host's monotonic receipt time of the last valid command
+    command_state: BrakeState | None = None  # the command stream's state; differs under FAULT

@@ -1,0 +1,88 @@
+"""Configuration of the brake service: the `[brake]` table (see docs/brake.md)."""
+
+import enum
+import math
+from typing import Annotated
+
+import msgspec
+
+from common.config.base import ServiceConfig
+from common.keys import FUSION_BRAKE_CMD
+from common.messages.brake import FailsafePolicy
+
+_Ms = Annotated[float, msgspec.Meta(gt=0)]
+_Pct = Annotated[float, msgspec.Meta(ge=0, le=100)]
+
+
+class AgeClock(enum.Enum):
+    """How the age of a command is measured (rejection reason `too_old`)."""
+
+    # receipt minus header.pub_mono_ns: transport age, exact, but only when fusion runs
+    # on this host (monotonic clocks of two hosts are not comparable)
+    MONOTONIC = "monotonic"
+    # local wall clock minus header.stamp_ns (the radar cycle): age of the data, for a
+    # brake ECU on another host; needs clocks synchronised well below max_age_ms
+    WALL = "wall"
+
+
+class SerialSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The actuator's serial port (pyserial), reopened with backoff when it vanishes."""
+
+    port: str = "/dev/ttyACM0"
+    baudrate: Annotated[int, msgspec.Meta(gt=0)] = 115200
+    exclusive: bool = True                    # flock: a second brake process cannot open it
+    write_timeout_ms: _Ms = 20.0              # a stuck port cannot block the command path longer
+    reconnect_min_ms: _Ms = 100.0
+    reconnect_max_ms: _Ms = 2000.0
+
+    def __post_init__(self) -> None:
+        if not self.port:
+            raise ValueError("serial.port must name a device")
+        if self.reconnect_max_ms < self.reconnect_min_ms:
+            raise ValueError("reconnect_max_ms must be >= reconnect_min_ms")
+
+
+class ActuatorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The link's own timing (docs/actuator-protocol.md)."""
+
+    heartbeat_ms: _Ms = 50.0          # a command line at least this often, even if unchanged
+    ttl_ms: Annotated[int, msgspec.Meta(ge=20, le=2000)] = 250   # the actuator's own watchdog
+    ack_timeout_ms: _Ms = 150.0       # an unacknowledged line older than this: FAULT
+    ack_recover_count: Annotated[int, msgspec.Meta(ge=1)] = 3  # good acks to leave FAULT
+
+    def __post_init__(self) -> None:
+        if self.ttl_ms < 2 * self.heartbeat_ms:
+            raise ValueError("ttl_ms must be at least two heartbeats (2 * heartbeat_ms)")
+
+
+class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    instance: str = "primary"          # the one fusion instance whose commands count
+    deadline_ms: _Ms = 200.0           # no valid command for this long: FAILSAFE
+    timer_period_ms: Annotated[float, msgspec.Meta(gt=0, le=50)] = 10.0
+    timer_realtime_priority: Annotated[int, msgspec.Meta(ge=0, le=99)] = 0  # 0: normal
+    recover_count: Annotated[int, msgspec.Meta(ge=1)] = 3   # consecutive commands to arm
+    min_brake_hold_ms: Annotated[float, msgspec.Meta(ge=0)] = 1000.0
+    policy: FailsafePolicy = FailsafePolicy.HOLD
+    failsafe_hold_s: Annotated[float, msgspec.Meta(gt=0)] = 5.0       # policy `hold`
+    failsafe_stop_level_pct: _Pct = 30.0                              # policy `stop`
+    age_clock: AgeClock = AgeClock.MONOTONIC
+    max_age_ms: _Ms = 100.0
+    max_future_ms: Annotated[float, msgspec.Meta(ge=0)] = 5.0
+    status_period_ms: Annotated[float, msgspec.Meta(gt=0, le=100)] = 100.0   # >= 10 Hz
+    serial: SerialSettings = msgspec.field(default_factory=SerialSettings)
+    actuator: ActuatorSettings = msgspec.field(default_factory=ActuatorSettings)
+
+    def __post_init__(self) -> None:
+        if self.deadline_ms <= self.timer_period_ms:
+            raise ValueError("deadline_ms must be longer than timer_period_ms")
+        if not math.isfinite(self.failsafe_hold_s):
+            raise ValueError("failsafe_hold_s must be finite")
+
+
+class BrakeConfig(ServiceConfig, frozen=True, forbid_unknown_fields=True):
+    brake: BrakeSettings = msgspec.field(default_factory=BrakeSettings)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        # the instance becomes a key chunk: reject what could never be subscribed to
+        FUSION_BRAKE_CMD.key(self.vehicle, instance=self.brake.instance)

@@ -1,0 +1,5 @@
+import sys
+
+from services.brake.main import main
+
+sys.exit(main())

@@ -1,0 +1,60 @@
+"""`aeb brake`: the brake service (docs/brake.md)."""
+
+import sys
+import threading
+
+import msgspec
+
+from common.bus import Bus, BusError
+from common.config.brake import BrakeConfig
+from common.log import kv, setup_logging
+from common.service import load_service_config, service_argparser, stop_event_on_signals
+from services.brake.service import SOURCE, BrakeService
+
+
+def _serve_bus(cfg: BrakeConfig, service: BrakeService, stop: threading.Event,
+               opened: list[Bus], errors: list[str]) -> None:
+    """Blocks until the router is reachable: runs on its own thread so that the timer and
+    the actuator link work (and the deadline is enforced) without a bus."""
+    try:
+        bus = Bus.open(cfg.zenoh, cfg.vehicle, SOURCE)
+    except BusError as exc:
+        errors.append(str(exc))
+        stop.set()
+        return
+    opened.append(bus)
+    if not stop.is_set():
+        service.attach(bus)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = service_argparser("brake", __doc__ or "")
+    parser.add_argument("--port", help="actuator serial port, overrides brake.serial.port")
+    args = parser.parse_args(argv)
+    cfg = load_service_config(args, BrakeConfig)
+    if args.port:
+        serial = msgspec.structs.replace(cfg.brake.serial, port=args.port)
+        cfg = msgspec.structs.replace(cfg, brake=msgspec.structs.replace(cfg.brake, serial=serial))
+    log = setup_logging("brake", cfg.log.level.value)
+    stop = stop_event_on_signals()
+    # the timer thread waits at most ~1 ms for the GIL instead of the default 5 ms
+    sys.setswitchinterval(0.001)
+    service = BrakeService(cfg, log)
+    service.start()
+    opened: list[Bus] = []
+    errors: list[str] = []
+    threading.Thread(target=_serve_bus, args=(cfg, service, stop, opened, errors),
+                     name="brake-bus", daemon=True).start()
+    stop.wait()
+    service.stop()
+    for bus in opened:
+        bus.close()
+    if errors:
+        print(f"error: {errors[0]}", file=sys.stderr)
+        return 2
+    log.info(kv("brake_stopped"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,233 @@
+"""The brake service's I/O shell: feeds the pure core from three threads under one lock.
+
+- Zenoh's callback thread: every BrakeCommand sample -> core -> serial write, right there
+  (the command path: no queue, no hand-off to another thread);
+- the timer thread (`brake-timer`): wakes at the core's next due time (deadline expiry,
+  hold end, heartbeat, acknowledgement timeout) and at least every `timer_period_ms`,
+  so that silence is detected without any message arriving; it also publishes
+  BrakeStatus (on every change and every `status_period_ms`);
+- the serial reader thread (`brake-serial`): acknowledgements and faults from the
+  actuator, port loss and reopening.
+
+The timer and the serial link start before the Zenoh session exists (`attach` comes
+later, from whatever thread opened the session), so that a silent bus from the very
+start already leads to FAILSAFE.
+"""
+
+import logging
+import os
+import threading
+
+import zenoh
+
+from common.bus import Bus, TypedPublisher
+from common.clock import mono_ns, wall_ns
+from common.config.brake import AgeClock, BrakeConfig
+from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from common.log import RateLimitedLog, kv
+from common.messages import BrakeState, BrakeStatus, Header
+from services.brake.core import BrakeCore, Outgoing
+from services.brake.protocol import BadLine
+from services.brake.serial_link import SerialLink
+
+SERVICE = "brake"
+INSTANCE = "main"
+SOURCE = f"{SERVICE}/{INSTANCE}"
+MIN_WAIT_NS = 100_000
+
+
+class BrakeService:
+    def __init__(self, cfg: BrakeConfig, log: logging.Logger) -> None:
+        s = cfg.brake
+        self.cfg = cfg
+        self._log = log
+        self._rl = RateLimitedLog(log, cfg.log.repeat_interval_s)
+        self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
+                              mono_ns())
+        self.link = SerialLink(s.serial, self._on_link_up, self._on_link_down, self._on_rx, log)
+        self._period_ns = round(s.timer_period_ms * 1e6)
+        self._status_period_ns = round(s.status_period_ms * 1e6)
+        self._stopping = False
+        self._status_pub: TypedPublisher[BrakeStatus] | None = None
+        self._subscriber: zenoh.Subscriber[None] | None = None
+        self._token: zenoh.LivelinessToken | None = None
+        self._status_seq = 0
+        self._published_version = -1
+        self._last_status_ns = 0
+        self.cmd_to_serial_us: float | None = None
+        self.radar_to_serial_us: float | None = None
+        self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
+
+    # ---- life cycle ---------------------------------------------------------------
+
+    def start(self) -> None:
+        self._timer.start()
+        self.link.start()
+
+    def attach(self, bus: Bus) -> None:
+        """Start serving on the bus: status publisher, command subscription (every
+        instance, so that other instances are counted as rejections, not unseen), then
+        the liveliness token."""
+        publisher = bus.publisher(BRAKE_STATUS)
+        with self._lock:
+            self._status_pub = publisher
+            self._cond.notify()
+        self._subscriber = bus.subscribe_raw(FUSION_BRAKE_CMD, self.on_command)
+        self._token = bus.declare_health(SERVICE, INSTANCE)
+        self._log.info(kv("brake_ready", instance=self.cfg.brake.instance,
+                          port=self.cfg.brake.serial.port,
+                          policy=self.cfg.brake.policy.value))
+
+    def stop(self) -> None:
+        with self._lock:
+            self._stopping = True
+            self._cond.notify()
+        self._timer.join(timeout=5.0)
+        self.link.stop()
+        if self._token is not None:
+            self._token.undeclare()
+        if self._subscriber is not None:
+            self._subscriber.undeclare()
+
+    # ---- events (each under the lock) -----------------------------------------------
+
+    def on_command(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        """Zenoh's thread: validate, decide and write to the serial line at once."""
+        with self._lock:
+            before = self.core.state
+            out = self.core.on_command(payload, key, rx_mono_ns, wall_ns())
+            if out is not None:
+                self._write(out, rx_mono_ns)
+            self._cond.notify()
+            rejection = self.core.last_rejection
+            self._log_transition(before)
+        if rejection is not None:
+            self._rl.warning(f"reject:{rejection.value}", "command_rejected",
+                             reason=rejection.value, key=key)
+
+    def _on_rx(self, items: list[bytes | BadLine]) -> None:
+        with self._lock:
+            now = mono_ns()
+            before = self.core.state
+            for item in items:
+                out = self.core.on_rx(item, now)
+                if out is not None:
+                    self._write(out, None)
+                if self.core.rx_problem is not None:
+                    self._rl.warning(f"rx:{self.core.rx_problem}", "actuator_bad_line",
+                                     reason=self.core.rx_problem)
+            self._cond.notify()
+            self._log_transition(before)
+
+    def _on_link_up(self) -> None:
+        self._on_link(True, "")
+
+    def _on_link_down(self, reason: str) -> None:
+        self._on_link(False, reason)
+
+    def _on_link(self, up: bool, reason: str) -> None:
+        with self._lock:
+            before = self.core.state
+            out = self.core.on_link(up, mono_ns(), reason)
+            if out is not None:
+                self._write(out, None)
+            self._cond.notify()
+            self._log_transition(before)
+
+    # ---- timer ----------------------------------------------------------------------
+
+    def _timer_loop(self) -> None:
+        self._set_realtime_priority()
+        with self._lock:
+            while not self._stopping:
+                try:
+                    self._tick()
+                except Exception as exc:  # the deadline check must outlive a bug: log, go on
+                    self._rl.error("timer", "timer_tick_failed", error=repr(exc))
+                    self._log.debug("timer traceback", exc_info=True)
+                now = mono_ns()
+                wake = now + self._period_ns
+                if self._status_pub is not None:
+                    wake = min(wake, self._last_status_ns + self._status_period_ns)
+                due = self.core.next_due_ns(now)
+                if due is not None:
+                    wake = min(wake, due)
+                # a short wait even when something is due already: never spin holding the lock
+                self._cond.wait(max(wake - now, MIN_WAIT_NS) / 1e9)
+
+    def _tick(self) -> None:
+        now = mono_ns()
+        before = self.core.state
+        out = self.core.on_tick(now)
+        if out is not None:
+            self._write(out, None)
+        self._log_transition(before)
+        publisher = self._status_pub
+        if publisher is None or (self.core.version == self._published_version
+                                 and now - self._last_status_ns < self._status_period_ns):
+            return
+        status = self._status(now)
+        self._published_version = self.core.version
+        self._last_status_ns = now
+        # publish without the lock: the command path must not wait for Zenoh
+        self._lock.release()
+        try:
+            publisher.put(status)
+        except Exception as exc:
+            self._rl.error("status", "status_publish_failed", error=repr(exc))
+        finally:
+            self._lock.acquire()
+
+    def _set_realtime_priority(self) -> None:
+        prio = self.cfg.brake.timer_realtime_priority
+        if prio <= 0:
+            return
+        try:
+            # pid 0 on Linux: the calling thread only
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            self._log.info(kv("timer_realtime", priority=prio))
+        except (OSError, AttributeError) as exc:
+            self._log.warning(kv("timer_realtime_refused", priority=prio, error=exc))
+
+    # ---- helpers (lock held) --------------------------------------------------------
+
+    def _write(self, out: Outgoing, rx_mono_ns: int | None) -> None:
+        if not self.link.write(out.line):
+            self.core.on_link(False, mono_ns(), "write failed")
+            return
+        if out.cmd is None or rx_mono_ns is None:
+            return
+        written = mono_ns()
+        self.cmd_to_serial_us = (written - rx_mono_ns) / 1e3
+        radar_ns = out.cmd.radar_last_frame_mono_ns
+        same_host = self.cfg.brake.age_clock is AgeClock.MONOTONIC
+        self.radar_to_serial_us = (
+            (written - radar_ns) / 1e3 if same_host and 0 < radar_ns <= written else None
+        )
+
+    def _log_transition(self, before: BrakeState) -> None:
+        core = self.core
+        if core.state is before:
+            return
+        level = logging.INFO if core.state in (BrakeState.ARMED, BrakeState.BRAKING,
+                                               BrakeState.STANDBY) else logging.WARNING
+        self._log.log(level, kv("brake_state", old=before.value, new=core.state.value,
+                                reason=core.reason, level_pct=core.commanded_level_pct))
+
+    def _status(self, now: int) -> BrakeStatus:
+        v = self.core.view()
+        self._status_seq += 1
+        return BrakeStatus(
+            header=Header(seq=self._status_seq - 1, source=SOURCE, stamp_ns=wall_ns(),
+                          pub_mono_ns=now),
+            state=v.state, reason=v.reason, instance=self.cfg.brake.instance,
+            policy=self.cfg.brake.policy, last_cmd_seq=v.last_cmd_seq,
+            commanded_level_pct=v.commanded_level_pct,
+            actuator_position_pct=v.actuator_position_pct, actuator_state=v.actuator_state,
+            actuator_connected=v.actuator_connected, cmd_to_serial_us=self.cmd_to_serial_us,
+            radar_to_serial_us=self.radar_to_serial_us, rejected=v.rejected,
+            counters=v.counters, state_since_mono_ns=v.since_ns,
+            last_cmd_rx_mono_ns=v.last_cmd_rx_ns, command_state=v.command_state,
+        )
