@@ -5,7 +5,7 @@ as they were on the bus, so a recording replays through the same decoder."""
 import struct
 from collections.abc import Iterator
 from pathlib import Path
-from typing import BinaryIO
+from typing import IO
 
 import msgspec
 
@@ -18,7 +18,7 @@ class RecordingError(ValueError):
     """A recording that is truncated or not one of ours."""
 
 
-def write_record(out: BinaryIO, spec_name: str, key: str, rx_wall_ns: int,
+def write_record(out: IO[bytes], spec_name: str, key: str, rx_wall_ns: int,
                  payload: bytes) -> None:
     body = _encoder.encode((spec_name, key, rx_wall_ns, payload))
     out.write(_LEN.pack(len(body)) + body)
