@@ -6,9 +6,10 @@ import sys
 
 import pytest
 
-from common.config.camera import CameraConfig, FolderSource, RealSenseSource
+from common.config.camera import CameraConfig, FolderSource, RealSenseSource, SyntheticSource
 from common.config.loader import load_config
 from services.camera.main import main
+from services.camera.sources import check_source
 from tests.camera.helpers import CALIBRATION
 
 
@@ -61,6 +62,9 @@ def test_shipped_configs_are_valid():
     assert isinstance(real.camera.source, RealSenseSource)
     assert (real.camera.source.width, real.camera.source.height, real.camera.source.fps) == (
         848, 480, 30)
+    sim = load_config("deploy/camera-sim.toml", CameraConfig)
+    assert isinstance(sim.camera.source, SyntheticSource)
+    check_source(sim.camera)   # the factory imports
     folder = load_config("deploy/camera-folder.toml", CameraConfig)
     assert isinstance(folder.camera.source, FolderSource)
     assert folder.camera.calibration == CALIBRATION
