@@ -8,6 +8,7 @@ its column projected to a ROI (roi.py), the verifier (verifiers.py), the decisio
 command is the most severe decision (ties: the smallest TTC_eff), or a heartbeat.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,8 @@ from services.fusion.verifiers import Verifier
 
 _NO_ROI: tuple[int, ...] = ()
 
+CommandSink = Callable[[BrakeCommand], None]
+
 
 @dataclass(frozen=True, slots=True)
 class CycleResult:
@@ -53,9 +56,15 @@ class FusionCore:
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
 
     def process(self, tracks: RadarTracks, feed: FrameFeed, now_wall_ns: int,
-                now_mono_ns: int) -> CycleResult:
+                now_mono_ns: int, on_command: CommandSink | None = None) -> CycleResult:
         """Decide one radar cycle. `now_wall_ns` judges the radar's age; `now_mono_ns`
-        stamps the messages' pub_mono_ns (the shell refreshes it at publish)."""
+        stamps the messages' pub_mono_ns (the shell refreshes it at publish).
+
+        `on_command` receives the cycle's BrakeCommand as soon as it is decided, before
+        the gate has run on tracks that cannot change it: threats are checked most urgent
+        first, and once one of them reaches the most its radar threat allows, nothing
+        after it can be more severe. The targets are completed afterwards.
+        """
         s = self.s
         confirmed = [t for t in tracks.tracks if t.confirmed]
         age_ns = now_wall_ns - tracks.header.stamp_ns
@@ -75,16 +84,15 @@ class FusionCore:
                                                         self._max_skew_ns)
             else:
                 status = VerifierStatus.OK
-
+        cycle = _Cycle(tracks, confirmed, status, reason_unavailable, age_ns, now_wall_ns,
+                       now_mono_ns, on_command)
         if radar_stale:
             targets = [self._stale_target(t, age_ns) for t in confirmed]
+            self._send(cycle, targets)
         else:
-            targets = self._verify_all(confirmed, tracks.header.stamp_ns, frame,
-                                       reason_unavailable)
-
-        command = self._command(tracks, targets, status, reason_unavailable, age_ns,
-                                now_wall_ns, now_mono_ns)
-        header = Header(seq=command.header.seq, source=self.source,
+            targets = self._verify_all(cycle, frame)
+        assert cycle.command is not None
+        header = Header(seq=cycle.command.header.seq, source=self.source,
                         stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
         verified = VerifiedTargets(
             header=header, instance=s.instance, radar_sensor=tracks.sensor,
@@ -94,7 +102,7 @@ class FusionCore:
             unavailable_reason=reason_unavailable, radar_age_ms=age_ns / 1e6,
             frames_received=feed.received, frames_undecodable=feed.undecodable,
             frames_dropped=feed.dropped)
-        return CycleResult(verified, command)
+        return CycleResult(verified, cycle.command)
 
     def _stale_target(self, t: RadarTrack, age_ns: int) -> VerifiedTarget:
         k = self.rule.kinematics(t)
@@ -105,10 +113,10 @@ class FusionCore:
             Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
             reason, None, None)
 
-    def _verify_all(self, confirmed: list[RadarTrack], radar_stamp_ns: int,
-                    frame: DecodedFrame | None, reason_unavailable: str
-                    ) -> list[VerifiedTarget]:
+    def _verify_all(self, cycle: "_Cycle", frame: DecodedFrame | None) -> list[VerifiedTarget]:
         rule = self.rule
+        confirmed = cycle.confirmed
+        radar_stamp_ns = cycle.tracks.header.stamp_ns
         if frame is not None and self.s.frames.align:
             dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9
         else:
@@ -116,20 +124,23 @@ class FusionCore:
         xy = [(t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s) for t in confirmed]
         rois: list[Roi | None] = (self.projector.rois(np.array(xy))
                                   if frame is not None and confirmed else [None] * len(confirmed))
+        kins = [rule.kinematics(t) for t in confirmed]
+        threats = [rule.threat(k) for k in kins]
         frame_seq = frame.seq if frame is not None else None
         frame_age_ms = (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None
         gate_all = self.s.gate_scope is GateScope.ALL
         verify = self.verifier.verify
-        out = []
-        for t, (x, y), roi in zip(confirmed, xy, rois, strict=True):
-            k = rule.kinematics(t)
-            threat, threat_reason = rule.threat(k)
+        out: list[VerifiedTarget | None] = [None] * len(confirmed)
+
+        def evaluate(i: int) -> VerifiedTarget:
+            t, k, roi = confirmed[i], kins[i], rois[i]
+            threat, threat_reason = threats[i]
             density: float | None = None
             detail: dict[str, float] = {}
             if frame is None:
                 verification = Verification.UNAVAILABLE
                 if threat is not Decision.NONE:
-                    threat_reason = f"{threat_reason}; {reason_unavailable}"
+                    threat_reason = f"{threat_reason}; {cycle.reason_unavailable}"
             elif roi is None:
                 verification = Verification.NOT_VISIBLE
             elif threat is Decision.NONE and not gate_all:
@@ -142,11 +153,41 @@ class FusionCore:
             decision, reason = decide(threat, threat_reason, verification, rule.policy)
             if verification is Verification.REJECTED:
                 reason = f"{reason}; density {density:.4f}"
-            out.append(VerifiedTarget(
+            x, y = xy[i]
+            tgt = VerifiedTarget(
                 t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
                 _NO_ROI if roi is None else tuple(roi), density, k.ttc_s, k.ttc_eff_s,
-                decision, reason, frame_seq, frame_age_ms, detail))
-        return out
+                decision, reason, frame_seq, frame_age_ms, detail)
+            out[i] = tgt
+            return tgt
+
+        # Threats, most severe first, then most urgent: once the best decision so far is
+        # one the next threat cannot beat, the command is known.
+        inf = float("inf")
+        urgent = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
+                        key=lambda i: (-severity(threats[i][0]), kins[i].ttc_eff_s or inf))
+        best: VerifiedTarget | None = None
+        for i in urgent:
+            if best is not None and not _could_beat(threats[i][0], kins[i].ttc_eff_s, best):
+                break
+            tgt = evaluate(i)
+            if tgt.decision is not Decision.NONE and (best is None or _more_severe(tgt, best)):
+                best = tgt
+        self._send(cycle, [best] if best is not None else [], n_targets=len(confirmed))
+        for i in range(len(confirmed)):
+            if out[i] is None:
+                evaluate(i)
+        return [t for t in out if t is not None]
+
+    def _send(self, cycle: "_Cycle", candidates: list[VerifiedTarget],
+              n_targets: int | None = None) -> None:
+        cycle.command = self._command(
+            cycle.tracks, candidates, cycle.status, cycle.reason_unavailable, cycle.age_ns,
+            cycle.now_wall_ns, cycle.now_mono_ns,
+            n_targets=len(candidates) if n_targets is None else n_targets,
+            confirmed=cycle.confirmed)
+        if cycle.on_command is not None:
+            cycle.on_command(cycle.command)
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:
@@ -168,19 +209,25 @@ class FusionCore:
 
     def _command(self, tracks: RadarTracks, targets: list[VerifiedTarget],
                  status: VerifierStatus, reason_unavailable: str, age_ns: int,
-                 now_wall_ns: int, now_mono_ns: int, summary: str = "") -> BrakeCommand:
+                 now_wall_ns: int, now_mono_ns: int, summary: str = "",
+                 n_targets: int = 0, confirmed: list[RadarTrack] | None = None
+                 ) -> BrakeCommand:
+        """The command from the most severe of `targets` (ties: smallest TTC_eff), and the
+        hold. `n_targets` counts every confirmed track, `confirmed` gives a held track's
+        current range and TTC."""
         ds = self.s.decision
         worst: VerifiedTarget | None = None
         for tgt in targets:
             if worst is None or _more_severe(tgt, worst):
                 worst = tgt
         decision = worst.decision if worst is not None else Decision.NONE
+        n_targets = max(n_targets, len(targets))
         if summary:
             reason = summary
-        elif worst is None:
+        elif n_targets == 0:
             reason = "no confirmed tracks"
-        elif decision is Decision.NONE:
-            reason = f"no threat among {len(targets)} confirmed tracks"
+        elif worst is None or decision is Decision.NONE:
+            reason = f"no threat among {n_targets} confirmed tracks"
         else:
             reason = f"track {worst.track_id}: {worst.reason}"
         if status is VerifierStatus.STALE_RADAR:
@@ -188,13 +235,18 @@ class FusionCore:
         elif status is VerifierStatus.UNAVAILABLE and decision is Decision.NONE and not summary:
             reason = f"verifier unavailable ({reason_unavailable}): {reason}"
         track_id = worst.track_id if worst is not None and decision is not Decision.NONE else -1
+        range_m = worst.range_m if track_id >= 0 and worst is not None else None
+        ttc_s = worst.ttc_s if track_id >= 0 and worst is not None else None
         held = self.hold.update(decision, track_id, now_wall_ns)
         if held:
             track_id = self.hold.track_id
             left_ms = self.hold.remaining_ns(now_wall_ns) / 1e6
             reason = f"BRAKE held {left_ms:.0f} ms more; this cycle: {decision.value}, {reason}"
             decision = Decision.BRAKE
-            worst = next((t for t in targets if t.track_id == track_id), None)
+            # The held track as the radar sees it now, if it is still there.
+            now = next((t for t in confirmed or () if t.track_id == track_id), None)
+            range_m = now.range_m if now is not None else None
+            ttc_s = self.rule.kinematics(now).ttc_s if now is not None else None
         seq = self._seq
         self._seq += 1
         return BrakeCommand(
@@ -202,10 +254,8 @@ class FusionCore:
                           pub_mono_ns=now_mono_ns),
             instance=self.s.instance, decision=decision,
             brake_level_pct=ds.brake_level_pct if decision is Decision.BRAKE else 0.0,
-            verifier_status=status, held=held, track_id=track_id,
-            range_m=worst.range_m if worst is not None and track_id >= 0 else None,
-            ttc_s=worst.ttc_s if worst is not None and track_id >= 0 else None,
-            reason=reason, radar_seq=tracks.header.seq,
+            verifier_status=status, held=held, track_id=track_id, range_m=range_m,
+            ttc_s=ttc_s, reason=reason, radar_seq=tracks.header.seq,
             radar_last_frame_mono_ns=tracks.last_frame_mono_ns)
 
 
@@ -217,3 +267,31 @@ def _more_severe(a: VerifiedTarget, b: VerifiedTarget) -> bool:
     ta = a.ttc_eff_s if a.ttc_eff_s is not None else inf
     tb = b.ttc_eff_s if b.ttc_eff_s is not None else inf
     return ta < tb
+
+
+def _could_beat(threat: Decision, ttc_eff_s: float | None, best: VerifiedTarget) -> bool:
+    """Could a track whose radar threat is `threat` end more severe than `best`? Its
+    decision is at most its threat."""
+    s, sb = severity(threat), severity(best.decision)
+    if s != sb:
+        return s > sb
+    inf = float("inf")
+    tb = best.ttc_eff_s if best.ttc_eff_s is not None else inf
+    return (ttc_eff_s if ttc_eff_s is not None else inf) < tb
+
+
+class _Cycle:
+    """One cycle's context while it is processed."""
+
+    def __init__(self, tracks: RadarTracks, confirmed: list[RadarTrack], status: VerifierStatus,
+                 reason_unavailable: str, age_ns: int, now_wall_ns: int, now_mono_ns: int,
+                 on_command: "CommandSink | None") -> None:
+        self.tracks = tracks
+        self.confirmed = confirmed
+        self.status = status
+        self.reason_unavailable = reason_unavailable
+        self.age_ns = age_ns
+        self.now_wall_ns = now_wall_ns
+        self.now_mono_ns = now_mono_ns
+        self.on_command = on_command
+        self.command: BrakeCommand | None = None

@@ -16,7 +16,14 @@ from common.config.fusion import FusionSettings
 from common.counters import ReasonCounter
 from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import RateLimitedLog, kv
-from common.messages import Decision, DecodeError, RadarTracks, VerifierStatus, decode
+from common.messages import (
+    BrakeCommand,
+    Decision,
+    DecodeError,
+    RadarTracks,
+    VerifierStatus,
+    decode,
+)
 from services.fusion.core import CycleResult, FusionCore
 from services.fusion.frames import FrameDecoder
 
@@ -33,6 +40,7 @@ class FusionNode:
         self._rl = RateLimitedLog(log)
         self._lock = threading.Lock()
         self._last_radar_seq: int | None = None
+        self._decided_ns = 0
         self._proc_us: deque[float] = deque(maxlen=512)
         self._subs: list[zenoh.Subscriber[None]] = []
         self._cmd_pub = bus.publisher(FUSION_BRAKE_CMD, instance=settings.instance)
@@ -67,28 +75,38 @@ class FusionNode:
         return self.handle(tracks, rx_mono_ns)
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
+        """Process one cycle: the BrakeCommand is published the moment the core has
+        decided it, the targets when every track is done."""
         with self._lock:
             self._check_order(tracks)
             feed = self.decoder.snapshot()
+            sent: list[BrakeCommand] = []
+
+            def publish(cmd: BrakeCommand) -> None:
+                self._cmd_pub.put(msgspec.structs.replace(
+                    cmd, header=msgspec.structs.replace(cmd.header, pub_mono_ns=mono_ns())))
+                sent.append(cmd)
+                self._decided_ns = mono_ns()
+
             try:
-                result = self.core.process(tracks, feed, wall_ns(), mono_ns())
+                result = self.core.process(tracks, feed, wall_ns(), mono_ns(), publish)
             except Exception as exc:  # one command per cycle even when a bug bites
                 self.counters.add("processing_error")
                 self._rl.error("core", "fusion_cycle_failed", radar_seq=tracks.header.seq,
                                error=repr(exc))
                 result = self.core.failed_cycle(tracks, repr(exc), wall_ns(), mono_ns())
-            decided = mono_ns()
-            cmd = result.command
-            self._cmd_pub.put(msgspec.structs.replace(
-                cmd, header=msgspec.structs.replace(cmd.header, pub_mono_ns=mono_ns())))
-            processing_ns = decided - rx_mono_ns
+                if sent:   # the command went out before the failure: never a second one
+                    result = CycleResult(result.targets, sent[0])
+                else:
+                    publish(result.command)
+            processing_ns = self._decided_ns - rx_mono_ns
             targets = msgspec.structs.replace(
                 result.targets, processing_ns=processing_ns,
                 header=msgspec.structs.replace(result.targets.header, pub_mono_ns=mono_ns()))
             self._tgt_pub.put(targets)
             self._count(result)
             self._proc_us.append(processing_ns / 1e3)
-            return CycleResult(targets, cmd)
+            return CycleResult(targets, result.command)
 
     def _check_order(self, tracks: RadarTracks) -> None:
         seq = tracks.header.seq

@@ -4,6 +4,7 @@ import pytest
 
 from common.messages import Decision, Verification, VerifierStatus
 from services.fusion.frames import FrameDecoder
+from services.fusion.verifiers import GateResult
 from tests.fusion.helpers import MS, T0, FixedVerifier, cycle, feed, frame, make_core, run, track
 
 
@@ -269,3 +270,74 @@ def test_a_failed_cycle_still_answers_once_and_keeps_a_held_brake():
     fresh = make_core().failed_cycle(cycle(), "boom", T0, 1)
     assert fresh.command.decision is Decision.NONE
 
+
+
+def test_the_command_is_issued_before_the_gate_runs_on_tracks_that_cannot_change_it():
+    verifier = FixedVerifier(verdict=True)
+    core = make_core(verifier)
+    seen: list[tuple[int, int]] = []
+    tracks = (track(tid=1, x=12.0, vx=-5.0),       # BRAKE threat, TTC_eff 1.4 s
+              track(tid=2, x=6.0, vx=-5.0),        # BRAKE threat, TTC_eff 0.2 s: first
+              track(tid=3, x=20.0, vx=3.0))        # no threat
+    res = core.process(cycle(*tracks), feed(frame()), T0 + MS, 1,
+                       lambda cmd: seen.append((cmd.track_id, len(verifier.calls))))
+    assert seen == [(2, 1)]                        # one gate run, on the most urgent
+    assert len(verifier.calls) == 2                # the other threat is gated afterwards
+    assert [t.track_id for t in res.targets.targets] == [1, 2, 3]
+    assert res.targets.targets[0].verification is Verification.VERIFIED
+    assert res.command.track_id == 2
+
+
+def test_a_rejected_urgent_track_lets_the_next_threat_decide():
+    verdicts = iter([False, True])                 # first call (most urgent) rejects
+
+    class Scripted(FixedVerifier):
+        def verify(self, gray, roi):
+            self.calls.append(roi)
+            return GateResult(0.1, next(verdicts))
+
+    core = make_core(Scripted())
+    seen: list[int] = []
+    res = core.process(cycle(track(tid=1, x=12.0, vx=-5.0), track(tid=2, x=6.0, vx=-5.0)),
+                       feed(frame()), T0 + MS, 1, lambda cmd: seen.append(cmd.track_id))
+    assert seen == [1] and res.command.decision is Decision.BRAKE
+    assert res.targets.targets[1].verification is Verification.REJECTED
+
+
+def test_exactly_one_command_per_cycle_whatever_the_path():
+    for now, frames, tracks in [(T0 + MS, feed(frame()), ()),
+                                (T0 + MS, feed(frame()), (track(x=20.0, vx=3.0),)),
+                                (T0 + 900 * MS, feed(frame()), (track(),)),
+                                (T0 + MS, feed(), (track(),))]:
+        sent: list[object] = []
+        make_core().process(cycle(*tracks), frames, now, 1, sent.append)
+        assert len(sent) == 1
+
+
+def test_the_early_command_equals_the_most_severe_of_all_targets():
+    import random
+
+    rng = random.Random(7)
+
+    class Coin(FixedVerifier):
+        def verify(self, gray, roi):
+            return GateResult(0.1, rng.random() < 0.5)
+
+    for policy in ("warn", "ignore", "radar_only"):
+        core = make_core(Coin(), decision={"hold_s": 0.0, "unverifiable_policy": policy})
+        for n in range(60):
+            tracks = [track(tid=i, x=rng.uniform(2.0, 27.0), y=rng.uniform(-1.5, 1.5),
+                            vx=rng.uniform(-12.0, 3.0)) for i in range(rng.randint(0, 8))]
+            frames = feed(frame()) if n % 5 else feed()
+            res = core.process(cycle(*tracks, seq=n), frames, T0 + MS, 1)
+            rank = {Decision.NONE: 0, Decision.WARNING: 1, Decision.BRAKE: 2}
+            best = None
+            for tgt in res.targets.targets:          # the plain definition, in order
+                if tgt.decision is Decision.NONE:
+                    continue
+                key = (rank[tgt.decision], -(tgt.ttc_eff_s or 0.0))
+                if best is None or key > best[0]:
+                    best = (key, tgt)
+            expected = (Decision.NONE, -1) if best is None else (best[1].decision,
+                                                                 best[1].track_id)
+            assert (res.command.decision, res.command.track_id) == expected

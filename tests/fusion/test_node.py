@@ -1,0 +1,111 @@
+"""The shell: one BrakeCommand per radar cycle, published before the targets, also when
+the core fails half-way or the payload is not a radar cycle."""
+
+import logging
+
+import pytest
+
+from common.clock import wall_ns
+from common.messages import BrakeCommand, Decision, VerifiedTargets, encode
+from services.fusion.frames import FrameDecoder
+from services.fusion.node import FusionNode
+from services.fusion.verifiers import GateResult
+from tests.fusion.helpers import FixedVerifier, cycle, make_core, track
+from tests.fusion.test_frames import compressed
+
+
+class FakePublisher:
+    def __init__(self, log: list, name: str) -> None:
+        self.log, self.name = log, name
+
+    def put(self, msg) -> None:
+        self.log.append((self.name, msg))
+
+
+class FakeBus:
+    """Just what FusionNode needs to publish; no Zenoh."""
+
+    def __init__(self) -> None:
+        self.log: list = []
+
+    def publisher(self, spec, **params):
+        return FakePublisher(self.log, spec.name)
+
+
+def node_with(verifier, **fusion) -> tuple[FusionNode, FakeBus]:
+    bus = FakeBus()
+    core = make_core(verifier, **fusion)
+    decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
+    return FusionNode(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
+
+
+def fresh(node: FusionNode) -> None:
+    node.decoder.decode_now(compressed(stamp_ns=wall_ns()), 1)
+
+
+def payload(*tracks, seq: int = 0) -> bytes:
+    return encode(cycle(*tracks, seq=seq, stamp_ns=wall_ns()))
+
+
+def test_command_then_targets_for_each_cycle():
+    node, bus = node_with(FixedVerifier())
+    fresh(node)
+    node.on_tracks_payload(payload(track(x=8.0, vx=-6.0), seq=0), "k", 0)
+    node.on_tracks_payload(payload(seq=1), "k", 0)
+    kinds = [name for name, _ in bus.log]
+    assert kinds == ["fusion_brake_cmd", "fusion_targets"] * 2
+    first: BrakeCommand = bus.log[0][1]
+    assert first.decision is Decision.BRAKE and first.header.pub_mono_ns > 0
+    targets: VerifiedTargets = bus.log[1][1]
+    assert targets.processing_ns > 0 and targets.radar_seq == 0
+
+
+def test_a_failure_after_the_command_never_sends_a_second_one():
+    calls = []
+
+    class Breaks(FixedVerifier):
+        def verify(self, gray, roi):
+            calls.append(roi)
+            if len(calls) > 1:
+                raise RuntimeError("bug in a verifier")
+            return GateResult(0.2, True)
+
+    node, bus = node_with(Breaks())
+    fresh(node)
+    # Most urgent first: verified, the command goes out; the second gate run raises.
+    node.on_tracks_payload(payload(track(tid=1, x=12.0, vx=-5.0), track(tid=2, x=6.0, vx=-5.0)),
+                           "k", 0)
+    commands = [m for name, m in bus.log if name == "fusion_brake_cmd"]
+    assert len(commands) == 1 and commands[0].track_id == 2
+    targets = [m for name, m in bus.log if name == "fusion_targets"]
+    assert len(targets) == 1 and "fusion error" in targets[0].unavailable_reason
+    assert node.counters.get("processing_error") == 1
+
+
+def test_a_failure_before_the_command_sends_a_none_command_with_the_error():
+    class Broken(FixedVerifier):
+        def verify(self, gray, roi):
+            raise RuntimeError("boom")
+
+    node, bus = node_with(Broken())
+    fresh(node)
+    node.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", 0)
+    commands = [m for name, m in bus.log if name == "fusion_brake_cmd"]
+    assert len(commands) == 1 and commands[0].decision is Decision.NONE
+    assert "fusion error: RuntimeError('boom')" in commands[0].reason
+
+
+@pytest.mark.parametrize("junk", [b"", b"\x01\x02", encode(track())])
+def test_a_payload_that_is_not_a_radar_cycle_is_counted_not_answered(junk):
+    node, bus = node_with(FixedVerifier())
+    assert node.on_tracks_payload(junk, "k", 0) is None
+    assert bus.log == [] and node.counters.get("radar_undecodable") == 1
+
+
+def test_radar_sequence_gaps_and_regressions_are_counted_and_still_answered():
+    node, bus = node_with(FixedVerifier())
+    for seq in (5, 6, 9, 9, 3):
+        node.on_tracks_payload(payload(seq=seq), "k", 0)
+    assert node.counters.get("radar_cycles_missed") == 2
+    assert node.counters.get("radar_seq_not_increasing") == 2
+    assert [m.header.seq for name, m in bus.log if name == "fusion_brake_cmd"] == [0, 1, 2, 3, 4]
