@@ -1,0 +1,46 @@
+"""A stand-in fusion instance for the brake tests: publishes one BrakeCommand every
+`--period-ms` (BRAKE at `--level` when > 0, else NONE) until SIGTERM. The tests SIGKILL
+or SIGSTOP it to make the command stream stop.
+
+    python -m tests.brake.publisher --connect tcp/127.0.0.1:7447 --level 60
+"""
+
+import argparse
+import sys
+import time
+
+from common.bus import Bus
+from common.keys import FUSION_BRAKE_CMD
+from common.service import stop_event_on_signals
+from tests.brake.helpers import command
+from tests.support import client_settings
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--connect", required=True)
+    parser.add_argument("--instance", default="primary")
+    parser.add_argument("--vehicle", default="ego")
+    parser.add_argument("--period-ms", type=float, default=20.0)
+    parser.add_argument("--level", type=float, default=0.0)
+    args = parser.parse_args(argv)
+    stop = stop_event_on_signals()
+    period = args.period_ms / 1000
+    with Bus.open(client_settings(args.connect), args.vehicle,
+                  f"fusion/{args.instance}") as bus:
+        pub = bus.publisher(FUSION_BRAKE_CMD, instance=args.instance)
+        seq = 0
+        next_t = time.monotonic()
+        while not stop.is_set():
+            pub.put(command(seq, args.level, instance=args.instance))
+            seq += 1
+            next_t += period
+            now = time.monotonic()
+            if next_t < now:          # resumed after SIGSTOP: no burst of stale periods
+                next_t = now + period
+            stop.wait(next_t - now)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,214 @@
+"""The multi-process rig of the brake tests: a Zenoh router, the brake service as its own
+process, the simulated actuator on a pty in this process, and a bus for observing
+BrakeStatus and publishing commands."""
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from common.bus import Bus
+from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from common.messages import BrakeCommand, BrakeState, BrakeStatus
+from services.brake.pty_pair import PtyPair
+from services.brake.sim_actuator import SimActuator
+from tests.support import (
+    START_TIMEOUT_S,
+    HealthWatch,
+    ServiceProcess,
+    open_bus,
+    python_module,
+    router_process,
+)
+
+LIVE = (BrakeState.ARMED, BrakeState.BRAKING)
+
+
+def toml_text(tables: dict[str, dict[str, Any]]) -> str:
+    """A small TOML writer for flat tables (`{"brake": {...}, "brake.serial": {...}}`)."""
+    def value(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return f'"{v}"'
+        return repr(v)
+
+    out = []
+    for table, fields in tables.items():
+        out.append(f"[{table}]")
+        out += [f"{k} = {value(v)}" for k, v in fields.items()]
+    return "\n".join(out) + "\n"
+
+
+class Log:
+    """Messages in arrival order, each with this process's monotonic arrival time; waits
+    that start from an index so that long trial runs stay linear."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[int, Any]] = []
+        self._cond = threading.Condition()
+
+    def __call__(self, msg: Any, key: str) -> None:
+        with self._cond:
+            self.items.append((time.monotonic_ns(), msg))
+            self._cond.notify_all()
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self.items)
+
+    def wait(self, pred: Callable[[Any], bool], timeout_s: float, start: int = 0,
+             what: str = "") -> tuple[int, Any]:
+        """(index, message) of the first message from `start` on that satisfies `pred`."""
+        deadline = time.monotonic() + timeout_s
+        i = start
+        with self._cond:
+            while True:
+                while i < len(self.items):
+                    if pred(self.items[i][1]):
+                        return i, self.items[i][1]
+                    i += 1
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    last = self.items[-1][1] if self.items else None
+                    raise TimeoutError(f"no {what or 'matching message'} in {timeout_s} s; "
+                                       f"last: {last}")
+                self._cond.wait(left)
+
+    def since(self, start: int) -> list[Any]:
+        with self._cond:
+            return [m for _, m in self.items[start:]]
+
+
+@dataclass
+class BrakeRig:
+    endpoint: str
+    log_dir: Path
+    link: Path
+    sim: SimActuator
+    pair: PtyPair
+    brake: ServiceProcess
+    bus: Bus
+    status: Log
+    commands: Log          # what the primary publishers put on the bus, as seen here
+    deadline_ms: float
+    period_ms: float
+
+    def publisher(self, level: float = 0.0, period_ms: float = 20.0,
+                  instance: str = "primary", name: str = "publisher") -> ServiceProcess:
+        return ServiceProcess(
+            name, python_module("tests.brake.publisher", "--connect", self.endpoint,
+                                "--level", str(level), "--period-ms", str(period_ms),
+                                "--instance", instance),
+            self.log_dir,
+        )
+
+    def wait_status(self, pred: Callable[[BrakeStatus], bool], start: int = 0,
+                    timeout_s: float = 30.0, what: str = "") -> tuple[int, BrakeStatus]:
+        return self.status.wait(pred, timeout_s, start, what)
+
+    def wait_live(self, start: int, level: float = 0.0, timeout_s: float = 30.0) -> int:
+        """Index of the first status from `start` that follows the stream at `level`."""
+        want = BrakeState.BRAKING if level > 0 else BrakeState.ARMED
+        i, _ = self.wait_status(
+            lambda s: s.state is want and s.commanded_level_pct == level, start, timeout_s,
+            f"{want.value} at {level}%")
+        return i
+
+
+@contextmanager
+def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
+    """Everything started and the brake service's liveliness token seen. `brake` holds
+    [brake] fields; nested tables as `serial={...}`, `actuator={...}`."""
+    nested = {k: brake.pop(k) for k in ("serial", "actuator") if k in brake}
+    link = log_dir / "actuator"
+    tables: dict[str, dict[str, Any]] = {
+        "brake": brake,
+        "brake.serial": {"port": str(link), **nested.get("serial", {})},
+    }
+    if "actuator" in nested:
+        tables["brake.actuator"] = nested["actuator"]
+    config = log_dir / "brake.toml"
+    config.write_text(toml_text(tables))
+    with ExitStack() as stack:
+        endpoint = stack.enter_context(router_process(log_dir))
+        sim, pair = SimActuator.on_pty(link, seed=7)
+        stack.callback(pair.remove)
+        stack.enter_context(sim)
+        proc = ServiceProcess("brake", python_module("services.brake", "--config", str(config),
+                                                      "--connect", endpoint), log_dir)
+        stack.callback(proc.stop)
+        bus = stack.enter_context(open_bus(endpoint, source="test"))
+        status, commands = Log(), Log()
+        bus.subscribe(BRAKE_STATUS, status)
+        bus.subscribe(FUSION_BRAKE_CMD, commands, instance="primary")
+        watch = HealthWatch(bus)
+        try:
+            watch.wait_alive("brake", "main", START_TIMEOUT_S)
+        except TimeoutError:
+            raise AssertionError(f"brake did not start:\n{proc.output()}") from None
+        yield BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
+                       float(brake.get("deadline_ms", 200.0)),
+                       float(brake.get("timer_period_ms", 10.0)))
+        assert proc.alive(), f"brake process died:\n{proc.output()}"
+
+
+def last_command_before(rig: BrakeRig, t_ns: int) -> BrakeCommand | None:
+    """The newest primary command this process saw published before `t_ns`."""
+    found = None
+    for _, msg in rig.commands.items:
+        if msg.header.pub_mono_ns <= t_ns:
+            found = msg
+    return found
+
+
+class Stream:
+    """Primary commands published from this process every `period_ms` on its own thread.
+    `inject(fn)` runs `fn(next_seq)` on that thread between two commands (so injected
+    samples interleave with the stream deterministically) and returns its result."""
+
+    def __init__(self, bus: Bus, level: float = 0.0, period_ms: float = 20.0) -> None:
+        self.pub = bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        self.level = level
+        self.period_s = period_ms / 1000
+        self.seq = 0
+        self.sent: list[BrakeCommand] = []
+        self._jobs: list[tuple[Callable[[int], Any], list[Any], threading.Event]] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> "Stream":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+    def inject(self, fn: Callable[[int], Any], timeout_s: float = 10.0) -> Any:
+        done = threading.Event()
+        result: list[Any] = []
+        with self._lock:
+            self._jobs.append((fn, result, done))
+        if not done.wait(timeout_s):
+            raise TimeoutError("stream thread did not run the injection")
+        return result[0]
+
+    def _run(self) -> None:
+        from tests.brake.helpers import command
+
+        while not self._stop.is_set():
+            msg = command(self.seq, self.level)
+            self.pub.put(msg)
+            self.sent.append(msg)
+            self.seq += 1
+            with self._lock:
+                jobs, self._jobs = self._jobs, []
+            for fn, result, done in jobs:
+                result.append(fn(self.seq))
+                done.set()
+            self._stop.wait(self.period_s)

@@ -1,0 +1,214 @@
+"""The brake service as its own process (must show 1, 3, 4, 5 of the issue): a router,
+the simulated actuator on a pty, commands over Zenoh, bytes checked on the line."""
+
+import os
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.keys import FUSION_BRAKE_CMD
+from common.messages import BrakeState, encode
+from services.brake.protocol import HostMode
+from services.brake.sim_actuator import SimActuator
+from tests.brake.helpers import command
+from tests.brake.rig import BrakeRig, Stream, brake_rig
+from tests.support import (
+    HealthWatch,
+    ServiceProcess,
+    free_port,
+    open_bus,
+    python_module,
+    router_process,
+    wait_for,
+)
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BrakeRig]:
+    with brake_rig(tmp_path_factory.mktemp("brake"), min_brake_hold_ms=100.0,
+                   failsafe_hold_s=0.5) as r:
+        yield r
+
+
+def _levels_since(rig: BrakeRig, t_ns: int) -> list[int]:
+    return [r.cmd.level_pct for r in rig.sim.commands_since(t_ns)]
+
+
+def test_brake_command_puts_brake_bytes_on_the_line(rig):
+    """Must show 1."""
+    start = len(rig.status)
+    with Stream(rig.bus) as stream:
+        rig.wait_live(start)
+        t_brake = time.monotonic_ns()
+        stream.level = 70.0
+        found = wait_for(lambda: [r for r in rig.sim.commands_since(t_brake)
+                                  if r.cmd.level_pct == 70], 10, what="level 70")
+        line = found[0]
+        first = next(m for m in stream.sent if m.brake_level_pct == 70.0)
+        assert line.t_ns > first.header.pub_mono_ns
+        assert line.cmd.mode is HostMode.BRAKING
+        _, status = rig.wait_status(lambda s: s.last_cmd_seq >= first.header.seq
+                                    and s.state is BrakeState.BRAKING, start)
+        stream.level = 0.0
+    assert status.commanded_level_pct == 70.0
+    assert status.cmd_to_serial_us is not None and 0 < status.cmd_to_serial_us < 1e6
+    assert status.radar_to_serial_us is not None and status.radar_to_serial_us > 0
+    print(f"\ncommand publish -> actuator read: {(line.t_ns - first.header.pub_mono_ns) / 1e3:.0f}"
+          f" us; receipt -> serial write (service): {status.cmd_to_serial_us:.0f} us")
+
+
+def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
+    """Must show 3: wrong instance (a real candidate process and a forged payload), old
+    sequence, duplicate, too old, malformed, out-of-contract; the line stays at 0."""
+    start = len(rig.status)
+    before = None
+    with Stream(rig.bus) as stream:
+        rig.wait_live(start)
+        _, before = rig.wait_status(lambda s: True, len(rig.status))
+        t0 = time.monotonic_ns()
+        candidate = rig.publisher(level=100.0, instance="candidate", name="candidate")
+        raw_key = FUSION_BRAKE_CMD.key("ego", instance="primary")
+
+        def forged(next_seq: int) -> None:
+            last = next_seq - 1
+            put = stream.pub.put
+            put(command(last, 100.0))                                    # duplicate
+            put(command(last - 3, 100.0))                                # old sequence
+            put(command(next_seq, 100.0,
+                        pub_mono_ns=time.monotonic_ns() - 1_000_000_000))  # too old
+            put(command(next_seq, 100.0, instance="candidate"))         # wrong instance
+            put(command(next_seq, 150.0))                                # out of contract
+            rig.bus.session.put(raw_key, b"\x00 not a command")         # malformed
+            rig.bus.session.put(raw_key, encode(command(next_seq, 100.0))[:-4])
+
+        for _ in range(3):
+            stream.inject(forged)
+        _, after = rig.wait_status(
+            lambda s: s.rejected.get("wrong_instance", 0) >= before.rejected.get(
+                "wrong_instance", 0) + 13 and s.rejected.get("malformed", 0) >= 6,
+            len(rig.status), 30, "all rejections counted")
+        candidate.stop()
+        t1 = time.monotonic_ns()
+        statuses = rig.status.since(start)
+    grew = {k: after.rejected.get(k, 0) - before.rejected.get(k, 0) for k in after.rejected}
+    assert grew["duplicate"] == 3 and grew["old_sequence"] == 3 and grew["too_old"] == 3
+    assert grew["invalid"] == 3 and grew["malformed"] == 6
+    assert grew["wrong_instance"] >= 3 + 10              # forged + the candidate process
+    assert set(_levels_since(rig, t0)) == {0}, "a rejected command moved the brake"
+    window = [s for s in statuses if t0 <= s.header.pub_mono_ns <= t1]
+    assert window and all(s.state is BrakeState.ARMED and s.commanded_level_pct == 0
+                          for s in window)
+
+
+def test_pty_closed_and_recreated_reconnects_and_brakes_again(rig):
+    """Must show 4: the port vanishes (EIO) and comes back under another /dev/pts name
+    behind the configured path; the service reopens it by itself."""
+    start = len(rig.status)
+    with Stream(rig.bus, level=50.0) as stream:
+        rig.wait_live(start, 50.0)
+        old_name = rig.pair.slave_name
+        rig.sim.disconnect()
+        i, lost = rig.wait_status(lambda s: not s.actuator_connected, start, 10, "port lost")
+        assert lost.state is BrakeState.FAULT and "serial port lost" in lost.reason
+        assert lost.command_state is BrakeState.BRAKING   # the decision is not forgotten
+        blocker = os.openpty()                           # take the old number
+        try:
+            t_back = time.monotonic_ns()
+            rig.sim.reconnect()
+        finally:
+            for fd in blocker:
+                os.close(fd)
+        assert rig.pair.slave_name != old_name
+        rig.wait_live(i, 50.0)
+        assert 50 in _levels_since(rig, t_back)
+        _, st = rig.wait_status(lambda s: s.actuator_connected, i)
+        stream.level = 0.0
+    assert st.counters["serial_losses"] >= 1 and st.counters["serial_connects"] >= 2
+
+
+def test_garbage_on_the_line_never_crashes_and_never_acknowledges(rig):
+    """Must show 5, on the live service: random bytes, cut-short and corrupted lines
+    between the acknowledgements, then garbage alone (no acknowledgements at all)."""
+    start = len(rig.status)
+    stop = threading.Event()
+
+    def pump() -> None:
+        while not stop.is_set():
+            rig.sim.inject_garbage(40)
+            stop.wait(0.005)
+
+    pumper = threading.Thread(target=pump, daemon=True)
+    with Stream(rig.bus) as stream:
+        rig.wait_live(start)
+        rig.sim.set_noise(1.0)
+        pumper.start()
+        try:
+            t_noise = time.monotonic_ns()
+            i, st = rig.wait_status(
+                lambda s: s.header.pub_mono_ns > t_noise + 1_000_000_000, start, 20)
+            # a second of garbage between good acknowledgements: still healthy
+            window = [s for s in rig.status.since(start) if s.header.pub_mono_ns > t_noise]
+            assert all(s.state is BrakeState.ARMED for s in window), window[-1].reason
+            bad = sum(v for k, v in st.counters.items() if k.startswith("rx_"))
+            assert bad > 50
+            rig.sim.set_no_ack(True)
+            i, fault = rig.wait_status(lambda s: s.state is BrakeState.FAULT, i, 10)
+            assert "acknowledgement" in fault.reason
+            acks = fault.counters["acks"]
+            t_fault = time.monotonic_ns()
+            i, later = rig.wait_status(
+                lambda s: s.header.pub_mono_ns > t_fault + 500_000_000, i, 10)
+            assert later.counters["acks"] == acks, "garbage counted as an acknowledgement"
+            assert later.state is BrakeState.FAULT
+        finally:
+            stop.set()
+            pumper.join(5)
+            rig.sim.set_noise(0.0)
+            rig.sim.set_no_ack(False)
+        rig.wait_live(i)
+        assert stream.seq > 0
+    assert rig.brake.alive()
+
+
+def test_actuator_fault_line_is_fault_until_it_clears(rig):
+    start = len(rig.status)
+    with Stream(rig.bus):
+        rig.wait_live(start)
+        rig.sim.raise_fault(3, "motor overcurrent")
+        i, st = rig.wait_status(lambda s: s.state is BrakeState.FAULT, start, 10)
+        assert "3: motor overcurrent" in st.reason
+        rig.wait_status(lambda s: s.actuator_state == "FAULT", i, 10)
+        rig.sim.clear_fault()
+        rig.wait_live(i)
+
+
+def test_silence_from_the_start_is_failsafe_even_without_a_router(tmp_path: Path):
+    """The timer and the actuator run before Zenoh is reachable: the actuator is told
+    FAILSAFE; once a router appears the service serves and recovers on commands."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    link = tmp_path / "actuator"
+    sim, pair = SimActuator.on_pty(link)
+    (tmp_path / "brake.toml").write_text(f'[brake.serial]\nport = "{link}"\n')
+    proc = ServiceProcess("brake", python_module("services.brake", "--config",
+                                                 str(tmp_path / "brake.toml"),
+                                                 "--connect", endpoint), tmp_path)
+    try:
+        with sim:
+            wait_for(lambda: sim.snapshot().mode == HostMode.FAILSAFE.value, 30,
+                     what="FAILSAFE on the line")
+            assert sim.snapshot().warning
+            with router_process(tmp_path, port), open_bus(endpoint) as bus:
+                HealthWatch(bus).wait_alive("brake", "main", 30)
+                with Stream(bus):
+                    wait_for(lambda: sim.snapshot().mode == HostMode.ARMED.value, 30,
+                             what="ARMED on the line")
+    finally:
+        proc.stop()
+        pair.remove()
+    assert "since start" in proc.log_path.read_text()
