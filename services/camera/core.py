@@ -82,6 +82,7 @@ class PublishCore:
             reason, self.last_rejection = problem
             self.stats.errors.add(reason)
             return Offer.REJECTED
+        self.last_rejection = ""   # only the newest frame's problem explains a stall
         if not self._gate.admit(now_mono_ns):
             self.stats.decimated += 1
             return Offer.DECIMATED

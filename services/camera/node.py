@@ -69,7 +69,7 @@ class CameraNode:
                      source=self.pipeline.source.describe(), fps=self.settings.fps,
                      size=f"{self.cal.width}x{self.cal.height}"))
         period = self.settings.info_period_s
-        next_stats = mono_ns()
+        next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9)
         try:
             while True:
                 self._info_pub.put(self.info())
@@ -80,7 +80,7 @@ class CameraNode:
                     self._info_pub.put(self.info())
                     return EXIT_OK
                 if self.settings.stats_period_s and mono_ns() >= next_stats:
-                    next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9)
+                    next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9) + round(self.settings.stats_period_s * 1e9)
                     self.log_stats()
                 if stop.wait(period):
                     return EXIT_OK

@@ -148,3 +148,11 @@ def test_camera_info_carries_the_calibration_and_counters_and_round_trips():
                                      np.array(info.t_m))
     np.testing.assert_allclose(back.project(np.array([[9.2, 1.0, 0.0]]))[0],
                                cal.project(np.array([[9.2, 1.0, 0.0]]))[0])
+
+
+def test_a_rejection_reason_is_forgotten_once_a_good_frame_arrives():
+    core = PublishCore("front", 64, 48, fps=30.0)
+    core.offer(frame(1, w=80), 0)
+    assert "80x48" in core.last_rejection
+    core.offer(frame(2), 40 * MS)
+    assert core.last_rejection == ""
