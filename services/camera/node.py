@@ -80,7 +80,7 @@ class CameraNode:
                     self._info_pub.put(self.info())
                     return EXIT_OK
                 if self.settings.stats_period_s and mono_ns() >= next_stats:
-                    next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9) + round(self.settings.stats_period_s * 1e9)
+                    next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9)
                     self.log_stats()
                 if stop.wait(period):
                     return EXIT_OK
