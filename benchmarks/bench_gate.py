@@ -224,12 +224,12 @@ def plot(summary: dict[str, dict[str, dict[str, float]]], night: dict[str, dict[
     for ax, labels in ((axes[0], list(SIZES)[:2]), (axes[1], list(SIZES)[2:])):
         width = 0.8 / len(names)
         for i, name in enumerate(names):
-            means = [summary[lb][name]["mean_us"] for lb in labels]
-            p95 = [summary[lb][name]["p95_us"] - summary[lb][name]["mean_us"] for lb in labels]
             xs = np.arange(len(labels)) + i * width
-            ax.bar(xs, means, width, yerr=[np.zeros(len(p95)), p95], capsize=3, label=name)
+            ax.bar(xs, [summary[lb][name]["mean_us"] for lb in labels], width, label=name)
+            ax.scatter(xs, [summary[lb][name]["p95_us"] for lb in labels], marker="_", s=120,
+                       color="black", zorder=3)
         ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels)
-        ax.set_ylabel("us per verification (bar: mean, whisker: p95)")
+        ax.set_ylabel("us per verification (bar: mean, dash: p95)")
     axes[0].legend(fontsize=8)
     axes[0].set_title("per ROI")
     axes[1].set_title("full frame")
