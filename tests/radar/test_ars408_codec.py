@@ -41,21 +41,23 @@ from services.radar.ars408 import (
 from services.radar.ars408.dbc import DBC_PATH, render
 from services.radar.ars408.table import BY_KIND
 
+OBJECT_GENERAL = {
+    "id": lambda b: b[0],
+    "dist_long_m": lambda b: (b[1] << 5 | b[2] >> 3) * 0.2 - 500,
+    "dist_lat_m": lambda b: ((b[2] & 7) << 8 | b[3]) * 0.2 - 204.6,
+    "vrel_long_mps": lambda b: (b[4] << 2 | b[5] >> 6) * 0.25 - 128,
+    "vrel_lat_mps": lambda b: ((b[5] & 0x3F) << 3 | b[6] >> 5) * 0.25 - 64,
+    "dyn_prop": lambda b: b[6] & 7,
+    "rcs_dbsm": lambda b: b[7] * 0.5 - 64,
+}
+
 SPEC = {
     "Obj_0_Status": {
         "n_objects": lambda b: b[0],
         "meas_counter": lambda b: b[1] << 8 | b[2],
         "interface_version": lambda b: b[3] >> 4,
     },
-    "Obj_1_General": {
-        "id": lambda b: b[0],
-        "dist_long_m": lambda b: (b[1] << 5 | b[2] >> 3) * 0.2 - 500,
-        "dist_lat_m": lambda b: ((b[2] & 7) << 8 | b[3]) * 0.2 - 204.6,
-        "vrel_long_mps": lambda b: (b[4] << 2 | b[5] >> 6) * 0.25 - 128,
-        "vrel_lat_mps": lambda b: ((b[5] & 0x3F) << 3 | b[6] >> 5) * 0.25 - 64,
-        "dyn_prop": lambda b: b[6] & 7,
-        "rcs_dbsm": lambda b: b[7] * 0.5 - 64,
-    },
+    "Obj_1_General": OBJECT_GENERAL,
     "Obj_2_Quality": {
         "id": lambda b: b[0],
         "dist_long_rms": lambda b: b[1] >> 3,
@@ -81,13 +83,9 @@ SPEC = {
         "interface_version": lambda b: b[4] >> 4,
     },
     "Cluster_1_General": {
-        "id": lambda b: b[0],
-        "dist_long_m": lambda b: (b[1] << 5 | b[2] >> 3) * 0.2 - 500,
+        # As 0x60B except DistLat: 10 bits, offset -102.3.
+        **OBJECT_GENERAL,
         "dist_lat_m": lambda b: ((b[2] & 3) << 8 | b[3]) * 0.2 - 102.3,
-        "vrel_long_mps": lambda b: (b[4] << 2 | b[5] >> 6) * 0.25 - 128,
-        "vrel_lat_mps": lambda b: ((b[5] & 0x3F) << 3 | b[6] >> 5) * 0.25 - 64,
-        "dyn_prop": lambda b: b[6] & 7,
-        "rcs_dbsm": lambda b: b[7] * 0.5 - 64,
     },
     "Cluster_2_Quality": {
         "id": lambda b: b[0],
@@ -286,6 +284,10 @@ def test_encoder_refuses_unrepresentable_values():
         encode(ObjectGeneral(1, -50.0, 0.0, 0.0, 0.0, 0, 0.0))   # representable, not valid
     with pytest.raises(EncodeError, match="Obj_Class"):
         encode(ObjectExtended(1, 0.0, 0.0, 7, 0.0, 1.0, 1.0))
+    # On purpose (fault injection): the frame is built, and the decoder rejects it.
+    bad = encode(ObjectGeneral(1, -50.0, 0.0, 0.0, 0.0, 0, 0.0), validate=False)
+    with pytest.raises(FrameError, match="Obj_DistLong"):
+        decode_frame(*bad)
     with pytest.raises(EncodeError):
         object_cycle_frames([ObjectGeneral(i % 256, 5.0, 0.0, 0.0, 0.0, 0, 0.0)
                              for i in range(256)], 0)

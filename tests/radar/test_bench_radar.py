@@ -1,8 +1,14 @@
 """The radar benchmark runs (its figures are printed by `python -m benchmarks.bench_radar`;
 no timing is asserted here)."""
 
-from benchmarks.bench_radar import SCENES, run_decode_only, run_pipeline, scene_cycles, table
-from benchmarks.bench_radar import Result
+from benchmarks.bench_radar import (
+    SCENES,
+    Result,
+    run_decode_only,
+    run_pipeline,
+    scene_cycles,
+    table,
+)
 
 
 def test_benchmark_scenes_run_through_the_pipeline():

@@ -20,7 +20,7 @@ CYCLE = object_cycle_frames([ObjectGeneral(1, 12.0, 0.4, -3.0, 0.0, 0, 10.0)], 7
 
 
 def recv_all(bus: can.BusABC, n: int) -> list[Frame]:
-    out = []
+    out: list[Frame] = []
     while len(out) < n:
         m = bus.recv(10)
         assert m is not None, f"received {len(out)} of {n} frames"
@@ -34,7 +34,7 @@ def test_slcan_pty_link_both_directions():
         bus = can.Bus(interface="slcan", channel=link.path, bitrate=500000, sleep_after_open=0)
         try:
             link.wait_open(10)
-            link.send(CYCLE + [Frame(0x123, b"")])
+            link.send([*CYCLE, Frame(0x123, b"")])
             assert recv_all(bus, 3) == [*CYCLE, Frame(0x123, b"")]
             bus.send(can.Message(arbitration_id=0x200, data=bytes(range(8)),
                                  is_extended_id=False))

@@ -1,6 +1,8 @@
 """The [radar] configuration: defaults are the paper's, errors name the field, and the
 example configs in deploy/ are valid."""
 
+import re
+
 import pytest
 
 from common.config.loader import ConfigError, load_config, parse_config
@@ -29,7 +31,7 @@ def test_defaults_are_the_papers():
     ({"radar": {"sensors": [{"configure": {"max_distance_m": 201}}]}}, "max_distance_m"),
 ])
 def test_invalid_fields_are_named(data, field):
-    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+    with pytest.raises(ConfigError, match=re.escape(field)):
         parse_config(data, RadarConfig)
 
 
@@ -39,7 +41,7 @@ def test_unknown_interface_and_missing_replay_file_fail_fast():
         check_settings(cfg.radar.can, cfg.radar.replay)
     cfg = parse_config({"radar": {"can": {"interface": "replay"},
                                   "replay": {"file": "/no/such.log"}}}, RadarConfig)
-    with pytest.raises(ConfigurationError, match="/no/such.log"):
+    with pytest.raises(ConfigurationError, match=re.escape("/no/such.log")):
         check_settings(cfg.radar.can, cfg.radar.replay)
 
 

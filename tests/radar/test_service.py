@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 
 import can
+import msgspec
 import pytest
 
 from common.clock import wall_ns
@@ -15,7 +16,6 @@ from common.config.radar import (
     CycleSettings,
     EgoMotionSettings,
     Expect,
-    OutputTypeCfg,
     Pace,
     RadarSettings,
     RadarWriteSettings,
@@ -63,6 +63,14 @@ class Output:
 
     def last_status(self, sensor: str = "front"):
         return next((m for m, k in reversed(self.got_status.items) if k == sensor), None)
+
+    def status_where(self, predicate, timeout_s: float = 30, sensor: str = "front"):
+        """The latest status of `sensor` once it satisfies `predicate`."""
+        def found():
+            st = self.last_status(sensor)
+            return st if st is not None and predicate(st) else None
+
+        return wait_for(found, timeout_s, what="a matching RadarStatus")
 
 
 def cycle_messages(k: int, sensor_id: int = 0, x: float = 12.0) -> list[can.Message]:
@@ -156,7 +164,7 @@ def test_bad_input_is_counted_and_never_stops_the_service(running):
     out.got_tracks.wait_count(4, 10)
     assert [m.complete for m in out.got_tracks.messages] == [True, False, True, True]
     assert out.got_tracks.messages[1].n_detections == 1
-    status = wait_for(lambda: (st := out.last_status()) and st.header.seq > 1 and st, 10)
+    status = out.status_where(lambda st: st.header.seq > 1, 10)
     assert {k: v for k, v in status.rejected.items()} == {
         "bus:error_frame": 1, "bus:extended_id": 1, "bus:remote_frame": 1,
         "bus:unknown_id": 1, "bus:unconfigured_sensor_id": 1, "bus:host_frame": 1,
@@ -265,8 +273,7 @@ def test_configuration_written_and_confirmed_from_0x201_over_slcan(running):
         assert record.output_type_valid and record.output_type == 1
         assert record.max_distance_m == 200 and record.send_quality and record.send_ext_info
         assert not record.sensor_id_valid            # never moves the radar to other IDs
-        wait_for(lambda: (st := out.last_status()) is not None and st.ready, 30,
-                 what="ready after confirmation")
+        out.status_where(lambda st: st.ready)
         assert not out.got_status.messages[0].ready
         assert radar.link.commands[:2] == ["C", "S6"]
 
@@ -275,8 +282,7 @@ def test_configuration_the_radar_does_not_take_is_reported_not_ready(running):
     with PtyRadar(answer_output_type=2) as radar:
         out = Output()
         running(RadarService(radar.settings(confirm_timeout_s=0.2, attempts=2), out))
-        status = wait_for(lambda: (st := out.last_status()) is not None
-                          and "differs" in st.not_ready_reason and st, 30)
+        status = out.status_where(lambda st: "differs" in st.not_ready_reason)
         assert not status.ready
         assert "output_type=clusters (want objects)" in status.not_ready_reason
         writes = [f for f in radar.link.received() if f.arb_id == 0x200]
@@ -287,8 +293,7 @@ def test_radar_error_bits_make_it_not_ready(running):
     with PtyRadar(answer_output_type=1, temperature_error=1) as radar:
         out = Output()
         running(RadarService(radar.settings(), out))
-        wait_for(lambda: (st := out.last_status()) is not None
-                 and st.not_ready_reason == "radar reports temperature error", 30)
+        out.status_where(lambda st: st.not_ready_reason == "radar reports temperature error")
         assert out.last_status().radar_state.temperature_error
 
 
@@ -307,15 +312,17 @@ def test_ego_motion_is_forwarded_as_0x300_and_0x301(running):
             return EgoMotion(header=Header(seq=0, source="sim", stamp_ns=stamp_ns,
                                            pub_mono_ns=0), speed_mps=speed, yaw_rate_dps=-4.5)
 
-        wait_for(lambda: service.on_ego_motion(motion(8.3, wall_ns())) or any(
-            f.arb_id == 0x300 for f in radar.link.received()), 30, 0.05)
+        def forwarded() -> bool:
+            service.on_ego_motion(motion(8.3, wall_ns()))
+            return any(f.arb_id == 0x300 for f in radar.link.received())
+
+        wait_for(forwarded, 30, 0.05)
         speed = radar.link.wait_frame(lambda f: f.arb_id == 0x300, 5)
         yaw = radar.link.wait_frame(lambda f: f.arb_id == 0x301, 5)
         assert decode_frame(*speed)[2] == pytest.approx(SpeedInformation(1, 8.3))
         assert decode_frame(*yaw)[2].yaw_rate_dps == pytest.approx(-4.5)
         service.on_ego_motion(motion(8.3, wall_ns() - 10**9))      # a second old: stale
-        status = wait_for(lambda: (st := out.last_status()) is not None
-                          and st.rejected.get("ego_motion:stale") == 1 and st, 30)
+        status = out.status_where(lambda st: st.rejected.get("ego_motion:stale") == 1)
         assert status.ego_motion_frames_sent >= 2
 
 
@@ -327,3 +334,18 @@ def test_disabled_ego_motion_sends_nothing():
                                                   pub_mono_ns=0), speed_mps=3.0,
                                     yaw_rate_dps=0.0))
     assert port.sent == [] and service.ego_sent == {0: 0}
+
+
+def test_unplugged_slcan_adapter_is_reported_and_retried(running):
+    radar = PtyRadar(answer_output_type=1)
+    with radar:
+        s = msgspec.structs.replace(
+            radar.settings(), can=CanSettings(
+                interface="slcan", channel=radar.link.path, options={"sleep_after_open": 0},
+                reopen_backoff_initial_s=0.01, reopen_backoff_max_s=0.05))
+        out = Output()
+        running(RadarService(s, out))
+        out.got_tracks.wait_count(3, 30)
+    # The link is closed: the service's reads fail and the device is gone.
+    status = out.status_where(lambda st: st.bus_state is BusState.REOPENING)
+    assert not status.ready and status.rejected.get("bus:bus_failure") == 1

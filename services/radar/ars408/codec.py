@@ -97,12 +97,14 @@ def decode_frame(arb_id: int, data: bytes | bytearray) -> tuple[MessageSpec, int
     return spec, sensor_id, decode(spec, data)
 
 
-def encode(record: NamedTuple, sensor_id: int = 0) -> Frame:
+def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> Frame:
     """The frame carrying `record` from/to radar `sensor_id` (ID + 0x10 * sensor_id).
 
-    Raises EncodeError when a value is not representable (out of the raw range, or outside
-    the signal's valid range), ValueError for a sensor ID outside 0..7, KeyError for a
-    type that is not an ARS408 record.
+    Raises EncodeError when a value is not representable: out of the raw range, or (with
+    `validate`) outside the signal's valid range, which the decoder would reject; pass
+    ``validate=False`` to build such a frame on purpose (fault injection). Raises
+    ValueError for a sensor ID outside 0..7, KeyError for a type that is not an ARS408
+    record.
     """
     spec = BY_RECORD[type(record)]
     if not 0 <= sensor_id < MAX_SENSORS:
@@ -112,7 +114,7 @@ def encode(record: NamedTuple, sensor_id: int = 0) -> Frame:
         raw = round((value - sig.offset) / sig.scale)
         if not 0 <= raw <= sig.mask:
             raise EncodeError(f"{sig.dbc_name}={value} is outside the signal's raw range")
-        if sig.valid is not None and not _within(sig.valid, _value(sig, raw)):
+        if validate and sig.valid is not None and not _within(sig.valid, _value(sig, raw)):
             raise EncodeError(f"{sig.dbc_name}={value} is outside {sig.valid}")
         word |= raw << sig.shift
     data = word.to_bytes(8, "big")[: spec.dlc]

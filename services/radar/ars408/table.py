@@ -122,14 +122,20 @@ def _flag(fld: str, dbc: str, byte: int, bit: int) -> Signal:
     return Signal(fld, dbc, byte, bit, 1)
 
 
-def _rms(fld: str, dbc: str, byte: int, bit: int) -> Signal:
-    return Signal(fld, dbc, byte, bit, 5, unit="code")
-
-
 def _id(prefix: str) -> Signal:
     return Signal("id", f"{prefix}_ID", 0, 7, 8)
 
 
+# Bytes 0..3 of 0x60C and 0x702: the ID and four 5-bit standard-deviation codes.
+_QUALITY_HEAD = (
+    Signal("id", "ID", 0, 7, 8),
+    Signal("dist_long_rms", "DistLong_rms", 1, 7, 5, unit="code"),
+    Signal("dist_lat_rms", "DistLat_rms", 1, 2, 5, unit="code"),
+    Signal("vrel_long_rms", "VrelLong_rms", 2, 5, 5, unit="code"),
+    Signal("vrel_lat_rms", "VrelLat_rms", 2, 0, 5, unit="code"),
+)
+
+# Bytes 4..7 of 0x60B and 0x701.
 _KINEMATICS_TAIL = (
     Signal("vrel_long_mps", "VrelLong", 4, 7, 10, 0.25, -128.0, "m/s"),
     Signal("vrel_lat_mps", "VrelLat", 5, 5, 9, 0.25, -64.0, "m/s"),
@@ -164,11 +170,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
                 ), "One per object. DistLat is left positive."),
     MessageSpec(Kind.OBJECT_QUALITY, "Obj_2_Quality", 0x60C, 7, "ARS408",
                 records.ObjectQuality, (
-                    _id("Obj"),
-                    _rms("dist_long_rms", "Obj_DistLong_rms", 1, 7),
-                    _rms("dist_lat_rms", "Obj_DistLat_rms", 1, 2),
-                    _rms("vrel_long_rms", "Obj_VrelLong_rms", 2, 5),
-                    _rms("vrel_lat_rms", "Obj_VrelLat_rms", 2, 0),
+                    *_prefixed("Obj", _QUALITY_HEAD),
                     Signal("meas_state", "Obj_MeasState", 6, 4, 3, valid=(0, 5),
                            choices=MEAS_STATE),
                     Signal("prob_of_exist", "Obj_ProbOfExist", 6, 7, 3, choices=PROB_OF_EXIST),
@@ -202,11 +204,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
                 ), "One per cluster. DistLat is left positive."),
     MessageSpec(Kind.CLUSTER_QUALITY, "Cluster_2_Quality", 0x702, 5, "ARS408",
                 records.ClusterQuality, (
-                    _id("Cluster"),
-                    _rms("dist_long_rms", "Cluster_DistLong_rms", 1, 7),
-                    _rms("dist_lat_rms", "Cluster_DistLat_rms", 1, 2),
-                    _rms("vrel_long_rms", "Cluster_VrelLong_rms", 2, 5),
-                    _rms("vrel_lat_rms", "Cluster_VrelLat_rms", 2, 0),
+                    *_prefixed("Cluster", _QUALITY_HEAD),
                     Signal("pdh0", "Cluster_Pdh0", 3, 2, 3, choices=PROB_OF_EXIST),
                     Signal("ambig_state", "Cluster_AmbigState", 4, 2, 3, valid=(0, 4),
                            choices=AMBIG_STATE),
