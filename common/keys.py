@@ -144,7 +144,7 @@ EGO_MOTION: KeySpec[EgoMotion] = KeySpec(
 )
 SIM_WORLD: KeySpec[SimWorld] = KeySpec(
     "sim_world", "sim/world", SimWorld,
-    rate_hz=100.0, max_age_s=1.0, qos=QoS(Priority.DATA_HIGH, Congestion.DROP, express=True),
+    rate_hz=50.0, max_age_s=1.0, qos=QoS(Priority.DATA_HIGH, Congestion.DROP, express=True),
 )
 HEALTH: KeySpec[Any] = KeySpec(
     "health", "health/{service}/{instance}", None,

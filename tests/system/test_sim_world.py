@@ -132,6 +132,21 @@ def test_ground_truth_gap_and_ttc_to_the_nearest_in_path_object():
     assert threat.ttc_s == pytest.approx(3.0)
 
 
+def test_ttc_counts_objects_that_will_cross_into_the_path():
+    crossing = SceneObject(ObjectKind.PEDESTRIAN, 30.0, -4.5,
+                           motion=Motion(speed_mps=1.4, heading_deg=90.0))
+    away = SceneObject(ObjectKind.PEDESTRIAN, 12.0, -2.0,
+                       motion=Motion(speed_mps=1.4, heading_deg=-90.0))
+    world = World(scenario(crossing, away, speed_kph=36.0))
+    assert world.in_path_gap() is None          # nobody in the path yet
+    threat = world.threat()
+    assert threat is not None and threat.object_index == 0
+    # Its near face (x 29.825) meets the ego's front at 2.98 s; by then it has walked
+    # into the ego's 1.8 m width (from 2.375 s).
+    assert threat.ttc_s == pytest.approx(2.9825)
+    assert threat.gap_m == pytest.approx(29.825)
+
+
 def test_a_moving_object_starts_when_the_ego_comes_within_its_trigger_gap():
     walker = SceneObject(ObjectKind.PEDESTRIAN, 30.0, -5.0, motion=Motion(
         speed_mps=1.5, heading_deg=90.0, trigger_gap_m=20.0, distance_m=3.0))

@@ -21,8 +21,10 @@ class Sample:
     t_s: float
     ego_x_m: float
     ego_speed_mps: float
-    gap_m: float | None          # ground truth: nearest in-path object, None when none
-    ttc_s: float | None          # ground truth: gap / closing speed, None when not closing
+    gap_m: float | None          # ground truth: nearest object in the ego's path (or the
+                                 # one it would hit), None when none
+    ttc_s: float | None          # ground truth: time until it would hit something at
+                                 # current velocities, None when nothing would be hit
     decision: str                # the followed fusion instance's latest decision ("" before any)
     brake_state: str             # the brake service's latest state ("" before any)
     commanded_pct: float         # level in the last command the actuator received

@@ -96,12 +96,20 @@ class Collision:
 
 @dataclass(frozen=True)
 class Threat:
-    """The nearest object overlapping the ego's corridor, ahead of it."""
+    """The object the ego would hit first at current velocities."""
 
     object_index: int
-    gap_m: float                # radar (ego front) to the object's nearest point, along x
+    gap_m: float                # radar (ego front) to the object's nearest x, along x
     closing_mps: float          # ego speed minus the object's speed along x
-    ttc_s: float | None         # gap / closing, None when not closing
+    ttc_s: float                # time until the footprints would touch
+
+
+def _interval(lo: float, hi: float, rate: float) -> tuple[float, float] | None:
+    """The times t (any sign) with lo <= rate * t <= hi; None when never."""
+    if abs(rate) < 1e-9:
+        return (-math.inf, math.inf) if lo <= 0.0 <= hi else None
+    a, b = lo / rate, hi / rate
+    return (min(a, b), max(a, b))
 
 
 @dataclass
@@ -207,21 +215,42 @@ class World:
                 return
 
     def threat(self) -> Threat | None:
-        """The nearest body ahead that overlaps the ego's corridor now."""
-        half = self.scenario.ego.width_m / 2
+        """The object the ego would hit first if everything kept its current velocity
+        (the ego its speed, objects theirs): crossing objects count before they reach
+        the path. `gap_m` is the longitudinal gap to it; None when nothing would be hit."""
+        spec = self.scenario.ego
+        half = spec.width_m / 2
+        ego_x, v = self.ego.x_m, self.ego.speed_mps
         best: Threat | None = None
+        for body in self.bodies():
+            c = body.corners()
+            x0, x1 = float(c[:, 0].min()), float(c[:, 0].max())
+            y0, y1 = float(c[:, 1].min()), float(c[:, 1].max())
+            # Overlap along x: x0 <= ego front and ego rear <= x1, with the relative motion.
+            tx = _interval(x0 - ego_x, x1 - ego_x + spec.length_m, v - body.vx_mps)
+            ty = _interval(-half - y1, half - y0, body.vy_mps)
+            if tx is None or ty is None:
+                continue
+            start = max(tx[0], ty[0], 0.0)
+            if start > min(tx[1], ty[1]):
+                continue
+            if best is None or start < (best.ttc_s or 0.0):
+                closing = v - body.vx_mps
+                best = Threat(body.index, x0 - ego_x, closing, start)
+        return best
+
+    def in_path_gap(self) -> float | None:
+        """Gap to the nearest object ahead that overlaps the ego's width now."""
+        half = self.scenario.ego.width_m / 2
+        gaps = []
         for body in self.bodies():
             c = body.corners()
             if c[:, 1].max() < -half or c[:, 1].min() > half:
                 continue
             gap = float(c[:, 0].min()) - self.ego.x_m
-            if gap < -body.length_m:
-                continue    # already passed
-            if best is None or gap < best.gap_m:
-                closing = self.ego.speed_mps - body.vx_mps
-                ttc = max(gap, 0.0) / closing if closing > 1e-6 else None
-                best = Threat(body.index, gap, closing, ttc)
-        return best
+            if gap > -body.length_m:
+                gaps.append(gap)
+        return min(gaps) if gaps else None
 
     def passed_everything(self, margin_m: float = 5.0) -> bool:
         """The ego's rear is beyond every object (a no-threat run is over)."""

@@ -1,0 +1,32 @@
+"""Radar-to-brake latency from the two ends of the chain, pure: the monotonic time each
+radar cycle's last CAN frame was written (the simulated radar) and the time each command
+line arrived on the actuator's serial line (the simulated actuator), same host.
+
+The brake service writes one line per fusion command (one per radar cycle) and, between
+commands, a heartbeat line at most every `heartbeat` period (50 ms by default, shorter
+than the 72-76 ms radar cycle). The heartbeat after a command comes a heartbeat period
+after it, so the first line after a cycle's last frame is that cycle's command line as
+long as the chain is faster than the radar period minus the heartbeat period (about
+20 ms); `max_ns` keeps a line that came later than that out of the figures.
+"""
+
+from collections.abc import Sequence
+
+DEFAULT_MAX_NS = 20_000_000
+
+
+def chain_latencies_ns(cycle_ends_ns: Sequence[int], line_times_ns: Sequence[int],
+                       max_ns: int = DEFAULT_MAX_NS) -> list[int]:
+    """For each cycle end, the delay to the first line after it (within `max_ns`).
+
+    Both sequences must be in increasing order. Cycles with no line in time are left out
+    (count them as len(cycle_ends) - len(result)).
+    """
+    out: list[int] = []
+    j = 0
+    for end in cycle_ends_ns:
+        while j < len(line_times_ns) and line_times_ns[j] <= end:
+            j += 1
+        if j < len(line_times_ns) and line_times_ns[j] - end <= max_ns:
+            out.append(line_times_ns[j] - end)
+    return out

@@ -1,0 +1,198 @@
+"""The simulated radar on a CAN link: the model's returns as real ARS408 frames, encoded
+with the radar service's own encoder, written where the radar service reads.
+
+A SIMULATION of the sensor: the radar service receives the frames exactly as from a real
+ARS408 behind a USB-CAN adapter (slcan over a pty: `SlcanSink`), on SocketCAN (vcan0 or
+can0: `PythonCanSink`), or through socketcand. It runs unchanged.
+
+Per cycle: status, N general, N quality, N extended (object mode) or status, N general,
+N quality (cluster mode); about once a second the radar state (0x201) and firmware
+version (0x700), as the real sensor sends them.
+"""
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import can
+
+from common.clock import mono_ns
+from services.radar.ars408 import (
+    RMS_CODE_VALUES,
+    ClusterGeneral,
+    ClusterQuality,
+    Frame,
+    ObjectExtended,
+    ObjectGeneral,
+    ObjectQuality,
+    RadarStateFrame,
+    Version,
+    cluster_cycle_frames,
+    encode,
+    object_cycle_frames,
+)
+from tools.sim.radar_model import RadarModel, RadarReturn
+from tools.sim.scenario import RadarLook
+from tools.sim.world import Body
+
+FIRMWARE = (4, 30, 2)
+STATE_PERIOD_S = 1.0
+# A classic CAN frame with 8 data bytes takes about 125 bits (with stuffing) on the wire:
+# 0.25 ms at the ARS408's 500 kbit/s. The feed spaces a cycle's frames at that rate (in
+# small bursts: sleeps are coarse), so the radar service receives them as from a real bus
+# rather than all at once.
+FRAME_TIME_S = 125 / 500_000
+BURST_FRAMES = 4
+
+
+class FrameSink(Protocol):
+    def send(self, frames: Sequence[Frame]) -> None: ...
+
+
+class PythonCanSink:
+    """Frames onto a python-can bus (socketcan vcan0/can0, or any interface)."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+
+    def send(self, frames: Sequence[Frame]) -> None:
+        for f in frames:
+            self.bus.send(can.Message(arbitration_id=f.arb_id, data=f.data,
+                                      is_extended_id=False))
+
+
+def _clamp(v: float, lo: float, hi: float) -> float:
+    return min(max(v, lo), hi)
+
+
+def rms_code(sigma: float) -> int:
+    """The ARS408 5-bit code of a standard deviation (the first bound above it)."""
+    for code, bound in enumerate(RMS_CODE_VALUES):
+        if sigma < bound:
+            return code
+    return len(RMS_CODE_VALUES) - 1
+
+
+def object_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
+                  sensor_id: int = 0) -> list[Frame]:
+    """One object-mode cycle with quality and extended messages."""
+    general, quality, extended = [], [], []
+    for r in returns:
+        general.append(ObjectGeneral(
+            r.id, _clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -204.6, 204.6),
+            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
+            _clamp(r.rcs_dbsm, -64.0, 63.5)))
+        quality.append(ObjectQuality(
+            r.id, rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
+            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps), r.meas_state,
+            r.prob_of_exist))
+        extended.append(ObjectExtended(
+            r.id, 0.0, 0.0, r.obj_class, _clamp(r.orientation_deg, -180.0, 180.0),
+            _clamp(r.length_m, 0.0, 50.0), _clamp(r.width_m, 0.0, 50.0)))
+    return object_cycle_frames(general, meas_counter, quality, extended, sensor_id)
+
+
+def cluster_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
+                   sensor_id: int = 0) -> list[Frame]:
+    """One cluster-mode cycle with quality messages (all clusters in the near scan)."""
+    general, quality = [], []
+    for r in returns:
+        general.append(ClusterGeneral(
+            r.id, _clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -102.3, 102.3),
+            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
+            _clamp(r.rcs_dbsm, -64.0, 63.5)))
+        quality.append(ClusterQuality(
+            r.id, rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
+            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps),
+            3 if r.source >= 0 else 5, 3, 0))
+    return cluster_cycle_frames(general, meas_counter, quality, sensor_id=sensor_id)
+
+
+def state_frames(look: RadarLook, sensor_id: int = 0) -> list[Frame]:
+    """0x201 (no error, configuration as simulated) and 0x700."""
+    state = RadarStateFrame(
+        nvm_read_ok=1, max_distance_m=196, persistent_error=0, interference=0,
+        temperature_error=0, temporary_error=0, voltage_error=0, sensor_id=sensor_id,
+        sort_index=1, motion_rx_state=0, send_ext_info=int(look.mode == "objects"),
+        send_quality=1, output_type=1 if look.mode == "objects" else 2, rcs_threshold=0)
+    return [encode(state, sensor_id), encode(Version(*FIRMWARE), sensor_id)]
+
+
+@dataclass(frozen=True)
+class CycleSent:
+    meas_counter: int
+    first_write_mono_ns: int
+    last_write_mono_ns: int     # after the cycle's last frame was written
+    n_returns: int
+
+
+class RadarFeed:
+    """The simulated radar: a model, a sink, a cycle counter. `cycle()` is called by the
+    simulator's loop every radar period; every cycle sent is remembered (bounded) with
+    the monotonic time its last frame was written, the start of the radar-to-brake
+    latency chain."""
+
+    def __init__(self, sink: FrameSink, look: RadarLook, seed: int = 0, sensor_id: int = 0,
+                 clock: Callable[[], int] = mono_ns, history: int = 10_000,
+                 frame_time_s: float = FRAME_TIME_S,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.sink = sink
+        self.frame_time_s = frame_time_s
+        self._sleep = sleep
+        self.look = look
+        self.sensor_id = sensor_id
+        self.model = RadarModel(look, seed)
+        self._clock = clock
+        self.meas_counter = 0
+        self._last_state_ns: int | None = None
+        self.sent: deque[CycleSent] = deque(maxlen=history)
+        self._lock = threading.Lock()
+        self.errors = 0
+
+    def reset(self, look: RadarLook, seed: int) -> None:
+        """A new scene: a fresh model (IDs, ghosts, noise) with the scenario's radar look."""
+        self.look = look
+        self.model = RadarModel(look, seed)
+
+    def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float) -> CycleSent:
+        """Model one cycle and write its frames. Raises OSError/can.CanError when the
+        link is gone (the caller decides whether that ends the run)."""
+        returns = self.model.cycle(bodies, ego_x_m, ego_speed_mps)
+        if self.look.mode == "objects":
+            frames = object_frames(returns, self.meas_counter, self.look, self.sensor_id)
+        else:
+            frames = cluster_frames(returns, self.meas_counter, self.look, self.sensor_id)
+        now = self._clock()
+        if self._last_state_ns is None or now - self._last_state_ns >= STATE_PERIOD_S * 1e9:
+            self._last_state_ns = now
+            self.sink.send(state_frames(self.look, self.sensor_id))
+        first = self._clock()
+        self._send_paced(frames, first)
+        sent = CycleSent(self.meas_counter, first, self._clock(), len(returns))
+        with self._lock:
+            self.sent.append(sent)
+        self.meas_counter = (self.meas_counter + 1) % 65536
+        return sent
+
+    def _send_paced(self, frames: Sequence[Frame], start_ns: int) -> None:
+        if self.frame_time_s <= 0:
+            self.sink.send(frames)
+            return
+        for i in range(0, len(frames), BURST_FRAMES):
+            due = start_ns + i * self.frame_time_s * 1e9
+            wait = (due - self._clock()) / 1e9
+            if wait > 0:
+                self._sleep(wait)
+            self.sink.send(frames[i:i + BURST_FRAMES])
+
+    def cycle_before(self, mono_ns_: int) -> CycleSent | None:
+        """The last cycle whose last frame was written at or before `mono_ns_`."""
+        with self._lock:
+            for c in reversed(self.sent):
+                if c.last_write_mono_ns <= mono_ns_:
+                    return c
+        return None
+

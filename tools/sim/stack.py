@@ -1,0 +1,75 @@
+"""The stack under simulation: the service configurations that point the real services
+at the simulated sensors and actuator, written into a run folder.
+
+- radar: python-can `slcan` on the simulated radar's pty (or `socketcan` on a vcan), as
+  with a USB-CAN adapter;
+- camera: the synthetic-source plugin `tools.sim.camera_source:make_source` (renders
+  `sim/world`), with the example D435 calibration that fusion also uses;
+- fusion: deploy/fusion.toml (the shipped `primary`), unchanged;
+- brake: deploy defaults, with the serial port on the simulated actuator's pty.
+"""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+CALIBRATION = REPO / "deploy" / "calibration" / "d435_848x480.toml"
+FUSION_CONFIG = REPO / "deploy" / "fusion.toml"
+SERVICES = ("radar", "camera", "fusion", "brake")
+# service -> its liveliness token (service, instance)
+TOKENS = {"radar": ("radar", "front"), "camera": ("camera", "front"),
+          "fusion": ("fusion", "primary"), "brake": ("brake", "main")}
+
+
+@dataclass(frozen=True)
+class StackConfigs:
+    radar: Path
+    camera: Path
+    fusion: Path
+    brake: Path
+
+    def of(self, service: str) -> Path:
+        return {"radar": self.radar, "camera": self.camera, "fusion": self.fusion,
+                "brake": self.brake}[service]
+
+
+def _toml_list(values: list[str]) -> str:
+    return json.dumps(values)
+
+
+def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: str,
+                  can_interface: str = "slcan", camera_fps: float = 30.0,
+                  fusion_config: Path = FUSION_CONFIG,
+                  heartbeat_ms: float | None = None) -> StackConfigs:
+    """Write radar, camera and brake TOMLs into `folder`; fusion's is the shipped one
+    (its endpoint comes from `--connect`). Returns every config's path.
+
+    `heartbeat_ms` overrides the brake's actuator heartbeat: above one radar cycle, every
+    line on the actuator while commands flow is a command line (one per radar cycle),
+    which lets a test pair cycles and lines exactly (tools/sim/latency.py)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    zenoh = f"[zenoh]\nconnect = {_toml_list([endpoint])}\n"
+    options = "{ sleep_after_open = 0 }" if can_interface == "slcan" else "{}"
+    bitrate = 500_000 if can_interface == "slcan" else 0
+    radar = folder / "radar.toml"
+    radar.write_text(
+        "# SIMULATION: the radar service on the simulated ARS408's CAN link.\n"
+        f'vehicle = "ego"\n{zenoh}\n[radar.can]\ninterface = "{can_interface}"\n'
+        f'channel = "{can_channel}"\nbitrate = {bitrate}\noptions = {options}\n\n'
+        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n')
+    camera = folder / "camera.toml"
+    camera.write_text(
+        "# SIMULATION: the camera service rendering the simulated world (synthetic plugin).\n"
+        f'vehicle = "ego"\n{zenoh}\n[camera]\nname = "front"\n'
+        f'calibration = "{CALIBRATION}"\nfps = {camera_fps}\njpeg_quality = 80\n\n'
+        '[camera.source]\nkind = "synthetic"\nfactory = "tools.sim.camera_source:make_source"\n')
+    brake = folder / "brake.toml"
+    brake.write_text(
+        "# The brake service on the simulated actuator's pty (a SIMULATION of the actuator).\n"
+        f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "primary"\n\n'
+        f'[brake.serial]\nport = "{actuator_port}"\n'
+        + ("" if heartbeat_ms is None else
+           f"\n[brake.actuator]\nheartbeat_ms = {heartbeat_ms}\nttl_ms = "
+           f"{max(250, int(2 * heartbeat_ms) + 10)}\n"))
+    return StackConfigs(radar, camera, fusion_config, brake)
