@@ -60,7 +60,7 @@ class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     n_detections: int          # decoded detections in the cycle
     n_prefiltered: int         # detections left after the prefilter
     last_frame_mono_ns: int
-    processing_ns: int         # decode + prefilter + merge + track for this cycle
+    processing_ns: int         # from the last CAN frame to this message (decode + track left)
     tracks: tuple[RadarTrack, ...]
 
 

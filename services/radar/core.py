@@ -22,7 +22,13 @@ from services.radar.ars408.records import (
 from services.radar.ars408.table import Kind, MessageSpec
 from services.radar.configure import ConfigWriter
 from services.radar.cycle import CycleAssembler, ListRole, RawCycle
-from services.radar.detections import decode_cycle, merge, prefilter
+from services.radar.detections import (
+    GeneralFrames,
+    attach_extras,
+    decode_general,
+    merge,
+    prefilter,
+)
 from services.radar.tracker import KalmanTracker
 
 _LIST_ROLES: dict[Kind, tuple[OutputMode, int]] = {
@@ -49,6 +55,16 @@ _BUS_NOT_READY = {
 }
 
 _PERIODS_KEPT = 32
+
+
+@dataclass(frozen=True)
+class _Tracked:
+    """A cycle whose general frames went through prefilter, merge and tracker."""
+
+    cycle: RawCycle
+    general: GeneralFrames
+    n_prefiltered: int
+    extras_attached: bool
 
 
 @dataclass(frozen=True)
@@ -101,6 +117,12 @@ class SensorCore:
         self._last_status_t: float | None = None
         self._last_counter: int | None = None
         self._counter_step: int | None = None
+        p = settings.prefilter
+        # The prefilter needs quality frames only for these optional filters; without
+        # them a cycle is tracked as soon as its general frames are in (see on_frame).
+        self._filter_needs_extras = p.min_prob_of_exist > 0 or bool(
+            p.drop_cluster_invalid_states)
+        self._early: _Tracked | None = None
 
     # -- frames -------------------------------------------------------------------------
 
@@ -117,7 +139,11 @@ class SensorCore:
                 self.rejected.add(f"wrong_dlc:{spec.dbc_name}")
                 usable = None   # arrived, so the cycle need not wait for it; marks it incomplete
             done = self.assembler.on_list_frame(role[0], role[1], usable, mono_ns)
-            return [self.process(c) for c in done] if done else []
+            if done:
+                return [self.process(c) for c in done]
+            if role[1] == ListRole.GENERAL and not self._filter_needs_extras:
+                self._track_early()
+            return []
         try:
             record = decode(spec, data)
         except FrameError as exc:
@@ -180,27 +206,50 @@ class SensorCore:
     def _finish(self, cycles: list[RawCycle]) -> list[CycleResult]:
         return [self.process(c) for c in cycles]
 
+    def _track_early(self) -> None:
+        """Track the open cycle once all its general frames are in: its quality and
+        extended frames (2 N more frames, about 0.25 ms each on the bus) then arrive while
+        the work is done, and only their decoding is left after the cycle's last frame."""
+        cycle = self.assembler.current
+        if cycle is not None and len(cycle.general) == cycle.announced and (
+                self._early is None or self._early.cycle is not cycle):
+            self._early = self._track(cycle)
+
+    def _track(self, cycle: RawCycle) -> _Tracked:
+        g = decode_general(cycle)
+        attached = self._filter_needs_extras
+        if attached:
+            attach_extras(cycle, g)
+        kept = prefilter(g.det, self.settings.prefilter)
+        self.tracker.step(merge(kept, self.settings.merge), cycle.t_s)
+        return _Tracked(cycle, g, len(kept), attached)
+
     def process(self, cycle: RawCycle) -> CycleResult:
-        det, rejected = decode_cycle(cycle)
-        for reason, n in rejected.items():
+        """A finished cycle: tracked (now, or earlier when its general frames were in),
+        its extra frames decoded, its result built."""
+        early, self._early = self._early, None
+        done = early if early is not None and early.cycle is cycle else self._track(cycle)
+        g = done.general
+        if not done.extras_attached:
+            attach_extras(cycle, g)
+            if cycle.mode is OutputMode.OBJECTS:
+                self.tracker.annotate_class(g.det)
+        for reason, n in g.rejected.items():
             self.rejected.add(reason, n)
-        kept = prefilter(det, self.settings.prefilter)
-        merged = merge(kept, self.settings.merge)
-        self.tracker.step(merged, cycle.t_s)
         t = self.settings.tracker
         tracks = tuple(
             tr for tr in self.tracker.tracks()
             if not (t.drop_receding and tr.range_rate_mps > t.receding_min_mps)
         )
-        complete = cycle.complete and not rejected
+        complete = cycle.complete and not g.rejected
         self.cycles_total += 1
         self.cycles_incomplete += not complete
         self.last_cycle_mono_ns = cycle.last_frame_mono_ns
         return CycleResult(
             mode=cycle.mode, meas_counter=cycle.meas_counter, complete=complete,
-            closed_by=cycle.closed_by, n_detections=len(det), n_prefiltered=len(kept),
-            stamp_wall_ns=cycle.stamp_wall_ns, last_frame_mono_ns=cycle.last_frame_mono_ns,
-            tracks=tracks,
+            closed_by=cycle.closed_by, n_detections=len(g.det),
+            n_prefiltered=done.n_prefiltered, stamp_wall_ns=cycle.stamp_wall_ns,
+            last_frame_mono_ns=cycle.last_frame_mono_ns, tracks=tracks,
         )
 
     # -- status -------------------------------------------------------------------------

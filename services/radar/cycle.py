@@ -191,6 +191,11 @@ class CycleAssembler:
                 return self._close(ClosedBy.COMPLETE)
         return []
 
+    @property
+    def current(self) -> RawCycle | None:
+        """The open cycle, while it has not been emitted."""
+        return None if self._emitted else self._current
+
     def poll(self, mono_ns: int) -> list[RawCycle]:
         """Close an open cycle older than the timeout (the radar stopped mid-cycle)."""
         cycle = self._current

@@ -23,6 +23,7 @@ F = npt.NDArray[np.float64]
 I = npt.NDArray[np.int64]  # noqa: E741 (a column type, not a loop index)
 
 UNKNOWN = -1
+_NO_IDS = np.zeros(0, dtype=np.int64)
 
 # Column order of Detections.f and Detections.i.
 X, Y, VX, VY, RCS = range(5)
@@ -159,18 +160,30 @@ def _attach(
     target[rows[ok]] = cols.values[column][cols.valid][ok]
 
 
-def decode_cycle(cycle: RawCycle) -> tuple[Detections, dict[str, int]]:
-    """The cycle's detections, and the number of frames rejected by reason
-    (``out_of_range:<signal>``, ``duplicate_id:<message>``, ``unmatched_id:<message>``).
+@dataclass
+class GeneralFrames:
+    """The general frames of a cycle decoded: the detections, and what matching the
+    quality / extended frames to them needs. `rejected` counts frames by reason."""
+
+    det: Detections
+    ids: I                      # radar IDs of the general frames as sent
+    keys: I                     # their occurrence keys
+    rows: I | None              # detection row of each general frame (-2 rejected);
+                                # None when every frame is a row, in order
+    rejected: dict[str, int]
+
+
+def decode_general(cycle: RawCycle) -> GeneralFrames:
+    """The cycle's general frames (0x60B / 0x701) as detections.
 
     Object IDs are unique within a cycle: a repeated one is a fault (the first frame
     wins). Cluster IDs may repeat (more than 256 clusters): each frame is kept.
     """
     rejected: dict[str, int] = {}
-    general_spec, quality_spec, extended_spec = _SPECS[cycle.mode]
+    general_spec = _SPECS[cycle.mode][0]
     datas = _present(cycle.general)
     if not datas:
-        return Detections.empty(), rejected
+        return GeneralFrames(Detections.empty(), _NO_IDS, _NO_IDS, None, rejected)
     cols = decode_columns(general_spec, datas)
     rejected.update(cols.rejected)
     ids = cols.raw[:, _GENERAL_ID]
@@ -191,16 +204,34 @@ def decode_cycle(cycle: RawCycle) -> tuple[Detections, dict[str, int]]:
         f, i = f[keep], i[keep]
         rows = np.full(len(keys), -2, dtype=np.int64)
         rows[keep] = np.arange(len(f))
+    return GeneralFrames(Detections(f, i), ids, keys, rows, rejected)
+
+
+def attach_extras(cycle: RawCycle, g: GeneralFrames) -> None:
+    """Decode the cycle's quality / extended frames into the detections' ProbOfExist,
+    class (objects) or InvalidState (clusters) columns; rejections go to `g.rejected`."""
+    if not len(g.det):
+        return
+    _, quality_spec, extended_spec = _SPECS[cycle.mode]
+    i = g.det.i
     if cycle.mode is OutputMode.OBJECTS:
         assert extended_spec is not None
-        _attach(quality_spec, cycle.quality, ids, keys, rows, i[:, PROB_OF_EXIST],
-                "prob_of_exist", rejected)
-        _attach(extended_spec, cycle.extended, ids, keys, rows, i[:, OBJ_CLASS],
-                "obj_class", rejected)
+        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[:, PROB_OF_EXIST],
+                "prob_of_exist", g.rejected)
+        _attach(extended_spec, cycle.extended, g.ids, g.keys, g.rows, i[:, OBJ_CLASS],
+                "obj_class", g.rejected)
     else:
-        _attach(quality_spec, cycle.quality, ids, keys, rows, i[:, INVALID_STATE],
-                "invalid_state", rejected)
-    return Detections(f, i), rejected
+        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[:, INVALID_STATE],
+                "invalid_state", g.rejected)
+
+
+def decode_cycle(cycle: RawCycle) -> tuple[Detections, dict[str, int]]:
+    """The cycle's detections with every attribute, and the number of frames rejected by
+    reason (``out_of_range:<signal>``, ``duplicate_id:<message>``,
+    ``unmatched_id:<message>``)."""
+    g = decode_general(cycle)
+    attach_extras(cycle, g)
+    return g.det, g.rejected
 
 
 def prefilter(det: Detections, s: PrefilterSettings) -> Detections:

@@ -213,6 +213,17 @@ class KalmanTracker:
         unmatched[drows] = False
         self._birth(det, np.flatnonzero(unmatched))
 
+    def annotate_class(self, det: Detections) -> None:
+        """Set the object class of the tracks updated or born this cycle from `det` (the
+        cycle's detections, classes attached after the tracker ran), by radar ID."""
+        if not len(self) or not len(det):
+            return
+        lut = np.full(256, -1, dtype=np.int64)
+        lut[det.radar_id] = det.i[:, OBJ_CLASS]
+        meta = self.meta
+        fresh = (meta[:, MISSES] == 0) & (meta[:, META_RADAR_ID] >= 0)
+        meta[fresh, META_OBJ_CLASS] = lut[meta[fresh, META_RADAR_ID]]
+
     def tracks(self) -> list[RadarTrack]:
         """Every track, confirmed or not, as messages."""
         if not len(self):
