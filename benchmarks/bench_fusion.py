@@ -113,8 +113,11 @@ class TimedPublisher:
 
 
 def build_node(bus: Bus, cal: Calibration) -> tuple[FusionNode, TimedPublisher, np.ndarray]:
-    settings = parse_config({"fusion": {"instance": "bench", "calibration": CALIBRATION}},
-                            FusionConfig).fusion
+    # Staleness bounds widened: a descheduled benchmark process must not turn a cycle
+    # stale (that path is cheaper and would flatter the figures).
+    settings = parse_config({"fusion": {
+        "instance": "bench", "calibration": CALIBRATION, "frames": {"max_skew_s": 1.0},
+        "decision": {"radar_max_age_s": 1.0}}}, FusionConfig).fusion
     verifier = CountingVerifier(create("edge_density"))
     core = FusionCore(settings, ColumnProjector(cal, ColumnGeometry()), verifier)
     log = logging.getLogger("bench")

@@ -66,8 +66,13 @@ connect = ["{endpoint}"]
 instance = "{INSTANCE}"
 calibration = "{CALIBRATION}"
 stats_interval_s = 1.0
+# Generous bounds: a loaded CI machine may delay a frame or a cycle by a few hundred ms,
+# and this test is about the chain, not the bounds (tests/fusion/test_decision.py).
+[fusion.frames]
+max_skew_s = 0.5
 [fusion.decision]
-hold_s = 0.3
+hold_s = 1.5
+radar_max_age_s = 1.0
 """)
     return camera, fusion
 
@@ -146,7 +151,7 @@ def test_camera_and_fusion_processes_verify_decide_and_survive_a_corrupt_frame(r
             assert road.verification is Verification.REJECTED
             assert road.decision is Decision.NONE and "camera rejected" in road.reason
             assert tgt.verifier == "edge_density" and tgt.verifier_params["tau"] == 0.025
-            assert box.frame_age_ms is not None and abs(box.frame_age_ms) <= 100
+            assert box.frame_age_ms is not None and abs(box.frame_age_ms) <= 500
             assert tgt.processing_ns > 0
             # The densities are the gate's, on the very frame fusion used.
             assert box.frame_seq is not None
@@ -158,7 +163,7 @@ def test_camera_and_fusion_processes_verify_decide_and_survive_a_corrupt_frame(r
             assert box.density is not None and box.density > 0.04
             assert road.density is not None and road.density < 0.02
 
-            # The threat vanishes: the brake is held (0.3 s), then the heartbeat is NONE.
+            # The threat vanishes: the brake is held (1.5 s), then the heartbeat is NONE.
             cmd, _ = radar.cycle()
             assert cmd.decision is Decision.BRAKE and cmd.held and cmd.track_id == 1
             wait_for(lambda: radar.cycle()[0].decision is Decision.NONE, 30, interval_s=0.05,
@@ -176,7 +181,7 @@ def test_camera_and_fusion_processes_verify_decide_and_survive_a_corrupt_frame(r
             # Stale radar never brakes, whatever the camera says.
             wait_for(lambda: radar.cycle()[0].decision is Decision.NONE, 30, interval_s=0.05,
                      what="hold released")
-            cmd, tgt = radar.cycle(track(1, *BOX, vx=-5.0), age_ns=500_000_000)
+            cmd, tgt = radar.cycle(track(1, *BOX, vx=-5.0), age_ns=5_000_000_000)
             assert cmd.verifier_status is VerifierStatus.STALE_RADAR
             assert cmd.decision is Decision.NONE
             assert tgt.targets[0].verification is Verification.NOT_CHECKED
