@@ -19,7 +19,7 @@ from services.radar.ars408.records import (
     RadarStateFrame,
     Version,
 )
-from services.radar.ars408.table import Kind, MessageSpec
+from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
 from services.radar.configure import ConfigWriter
 from services.radar.cycle import CycleAssembler, ListRole, RawCycle
 from services.radar.detections import (
@@ -31,12 +31,16 @@ from services.radar.detections import (
 )
 from services.radar.tracker import KalmanTracker
 
-_LIST_ROLES: dict[Kind, tuple[OutputMode, int]] = {
-    Kind.OBJECT_GENERAL: (OutputMode.OBJECTS, ListRole.GENERAL),
-    Kind.OBJECT_QUALITY: (OutputMode.OBJECTS, ListRole.QUALITY),
-    Kind.OBJECT_EXTENDED: (OutputMode.OBJECTS, ListRole.EXTENDED),
-    Kind.CLUSTER_GENERAL: (OutputMode.CLUSTERS, ListRole.GENERAL),
-    Kind.CLUSTER_QUALITY: (OutputMode.CLUSTERS, ListRole.QUALITY),
+# By base ID: an int hashes faster than an Enum or a MessageSpec, and this lookup runs
+# for every frame.
+_LIST_ROLES: dict[int, tuple[OutputMode, int]] = {
+    BY_KIND[kind].base_id: role for kind, role in (
+        (Kind.OBJECT_GENERAL, (OutputMode.OBJECTS, ListRole.GENERAL)),
+        (Kind.OBJECT_QUALITY, (OutputMode.OBJECTS, ListRole.QUALITY)),
+        (Kind.OBJECT_EXTENDED, (OutputMode.OBJECTS, ListRole.EXTENDED)),
+        (Kind.CLUSTER_GENERAL, (OutputMode.CLUSTERS, ListRole.GENERAL)),
+        (Kind.CLUSTER_QUALITY, (OutputMode.CLUSTERS, ListRole.QUALITY)),
+    )
 }
 
 _ERROR_BITS = (
@@ -132,17 +136,19 @@ class SensorCore:
         """One frame of this radar. `t_s` is the frame's source time (seconds; the log's
         time in a replay), `wall_ns` / `mono_ns` the host's receive times."""
         self.frames_total += 1
-        role = _LIST_ROLES.get(spec.kind)
+        role = _LIST_ROLES.get(spec.base_id)
         if role is not None:   # the hot path: hundreds of frames per cycle
             usable: bytes | None = data
             if not spec.dlc <= len(data) <= 8:
                 self.rejected.add(f"wrong_dlc:{spec.dbc_name}")
                 usable = None   # arrived, so the cycle need not wait for it; marks it incomplete
-            done = self.assembler.on_list_frame(role[0], role[1], usable, mono_ns)
+            asm = self.assembler
+            done = asm.on_list_frame(role[0], role[1], usable, mono_ns)
             if done:
                 return [self.process(c) for c in done]
-            if role[1] == ListRole.GENERAL and not self._filter_needs_extras:
-                self._track_early()
+            if asm.generals_in is not None and not self._filter_needs_extras:
+                self._track_early(asm.generals_in)
+                asm.generals_in = None
             return []
         try:
             record = decode(spec, data)
@@ -206,14 +212,11 @@ class SensorCore:
     def _finish(self, cycles: list[RawCycle]) -> list[CycleResult]:
         return [self.process(c) for c in cycles]
 
-    def _track_early(self) -> None:
+    def _track_early(self, cycle: RawCycle) -> None:
         """Track the open cycle once all its general frames are in: its quality and
         extended frames (2 N more frames, about 0.25 ms each on the bus) then arrive while
         the work is done, and only their decoding is left after the cycle's last frame."""
-        cycle = self.assembler.current
-        if cycle is not None and len(cycle.general) == cycle.announced and (
-                self._early is None or self._early.cycle is not cycle):
-            self._early = self._track(cycle)
+        self._early = self._track(cycle)
 
     def _track(self, cycle: RawCycle) -> _Tracked:
         g = decode_general(cycle)

@@ -51,13 +51,15 @@ class RawCycle:
     lists: tuple[list[bytes | None], list[bytes | None], list[bytes | None]] = field(
         default_factory=lambda: ([], [], []))
     remaining: int = 0             # frames still awaited (unknown expectations count)
+    awaited: tuple[bool, bool, bool] = (True, True, True)   # by ListRole
     closed_by: str = ""
     complete: bool = False
 
     def __post_init__(self) -> None:
         n = self.announced
-        self.remaining = n + (n if self.expect_quality is not False else 0) + (
-            n if self.expect_extended is not False else 0)
+        self.awaited = (True, self.expect_quality is not False,
+                        self.expect_extended is not False)
+        self.remaining = n * sum(self.awaited)
 
     @property
     def general(self) -> list[bytes | None]:
@@ -73,13 +75,6 @@ class RawCycle:
 
     def frames_for(self, role: int) -> list[bytes | None]:
         return self.lists[role]
-
-    def awaits(self, role: int) -> bool:
-        if role == ListRole.QUALITY:
-            return self.expect_quality is not False
-        if role == ListRole.EXTENDED:
-            return self.expect_extended is not False
-        return True
 
     def all_arrived(self, quality: bool | None, extended: bool | None) -> bool:
         """All announced frames arrived, counting unknown expectations as expected."""
@@ -112,6 +107,9 @@ class CycleAssembler:
         self._current: RawCycle | None = None
         self._emitted = False
         self._learned: dict[tuple[OutputMode, int], bool] = {}
+        # Set when the open cycle's last general frame arrived and the cycle still waits
+        # for other frames; the caller may start tracking it and clears it.
+        self.generals_in: RawCycle | None = None
 
     def _expectation(self, mode: OutputMode, role: int) -> bool | None:
         if role == ListRole.EXTENDED and mode is OutputMode.CLUSTERS:
@@ -149,6 +147,7 @@ class CycleAssembler:
         """A status frame: closes the open cycle (emitted if it was not yet) and opens a
         new one, emitted at once when it announces nothing."""
         out = self._close(ClosedBy.NEXT_STATUS)
+        self.generals_in = None
         self._current = RawCycle(
             mode=mode, meas_counter=meas_counter, announced=announced, t_s=t_s,
             stamp_wall_ns=wall_ns, start_mono_ns=mono_ns, last_frame_mono_ns=mono_ns,
@@ -185,16 +184,14 @@ class CycleAssembler:
         cycle.last_frame_mono_ns = mono_ns
         # Unknown expectations count as awaited: such a cycle completes only when every
         # possible frame arrived, else it waits for the next status message.
-        if cycle.awaits(role):
+        if cycle.awaited[role]:
             cycle.remaining -= 1
             if cycle.remaining == 0:
+                self.generals_in = None
                 return self._close(ClosedBy.COMPLETE)
+        if role == ListRole.GENERAL and len(frames) == cycle.announced:
+            self.generals_in = cycle
         return []
-
-    @property
-    def current(self) -> RawCycle | None:
-        """The open cycle, while it has not been emitted."""
-        return None if self._emitted else self._current
 
     def poll(self, mono_ns: int) -> list[RawCycle]:
         """Close an open cycle older than the timeout (the radar stopped mid-cycle)."""
