@@ -5,6 +5,7 @@ not through a queue, so that a command reaches the line with the least delay."""
 
 import contextlib
 import logging
+import os
 import threading
 from collections.abc import Callable
 
@@ -60,7 +61,15 @@ class SerialLink:
             if port is None or self._write_error is not None:
                 return False
             try:
-                port.write(data)
+                # straight to the (non-blocking) fd: pyserial's write adds a select and
+                # timeout bookkeeping to every line; it only takes over when the kernel
+                # buffer is full, and then waits at most write_timeout_ms
+                try:
+                    n = os.write(port.fd, data)
+                except BlockingIOError:
+                    n = 0
+                if n < len(data):
+                    port.write(data[n:])
             except (serial.SerialException, OSError) as exc:
                 self._write_error = str(exc)
                 return False

@@ -623,6 +623,7 @@ def main(argv: list[str] | None = None) -> int:
     log = setup_logging("sim_actuator", args.log_level)
     kw: dict[str, Any] = dict(tau_s=args.tau_s, seed=args.seed,
                               watchdog_policy=WatchdogPolicy(args.watchdog_policy))
+    pair: PtyPair | None = None
     try:
         if args.pty_link:
             sim, pair = SimActuator.on_pty(args.pty_link, **kw)
@@ -630,13 +631,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             port, baud = args.port, args.baudrate
             sim = SimActuator(lambda: SerialEndpoint(port, baud), **kw)
-            pair = None
             where_desc = port
+        sim.start()
     except (OSError, serial.SerialException, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stop = stop_event_on_signals()
-    sim.start()
     log.info(kv("sim_actuator_ready", port=where_desc, simulated=True))
     print(f"ready {args.pty_link or args.port}", flush=True)
     if not args.no_control:

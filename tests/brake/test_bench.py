@@ -1,0 +1,18 @@
+"""The brake benchmark still runs end to end (a short run; figures are not asserted)."""
+
+import json
+
+import pytest
+
+from benchmarks import bench_brake
+
+pytestmark = pytest.mark.slow
+
+
+def test_benchmark_runs_and_writes_its_table_plot_and_json(tmp_path, capsys):
+    assert bench_brake.main(["--count", "60", "--rate-hz", "100", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "command receipt -> serial write" in out and "baseline" in out
+    assert (tmp_path / "bench_brake.png").stat().st_size > 0
+    rows = json.loads((tmp_path / "bench_brake.json").read_text())["rows"]
+    assert all(r["n"] > 0 for r in rows.values())

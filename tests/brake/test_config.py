@@ -1,0 +1,22 @@
+"""The brake service's configuration: the shipped example, and failing fast."""
+
+import subprocess
+import sys
+
+from common.config.brake import BrakeConfig
+from common.config.loader import load_config, parse_config
+from tests.support import REPO
+
+
+def test_shipped_example_is_valid_and_documents_the_defaults():
+    assert load_config(REPO / "deploy/brake.toml", BrakeConfig) == parse_config({}, BrakeConfig)
+
+
+def test_an_invalid_field_stops_the_service_at_start_naming_it(tmp_path):
+    bad = tmp_path / "brake.toml"
+    bad.write_text("[brake.actuator]\nheartbeat_ms = 200.0\nttl_ms = 250\n")
+    res = subprocess.run([sys.executable, "-m", "services.brake", "--config", str(bad)],
+                         cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    assert "ttl_ms must be at least two heartbeats" in res.stderr
+    assert "brake.actuator" in res.stderr
