@@ -7,6 +7,7 @@ Exit codes: 0 after SIGINT/SIGTERM, 2 for an invalid configuration or calibratio
 (named on stderr), 1 when the bus cannot be opened.
 """
 
+import argparse
 import sys
 
 import msgspec
@@ -36,6 +37,7 @@ def build_core(cfg: FusionConfig) -> tuple[FusionCore, Calibration]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = service_argparser("fusion", __doc__ or "")
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("--instance", help="instance name, overrides fusion.instance")
     parser.add_argument("--calibration", help="calibration TOML, overrides fusion.calibration")
     args = parser.parse_args(argv)
@@ -69,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     with bus:
         decoder = FrameDecoder(cal.width, cal.height, s.frames.ring_size,
                                s.frames.decode_queue, log)
-        node = FusionNode(bus, s, core, decoder, log)
+        node = FusionNode(bus, s, core, decoder, log, cal)
         node.start()
         token = bus.declare_health("fusion", s.instance)
         log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,

@@ -11,26 +11,30 @@ import msgspec
 import zenoh
 
 from common.bus import Bus
+from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
 from common.config.fusion import FusionSettings
 from common.counters import ReasonCounter
-from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from common.keys import CAMERA_INFO, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import RateLimitedLog, kv
 from common.messages import (
     BrakeCommand,
+    CameraInfo,
     Decision,
     DecodeError,
     RadarTracks,
     VerifierStatus,
     decode,
 )
+from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, FusionCore
 from services.fusion.frames import FrameDecoder
 
 
 class FusionNode:
     def __init__(self, bus: Bus, settings: FusionSettings, core: FusionCore,
-                 decoder: FrameDecoder, log: logging.Logger) -> None:
+                 decoder: FrameDecoder, log: logging.Logger,
+                 calibration: Calibration | None = None) -> None:
         self.bus = bus
         self.s = settings
         self.core = core
@@ -43,6 +47,7 @@ class FusionNode:
         self._decided_ns = 0
         self._proc_us: deque[float] = deque(maxlen=512)
         self._subs: list[zenoh.Subscriber[None]] = []
+        self.calibration = calibration
         self._cmd_pub = bus.publisher(FUSION_BRAKE_CMD, instance=settings.instance)
         self._tgt_pub = bus.publisher(FUSION_TARGETS, instance=settings.instance)
 
@@ -52,12 +57,25 @@ class FusionNode:
                                                  camera=self.s.frames.camera))
         self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
                                                  sensor=self.s.radar_sensor))
+        if self.calibration is not None:
+            self._subs.append(self.bus.subscribe(CAMERA_INFO, self.on_camera_info,
+                                                 camera=self.s.frames.camera))
 
     def stop(self) -> None:
         for sub in self._subs:
             sub.undeclare()
         self._subs.clear()
         self.decoder.stop()
+
+    def on_camera_info(self, info: CameraInfo, key: str) -> None:
+        """Warn (rate-limited) and count when the camera's calibration is not ours."""
+        if self.calibration is None:
+            return
+        diff = calibration_differences(self.calibration, info)
+        if diff:
+            self.counters.add("camera_calibration_mismatch")
+            self._rl.warning("calibration", "camera_calibration_differs", camera=info.camera,
+                             ours=self.s.calibration, differences="; ".join(diff))
 
     def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
         self.on_tracks_payload(payload, key, rx_mono_ns)

@@ -2,6 +2,7 @@
 the core fails half-way or the payload is not a radar cycle."""
 
 import logging
+from typing import Any
 
 import pytest
 
@@ -109,3 +110,31 @@ def test_radar_sequence_gaps_and_regressions_are_counted_and_still_answered():
     assert node.counters.get("radar_cycles_missed") == 2
     assert node.counters.get("radar_seq_not_increasing") == 2
     assert [m.header.seq for name, m in bus.log if name == "fusion_brake_cmd"] == [0, 1, 2, 3, 4]
+
+
+def test_a_camera_calibration_other_than_ours_is_counted_and_named():
+    import numpy as np
+
+    from common.messages import CameraInfo, Header
+    from services.fusion.camera_check import calibration_differences
+    from tests.fusion.helpers import CAL
+
+    def info(**over) -> CameraInfo:
+        fields: dict[str, Any] = dict(
+            header=Header(seq=0, source="camera/front", stamp_ns=0, pub_mono_ns=0),
+            camera="front", width=848, height=480, k=tuple(CAL.k.ravel()), dist=(0.0,) * 5,
+            r=tuple(CAL.r.ravel()), t_m=tuple(CAL.t), fps=30.0, source="folder",
+            frames_published=0, frames_dropped=0, read_errors=0, healthy=True, status="")
+        fields.update(over)
+        return CameraInfo(**fields)
+
+    assert calibration_differences(CAL, info()) == []
+    assert calibration_differences(CAL, info(dist=())) == []          # zeros or none
+    moved = np.asarray(CAL.t) + np.array([0.0, 0.0, 0.05])
+    assert calibration_differences(CAL, info(t_m=tuple(moved), width=640)) == [
+        "size 640x480 != 848x480", "t differs"]
+    node, _ = node_with(FixedVerifier())
+    node.calibration = CAL
+    node.on_camera_info(info(), "k")
+    node.on_camera_info(info(k=(1.0,) * 9), "k")
+    assert node.counters.get("camera_calibration_mismatch") == 1
