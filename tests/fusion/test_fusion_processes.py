@@ -210,6 +210,8 @@ def test_camera_and_fusion_processes_verify_decide_and_survive_a_corrupt_frame(r
             wait_for(lambda: not fusion.alive(), 30, what="fusion exit")
             assert fusion.proc.returncode == 0, fusion.output()
             assert "fusion_stats" in fusion.output()
+            # The camera published the calibration fusion uses: no mismatch warning.
+            assert "camera_calibration_differs" not in fusion.output()
         finally:
             fusion.stop()
             camera.stop()
