@@ -8,6 +8,7 @@ its column projected to a ROI (roi.py), the verifier (verifiers.py), the decisio
 command is the most severe decision (ties: the smallest TTC_eff), or a heartbeat.
 """
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -52,6 +53,7 @@ class FusionCore:
         self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
         self.rule = DecisionRule(settings.decision)
         self._seq = 0
+        self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
 
@@ -66,7 +68,9 @@ class FusionCore:
         after it can be more severe. The targets are completed afterwards.
         """
         s = self.s
-        confirmed = [t for t in tracks.tracks if t.confirmed]
+        confirmed = [t for t in tracks.tracks if t.confirmed and _finite(t)]
+        invalid = [t for t in tracks.tracks if t.confirmed and not _finite(t)]
+        self.invalid_tracks += len(invalid)
         age_ns = now_wall_ns - tracks.header.stamp_ns
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
@@ -92,6 +96,7 @@ class FusionCore:
         else:
             targets = self._verify_all(cycle, frame)
         assert cycle.command is not None
+        targets += [_invalid_target(t) for t in invalid]
         header = Header(seq=cycle.command.header.seq, source=self.source,
                         stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
         verified = VerifiedTargets(
@@ -257,6 +262,18 @@ class FusionCore:
             verifier_status=status, held=held, track_id=track_id, range_m=range_m,
             ttc_s=ttc_s, reason=reason, radar_seq=tracks.header.seq,
             radar_last_frame_mono_ns=tracks.last_frame_mono_ns)
+
+
+def _finite(t: RadarTrack) -> bool:
+    return all(math.isfinite(v) for v in (t.x_m, t.y_m, t.vx_mps, t.vy_mps, t.range_m,
+                                          t.range_rate_mps))
+
+
+def _invalid_target(t: RadarTrack) -> VerifiedTarget:
+    """A confirmed track with NaN or infinite numbers: reported, never decided on."""
+    return VerifiedTarget(t.track_id, t.x_m, t.y_m, t.range_m, t.range_rate_mps, False,
+                          Verification.NOT_CHECKED, _NO_ROI, None, None, None, Decision.NONE,
+                          "invalid track: non-finite position, velocity or range", None, None)
 
 
 def _more_severe(a: VerifiedTarget, b: VerifiedTarget) -> bool:

@@ -153,7 +153,7 @@ class FusionNode:
         proc = sorted(self._proc_us)
         out: dict[str, Any] = dict(self.counters.snapshot())
         out.update(frames=feed.received, frames_unusable=feed.undecodable,
-                   frames_dropped=feed.dropped)
+                   frames_dropped=feed.dropped, invalid_tracks=self.core.invalid_tracks)
         if proc:
             out.update(proc_p50_us=proc[len(proc) // 2], proc_max_us=proc[-1])
         return out

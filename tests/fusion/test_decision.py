@@ -341,3 +341,19 @@ def test_the_early_command_equals_the_most_severe_of_all_targets():
             expected = (Decision.NONE, -1) if best is None else (best[1].decision,
                                                                  best[1].track_id)
             assert (res.command.decision, res.command.track_id) == expected
+
+
+def test_tracks_with_non_finite_numbers_are_reported_and_never_decided_on():
+    import math
+
+    core = make_core()
+    bad = [track(tid=1, x=math.nan), track(tid=2, x=math.inf),
+           track(tid=3, vx=math.nan, range_rate=-5.0), track(tid=4, range_rate=math.nan)]
+    res = run(core, *bad, track(tid=5, x=8.0, vx=-6.0))
+    assert res.command.decision is Decision.BRAKE and res.command.track_id == 5
+    reported = {t.track_id: t for t in res.targets.targets}
+    assert set(reported) == {1, 2, 3, 4, 5}
+    for tid in (1, 2, 3, 4):
+        assert reported[tid].decision is Decision.NONE
+        assert reported[tid].reason.startswith("invalid track")
+    assert core.invalid_tracks == 4
