@@ -42,6 +42,7 @@ import threading
 import time
 import tty
 from collections.abc import Callable, Iterable
+from typing import Self
 
 import can
 
@@ -105,6 +106,15 @@ class _Link:
     def opened(self) -> bool:
         return self._opened.is_set()
 
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
 
 def slcan_line(frame: Frame) -> bytes:
     """`tIIIL<data>\\r`: one standard frame as an slcan adapter forwards it."""
@@ -134,12 +144,6 @@ class SlcanPtyLink(_Link):
         self._write_lock = threading.Lock()
         self._thread = threading.Thread(target=self._read_loop, name="slcan-link", daemon=True)
         self._thread.start()
-
-    def __enter__(self) -> "SlcanPtyLink":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def send(self, frames: Iterable[Frame]) -> None:
         """Write radar -> service frames. Raises OSError once the link is closed."""
@@ -221,12 +225,6 @@ class SocketcandServer(_Link):
         self._thread = threading.Thread(target=self._serve, name="socketcand-link",
                                         daemon=True)
         self._thread.start()
-
-    def __enter__(self) -> "SocketcandServer":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def send(self, frames: Iterable[Frame]) -> None:
         """Write radar -> service frames. Raises ConnectionError when no client is in
