@@ -215,9 +215,11 @@ class AdaptiveEdgeDensity:
         edges = cv2.Canny(patch, low, high)
         n_edges = cv2.countNonZero(edges)
         pixels = roi.area
-        dark = _median_u8(patch) <= p.dark_median
+        # One histogram of the ROI answers both "is it dark?" and "anything saturated?".
+        cum = np.cumsum(cv2.calcHist([patch], [0], None, [256], [0, 256]).ravel())
+        dark = float(np.searchsorted(cum, pixels / 2.0)) <= p.dark_median
         masked_frac = 0.0
-        if dark and cv2.minMaxLoc(patch)[1] >= p.saturation:
+        if dark and cum[-1] > cum[p.saturation - 1]:
             mask = self._lights(patch, roi.area)
             if mask is not None:
                 n_masked = cv2.countNonZero(mask)
