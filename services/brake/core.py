@@ -106,6 +106,7 @@ class BrakeCore:
         self._held_level = 0.0
         self._held_until = now_ns
         self._failsafe = False
+        self._rx_in_failsafe = False   # a command was accepted since FAILSAFE was entered
         self._fs_level = 0.0
         self._fs_hold_end = now_ns
         self._fs_why = ""
@@ -138,8 +139,7 @@ class BrakeCore:
     ) -> Outgoing | None:
         """A sample from the bus. Rejected commands are counted and change nothing else."""
         now = rx_mono_ns
-        ref = self._last_rx if self._last_rx is not None else self._start_ns
-        if not self._failsafe and now - ref >= self._deadline:
+        if self._deadline_missed(now):
             self._evaluate(now)  # the deadline passed before the timer noticed: still a miss
         alive = self._last_rx is not None and now - self._last_rx < self._deadline
         result = self.validator.check(payload, key, now, rx_wall_ns, alive)
@@ -206,7 +206,7 @@ class BrakeCore:
     def next_due_ns(self, now: int) -> int | None:
         """When `on_tick` must run next at the latest (None: nothing pending)."""
         due: list[int] = []
-        if not self._failsafe:
+        if not self._failsafe or self._rx_in_failsafe:
             due.append((self._last_rx if self._last_rx is not None else self._start_ns)
                        + self._deadline)
         if self._held_until > now:
@@ -268,6 +268,7 @@ class BrakeCore:
         self._consecutive = self._consecutive + 1 if contiguous else 1
         self._last_rx = now
         self._last_seq = cmd.header.seq
+        self._rx_in_failsafe = self._failsafe
         level = cmd.brake_level_pct if cmd.decision is Decision.BRAKE else 0.0
         self._requested = level
         # minimum hold: a level is not lowered until min_brake_hold_ms after it was asked
@@ -276,11 +277,22 @@ class BrakeCore:
             self._held_until = now + self._min_hold
         self.version += 1
 
+    def _deadline_missed(self, now: int) -> bool:
+        """No valid command for the deadline, with something new to fail: the stream (or
+        the start), or commands that came back in FAILSAFE and stopped again."""
+        if self._failsafe and not self._rx_in_failsafe:
+            return False
+        ref = self._last_rx if self._last_rx is not None else self._start_ns
+        return now - ref >= self._deadline
+
     def _enter_failsafe(self, now: int) -> None:
+        """Each miss starts the policy anew from the level applied at this moment (in
+        FAILSAFE already: including the policy's own level, so a hold is never cut)."""
         had_commands = self._last_rx is not None
-        self._fs_level = self._command_level(now)
+        self._fs_level = self.level(now)
         self._fs_hold_end = now + self._fs_hold
         self._failsafe = True
+        self._rx_in_failsafe = False
         self._trusted = False
         self._consecutive = 0
         self._requested = 0.0
@@ -300,8 +312,7 @@ class BrakeCore:
                 and now < self._fs_hold_end)
 
     def _evaluate(self, now: int) -> None:
-        ref = self._last_rx if self._last_rx is not None else self._start_ns
-        if not self._failsafe and now - ref >= self._deadline:
+        if self._deadline_missed(now):
             self._enter_failsafe(now)
         fresh = self._last_rx is not None and now - self._last_rx < self._deadline
         if (not self._trusted and fresh and self._consecutive >= self.settings.recover_count

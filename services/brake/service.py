@@ -96,7 +96,7 @@ class BrakeService:
     def on_command(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
         """Zenoh's thread: validate, decide and write to the serial line at once."""
         with self._lock:
-            before = self.core.state
+            before = (self.core.state, self.core.command_state)
             out = self.core.on_command(payload, key, rx_mono_ns, wall_ns())
             if out is not None:
                 self._write(out, rx_mono_ns)
@@ -110,7 +110,8 @@ class BrakeService:
     def _on_rx(self, items: list[bytes | BadLine]) -> None:
         with self._lock:
             now = mono_ns()
-            before = self.core.state
+            before = (self.core.state, self.core.command_state)
+            version = self.core.version
             for item in items:
                 out = self.core.on_rx(item, now)
                 if out is not None:
@@ -118,7 +119,8 @@ class BrakeService:
                 if self.core.rx_problem is not None:
                     self._rl.warning(f"rx:{self.core.rx_problem}", "actuator_bad_line",
                                      reason=self.core.rx_problem)
-            self._cond.notify()
+            if self.core.version != version:   # a plain acknowledgement changes nothing
+                self._cond.notify()
             self._log_transition(before)
 
     def _on_link_up(self) -> None:
@@ -129,7 +131,7 @@ class BrakeService:
 
     def _on_link(self, up: bool, reason: str) -> None:
         with self._lock:
-            before = self.core.state
+            before = (self.core.state, self.core.command_state)
             out = self.core.on_link(up, mono_ns(), reason)
             if out is not None:
                 self._write(out, None)
@@ -159,7 +161,7 @@ class BrakeService:
 
     def _tick(self) -> None:
         now = mono_ns()
-        before = self.core.state
+        before = (self.core.state, self.core.command_state)
         out = self.core.on_tick(now)
         if out is not None:
             self._write(out, None)
@@ -207,14 +209,15 @@ class BrakeService:
             (written - radar_ns) / 1e3 if same_host and 0 < radar_ns <= written else None
         )
 
-    def _log_transition(self, before: BrakeState) -> None:
+    def _log_transition(self, before: tuple[BrakeState, BrakeState]) -> None:
         core = self.core
-        if core.state is before:
+        if (core.state, core.command_state) == before:
             return
-        level = logging.INFO if core.state in (BrakeState.ARMED, BrakeState.BRAKING,
-                                               BrakeState.STANDBY) else logging.WARNING
-        self._log.log(level, kv("brake_state", old=before.value, new=core.state.value,
-                                reason=core.reason, level_pct=core.commanded_level_pct))
+        quiet = (BrakeState.ARMED, BrakeState.BRAKING, BrakeState.STANDBY)
+        level = logging.INFO if core.state in quiet else logging.WARNING
+        self._log.log(level, kv("brake_state", old=before[0].value, new=core.state.value,
+                                command_state=core.command_state.value, reason=core.reason,
+                                level_pct=core.commanded_level_pct))
 
     def _status(self, now: int) -> BrakeStatus:
         v = self.core.view()

@@ -297,6 +297,27 @@ def test_a_valid_brake_request_in_failsafe_brakes_harder_never_less(policy):
     assert rig.state is BrakeState.FAILSAFE and rig.level == 90
 
 
+@pytest.mark.parametrize("policy", ["hold", "release"])
+def test_commands_that_come_back_in_failsafe_and_stop_again_are_a_new_miss(policy):
+    """A brake asked by a command in FAILSAFE must not stay forever when that stream
+    stops again before it was trusted: the policy starts anew from that level."""
+    rig = Rig(policy=policy, failsafe_hold_s=1.0, min_brake_hold_ms=0).armed()
+    rig.advance(200)
+    assert rig.state is BrakeState.FAILSAFE and rig.level == 0
+    rig.stream(2, 80.0)                              # not trusted yet, but applied
+    assert rig.level == 80 and rig.state is BrakeState.FAILSAFE
+    last_rx = rig.core.view().last_cmd_rx_ns
+    rig.advance((last_rx + 200 * MS - rig.t) / MS - 1)
+    assert rig.level == 80
+    rig.advance(1)
+    assert rig.core.counters["deadline_misses"] == 2
+    if policy == "hold":
+        rig.advance(990)
+        assert rig.level == 80                       # held for failsafe_hold_s again
+    rig.advance(20)
+    assert rig.level == 0 and rig.state is BrakeState.FAILSAFE
+
+
 def test_leaving_failsafe_needs_consecutive_commands():
     rig = Rig(recover_count=4).armed()
     rig.advance(200)
