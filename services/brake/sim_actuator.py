@@ -284,7 +284,9 @@ class SimActuator:
         self._wake()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
-        for fd in (self._wake_r, self._wake_w):
+        with self._lock:
+            fds, self._wake_r, self._wake_w = (self._wake_r, self._wake_w), -1, -1
+        for fd in fds:
             with contextlib.suppress(OSError):
                 os.close(fd)
 
@@ -556,8 +558,10 @@ class SimActuator:
                     _log.warning(kv("sim_listener_failed", error=repr(exc)))
 
     def _wake(self) -> None:
-        with contextlib.suppress(OSError):
-            os.write(self._wake_w, b"x")
+        with self._lock:   # never a write to a closed (and maybe reused) descriptor
+            if self._wake_w >= 0:
+                with contextlib.suppress(OSError):
+                    os.write(self._wake_w, b"x")
 
 
 # ---- the process: `aeb sim-actuator` ---------------------------------------------------
