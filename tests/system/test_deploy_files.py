@@ -1,0 +1,196 @@
+"""The files under deploy/: every Zenoh config is accepted by zenoh, the secure profile
+works end to end (mutual TLS and access control) with certificates made by its script,
+and the systemd units start real `aeb` commands on files that exist."""
+
+import configparser
+import json
+import shutil
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from tests.support import free_port, wait_for
+from tools.cli import COMMANDS
+
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
+ZENOH_CONFIGS = sorted((DEPLOY / "zenoh").rglob("*.json5"))
+
+
+def test_there_are_router_client_and_secure_configs():
+    names = {p.relative_to(DEPLOY / "zenoh").as_posix() for p in ZENOH_CONFIGS}
+    assert {"router.json5", "client.json5", "ecu-a-router.json5", "ecu-b-router.json5",
+            "secure/router.json5", "secure/client-fusion.json5"} <= names
+
+
+@pytest.mark.parametrize("path", ZENOH_CONFIGS, ids=lambda p: p.name)
+def test_zenoh_accepts_every_config_and_multicast_is_off(path):
+    conf = zenoh.Config.from_file(str(path))
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+    mode = json.loads(conf.get_json("mode"))
+    assert mode in ("router", "client")
+    endpoints = json.loads(conf.get_json("listen/endpoints" if mode == "router"
+                                         else "connect/endpoints"))
+    assert endpoints and not any("0.0.0.0" in ep or "[::]" in ep for ep in endpoints)
+
+
+def test_zenoh_rejects_a_misspelt_key(tmp_path):
+    # The test above means something only if from_file validates.
+    bad = tmp_path / "bad.json5"
+    bad.write_text('{ mode: "router", scoutin: {} }')
+    with pytest.raises(zenoh.ZError, match="scoutin"):
+        zenoh.Config.from_file(str(bad))
+
+
+def _conf(path: Path, **values: object) -> zenoh.Config:
+    conf = zenoh.Config.from_file(str(path))
+    for key, value in values.items():
+        conf.insert_json5(key, json.dumps(value))
+    return conf
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl is not installed")
+def test_secure_profile_mutual_tls_and_access_control(tmp_path):
+    certs = tmp_path / "certs"
+    subprocess.run(["sh", str(DEPLOY / "zenoh/secure/make-certs.sh"), str(certs)],
+                   check=True, capture_output=True, timeout=120)
+    port = free_port()
+    endpoint = f"tls/127.0.0.1:{port}"
+    tls = "transport/link/tls/"
+    router = zenoh.open(_conf(DEPLOY / "zenoh/secure/router.json5", **{
+        "listen/endpoints": [endpoint],
+        tls + "root_ca_certificate": str(certs / "ca.pem"),
+        tls + "listen_certificate": str(certs / "router.pem"),
+        tls + "listen_private_key": str(certs / "router-key.pem"),
+    }))
+
+    def client(name: str, cert: str | None = None) -> zenoh.Session:
+        cert = cert or name
+        return zenoh.open(_conf(DEPLOY / f"zenoh/secure/client-{name}.json5", **{
+            "connect/endpoints": [endpoint],
+            tls + "root_ca_certificate": str(certs / "ca.pem"),
+            tls + "connect_certificate": str(certs / f"{cert}.pem"),
+            tls + "connect_private_key": str(certs / f"{cert}-key.pem"),
+        }))
+
+    sessions: list[zenoh.Session] = []
+    try:
+        fusion, brake, monitor = (client(n) for n in ("fusion", "brake", "monitor"))
+        sessions += [fusion, brake, monitor]
+        got: list[tuple[str, str]] = []
+        lock = threading.Lock()
+
+        def collect(who: str):
+            def cb(sample: zenoh.Sample) -> None:
+                with lock:
+                    got.append((who, str(sample.key_expr)))
+            return cb
+
+        brake.declare_subscriber("aeb/ego/fusion/primary/brake_cmd", collect("brake"))
+        # The brake may not subscribe to what is not its input: denied, receives nothing.
+        brake.declare_subscriber("aeb/ego/radar/front/tracks", collect("brake"))
+        monitor.declare_subscriber("aeb/ego/**", collect("monitor"))
+        alive: list[str] = []
+        monitor.liveliness().declare_subscriber(
+            "aeb/ego/health/**", lambda s: alive.append(str(s.key_expr)), history=True)
+        # Keep the tokens: a token that is garbage-collected is undeclared.
+        tokens = [fusion.liveliness().declare_token("aeb/ego/health/fusion/primary"),
+                  fusion.liveliness().declare_token("aeb/ego/health/brake/main")]  # not fusion's
+
+        def flowed() -> bool:
+            fusion.put("aeb/ego/fusion/primary/brake_cmd", b"cmd")
+            fusion.put("aeb/ego/brake/status", b"forged")          # not fusion's key
+            fusion.put("aeb/ego/radar/front/tracks", b"forged")    # not fusion's key
+            with lock:
+                return ("brake", "aeb/ego/fusion/primary/brake_cmd") in got
+
+        wait_for(flowed, 60, 0.1, "brake command through the secure router")
+        wait_for(lambda: "aeb/ego/health/fusion/primary" in alive, 30, 0.05, "token")
+        time.sleep(0.5)  # negative check: let any wrongly admitted sample arrive
+        with lock:
+            assert set(got) == {("brake", "aeb/ego/fusion/primary/brake_cmd"),
+                                ("monitor", "aeb/ego/fusion/primary/brake_cmd")}
+        assert set(alive) == {"aeb/ego/health/fusion/primary"}
+        del tokens
+    finally:
+        for s in sessions:
+            s.close()
+        router.close()
+
+
+def _units() -> list[Path]:
+    return sorted((DEPLOY / "systemd").glob("*.service"))
+
+
+@pytest.mark.parametrize("unit", _units(), ids=lambda p: p.name)
+def test_systemd_units_run_aeb_commands_on_existing_files(unit):
+    parser = configparser.ConfigParser(interpolation=None, strict=False)
+    parser.read(unit)
+    assert {"Unit", "Service", "Install"} <= set(parser.sections())
+    argv = parser["Service"]["ExecStart"].split()
+    assert argv[0] == "/opt/aeb/.venv/bin/aeb"
+    command = argv[1]
+    instances = ["radar", "camera", "fusion", "brake"] if command == "%i" else [command]
+    tables = ["single-host", "ecu-a", "ecu-b"]
+    for inst in instances:
+        assert inst in COMMANDS
+        for arg in argv[2:]:
+            if arg.startswith("/opt/aeb/deploy/"):
+                rel = arg.removeprefix("/opt/aeb/")
+                names = tables if "%i" in rel and command == "up" else [inst]
+                for name in names:
+                    path = DEPLOY.parent / rel.replace("%i", name)
+                    assert path.is_file(), f"{unit.name}: {path} does not exist"
+
+
+TABLES = ["single-host", "ecu-a", "ecu-b"]
+
+
+def _config_types() -> dict[str, type]:
+    from common.config.brake import BrakeConfig
+    from common.config.camera import CameraConfig
+    from common.config.fusion import FusionConfig
+    from common.config.radar import RadarConfig
+
+    return {"radar": RadarConfig, "camera": CameraConfig, "fusion": FusionConfig,
+            "brake": BrakeConfig}
+
+
+@pytest.mark.parametrize("name", TABLES)
+def test_shipped_process_tables_resolve_to_valid_service_configs(name):
+    from common.config.loader import load_config
+    from tools.launch.table import load_table, resolve_launches
+
+    path = DEPLOY / f"{name}.toml"
+    table, workdir = load_table(path)
+    launches = resolve_launches(table, workdir, str(path))
+    assert launches[0].name == "router"
+    types = _config_types()
+    for entry in table.service:    # enabled or not: every config a table names must load
+        assert entry.aeb in types, entry
+        assert entry.config, f"{name}: {entry.name} has no config"
+        load_config(workdir / entry.config, types[entry.aeb])
+    services = {launch.name for launch in launches[1:]}
+    expected = {"single-host": {"radar", "camera", "fusion", "brake"},
+                "ecu-a": {"radar", "camera", "brake"}, "ecu-b": {"fusion"}}[name]
+    assert services == expected
+
+
+def test_the_two_boards_meet_at_ecu_a_and_brake_ages_commands_on_wall_clocks():
+    import tomllib
+
+    from common.config.brake import BrakeConfig
+    from common.config.loader import load_config
+
+    a = zenoh.Config.from_file(str(DEPLOY / "zenoh/ecu-a-router.json5"))
+    b = zenoh.Config.from_file(str(DEPLOY / "zenoh/ecu-b-router.json5"))
+    a_listen = set(json.loads(a.get_json("listen/endpoints")))
+    b_connect = set(json.loads(b.get_json("connect/endpoints")))
+    assert b_connect and b_connect <= a_listen
+    table = tomllib.loads((DEPLOY / "ecu-a.toml").read_text())
+    brake = next(s for s in table["service"] if s["name"] == "brake")
+    assert load_config(DEPLOY.parent / brake["config"], BrakeConfig).brake.age_clock.value \
+        == "wall"
