@@ -78,8 +78,9 @@ def test_secure_profile_mutual_tls_and_access_control(tmp_path):
 
     sessions: list[zenoh.Session] = []
     try:
-        fusion, brake, monitor = (client(n) for n in ("fusion", "brake", "monitor"))
-        sessions += [fusion, brake, monitor]
+        fusion, brake, monitor, radar = (client(n) for n in ("fusion", "brake", "monitor",
+                                                             "radar"))
+        sessions += [fusion, brake, monitor, radar]
         got: list[tuple[str, str]] = []
         lock = threading.Lock()
 
@@ -103,16 +104,20 @@ def test_secure_profile_mutual_tls_and_access_control(tmp_path):
         def flowed() -> bool:
             fusion.put("aeb/ego/fusion/primary/brake_cmd", b"cmd")
             fusion.put("aeb/ego/brake/status", b"forged")          # not fusion's key
-            fusion.put("aeb/ego/radar/front/tracks", b"forged")    # not fusion's key
+            fusion.put("aeb/ego/radar/front/status", b"forged")    # not fusion's key
+            radar.put("aeb/ego/radar/front/tracks", b"tracks")     # the radar's own key
             with lock:
-                return ("brake", "aeb/ego/fusion/primary/brake_cmd") in got
+                return {("brake", "aeb/ego/fusion/primary/brake_cmd"),
+                        ("monitor", "aeb/ego/radar/front/tracks")} <= set(got)
 
         wait_for(flowed, 60, 0.1, "brake command through the secure router")
         wait_for(lambda: "aeb/ego/health/fusion/primary" in alive, 30, 0.05, "token")
         time.sleep(0.5)  # negative check: let any wrongly admitted sample arrive
         with lock:
+            # The brake's radar subscription was refused: the tracks reach the monitor only.
             assert set(got) == {("brake", "aeb/ego/fusion/primary/brake_cmd"),
-                                ("monitor", "aeb/ego/fusion/primary/brake_cmd")}
+                                ("monitor", "aeb/ego/fusion/primary/brake_cmd"),
+                                ("monitor", "aeb/ego/radar/front/tracks")}
         assert set(alive) == {"aeb/ego/health/fusion/primary"}
         del tokens
     finally:
