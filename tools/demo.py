@@ -28,8 +28,11 @@ from typing import IO, Any
 from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
 from common.config.loader import ConfigError
+from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
 from common.log import setup_logging
 from common.service import stop_event_on_signals
+from tools.ab.compare import Comparator, render
+from tools.ab_report import Feeder
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import load_table, resolve_launches
 from tools.sim.latency import chain_latencies_ns
@@ -51,6 +54,7 @@ DEMO_SCENARIOS = (
     "no_threat_parked_cars_30kph",
     "no_threat_pedestrian_walking_beside_20kph",
 )
+CANDIDATE_CONFIG = REPO / "deploy" / "fusion-candidate.toml"
 START_TIMEOUT_S = 120.0
 SETTLE_TIMEOUT_S = 60.0
 
@@ -66,6 +70,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--camera-fps", type=float, default=30.0)
     parser.add_argument("--radar-mode", choices=["scenario", "objects", "clusters"],
                         default="scenario", help="override the scenarios' radar output mode")
+    parser.add_argument("--candidate", action="store_true",
+                        help="also run the candidate fusion instance (deploy/fusion-candidate"
+                             ".toml) in shadow mode and print the A/B report at the end")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
     return parser.parse_args(argv)
 
@@ -87,7 +94,8 @@ def pick_scenarios(spec: str) -> list[Scenario]:
     return [load_scenario(p) for p in paths]
 
 
-def write_table(folder: Path, endpoint: str, configs: StackConfigs) -> Path:
+def write_table(folder: Path, endpoint: str, configs: StackConfigs,
+                candidate: bool = False) -> Path:
     """The demo's process table (the same launcher as `aeb up`)."""
     lines = [
         "# Written by aeb demo: the stack under simulation.",
@@ -99,6 +107,9 @@ def write_table(folder: Path, endpoint: str, configs: StackConfigs) -> Path:
     for name in SERVICES:
         lines += ["[[service]]", f'name = "{name}"', f'aeb = "{name}"',
                   f'config = "{configs.of(name)}"', ""]
+    if candidate:
+        lines += ["[[service]]", 'name = "fusion-candidate"', 'aeb = "fusion"',
+                  f'config = "{CANDIDATE_CONFIG}"', ""]
     path = folder / "table.toml"
     path.write_text("\n".join(lines))
     return path
@@ -188,11 +199,12 @@ def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> 
     poller_stop = threading.Event()
     results: list[RunResult] = []
     feed: RadarFeed | None = None
+    ab: Feeder | None = None
     try:
-        table, workdir = load_table(write_table(run_dir, endpoint, configs))
+        table, workdir = load_table(write_table(run_dir, endpoint, configs, args.candidate))
         launches = resolve_launches(table, workdir, "demo")
-        supervisor = Supervisor(launches, LinePrinter(log_file, ["up", *SERVICES, "router"],
-                                                      colour=False))
+        supervisor = Supervisor(launches, LinePrinter(
+            log_file, ["up", *(launch.name for launch in launches)], colour=False))
         supervisor.start()
         sup = supervisor
 
@@ -211,6 +223,7 @@ def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> 
                       file=sys.stderr)
                 return 2
             print(f"all services up in {time.monotonic() - t0:.1f} s", flush=True)
+            ab = start_ab(bus) if args.candidate else None
             feed = RadarFeed(link, RadarLook())
             sim = Simulator(bus, feed, SimActuatorView(actuator)).start()
             try:
@@ -254,7 +267,22 @@ def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> 
         link.close()
         actuator.stop()
         log_file.close()
-    return report(results, feed, actuator, out)
+    code = report(results, feed, actuator, out)
+    if ab is not None:
+        print("\n" + render(ab.comparator.report(), max_episodes=12))
+    return code
+
+
+def start_ab(bus: Bus) -> Feeder:
+    """Pair primary's and candidate's outputs as they arrive (aeb ab-report's core)."""
+    feeder = Feeder(Comparator("primary", "candidate"))
+    for spec in (FUSION_TARGETS, FUSION_BRAKE_CMD):
+        def on_raw(payload: bytes, key: str, rx_mono_ns: int, name: str = spec.name) -> None:
+            feeder.feed(name, payload)
+
+        for instance in ("primary", "candidate"):
+            bus.subscribe_raw(spec, on_raw, instance=instance)
+    return feeder
 
 
 def report(results: list[RunResult], feed: RadarFeed | None, actuator: Any, out: Path) -> int:

@@ -67,7 +67,7 @@ def test_closed_loop_brakes_for_threats_only_and_fails_safe(router, tmp_path, va
         assert v.first_brake_t_s is not None and v.stopping_distance_m is not None
         print(f"\n[{variant}] {THREAT}: {v.outcome}, first BRAKE at {v.first_brake_t_s:.2f} s "
               f"(TTC {v.first_brake_ttc_s:.2f} s), brake bytes at {first_s:.2f} s, stopped "
-              f"{v.final_gap_m:.2f} m short")
+              f"{v.min_gap_m:.2f} m short")
 
         assert st.sim.wait_settled(60), st.logs()
         calm = st.sim.run(load_scenario(find_scenario(NO_THREAT)))

@@ -188,6 +188,7 @@ def test_verdict_of_an_avoided_threat():
     assert v.first_brake_ttc_s == pytest.approx(s[4].ttc_s)
     assert v.actuation_t_s == pytest.approx(0.5)
     assert v.stopping_distance_m == pytest.approx(s[8].ego_x_m - s[4].ego_x_m)
+    assert v.min_gap_m == pytest.approx(min(x.gap_m for x in s))
     assert v.brake_activations == 1 and v.false_activations == 0 and v.warnings == 1
     assert "PASS" in summary_line(v)
 

@@ -44,7 +44,7 @@ class Verdict:
     first_brake_gap_m: float | None
     actuation_t_s: float | None        # actuator position first above BRAKING_POSITION_PCT
     stopping_distance_m: float | None  # first BRAKE to standstill
-    final_gap_m: float | None          # gap to the nearest in-path object at the end
+    min_gap_m: float | None            # closest gap to an object in (or entering) the path
     brake_activations: int             # episodes of the actuator being commanded to brake
     false_activations: int             # activations in a no-threat scenario
     warnings: int                      # WARNING episodes
@@ -103,7 +103,7 @@ def judge(name: str, kind: ScenarioKind, samples: list[Sample],
         first_brake_gap_m=first_brake.gap_m if first_brake else None,
         actuation_t_s=actuated.t_s if actuated else None,
         stopping_distance_m=stopping,
-        final_gap_m=last.gap_m,
+        min_gap_m=min((x.gap_m for x in samples if x.gap_m is not None), default=None),
         brake_activations=activations,
         false_activations=false_activations,
         warnings=warnings,
@@ -115,12 +115,12 @@ def _fmt(value: float | None, unit: str, digits: int = 2) -> str:
     return "-" if value is None else f"{value:.{digits}f}{unit}"
 
 
-SUMMARY_HEADER = (f"{'scenario':<34} {'kind':<9} {'result':<6} {'outcome':<26} "
-                  f"{'1st BRAKE':>9} {'TTC':>6} {'gap':>7} {'stop dist':>9} {'false':>5}")
+SUMMARY_HEADER = (f"{'scenario':<42} {'kind':<9} {'result':<6} {'outcome':<22} "
+                  f"{'1st BRAKE':>9} {'TTC':>6} {'min gap':>7} {'stop dist':>9} {'false':>5}")
 
 
 def summary_line(v: Verdict) -> str:
-    return (f"{v.scenario:<34} {v.kind.value:<9} {'PASS' if v.passed else 'FAIL':<6} "
-            f"{v.outcome:<26} {_fmt(v.first_brake_t_s, 's'):>9} "
-            f"{_fmt(v.first_brake_ttc_s, 's'):>6} {_fmt(v.final_gap_m, 'm'):>7} "
+    return (f"{v.scenario:<42} {v.kind.value:<9} {'PASS' if v.passed else 'FAIL':<6} "
+            f"{v.outcome:<22} {_fmt(v.first_brake_t_s, 's'):>9} "
+            f"{_fmt(v.first_brake_ttc_s, 's'):>6} {_fmt(v.min_gap_m, 'm'):>7} "
             f"{_fmt(v.stopping_distance_m, 'm'):>9} {v.false_activations:>5}")
