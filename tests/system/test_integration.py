@@ -20,11 +20,11 @@ import pytest
 from common.clock import mono_ns
 from common.config.brake import BrakeConfig
 from common.config.loader import load_config
-from common.keys import BRAKE_STATUS
+from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
 from common.messages import BrakeState
 from tests.support import Collector
 from tests.system.stack_support import brake_lines, sim_stack
-from tools.sim.latency import chain_latencies_ns
+from tools.sim.latency import chain_latencies_ns, stage_breakdown_ns
 from tools.sim.runner import percentile
 from tools.sim.scenario import ScenarioKind, find_scenario, load_scenario
 from tools.sim.world import World
@@ -56,6 +56,9 @@ def test_closed_loop_brakes_for_threats_only_and_fails_safe(router, tmp_path, va
                                   ("fusion", "primary"), ("brake", "main")):
             assert st.health.is_alive(service, instance)
 
+        tracks, commands = Collector(), Collector()
+        st.bus.subscribe(RADAR_TRACKS, tracks, sensor="front")
+        st.bus.subscribe(FUSION_BRAKE_CMD, commands, instance="primary")
         threat = st.sim.run(load_scenario(find_scenario(THREAT)))
         lines = brake_lines(st.actuator, threat.start_mono_ns, threat.end_mono_ns)
         braking = [t for t, level in lines if level > 0]
@@ -86,6 +89,16 @@ def test_closed_loop_brakes_for_threats_only_and_fails_safe(router, tmp_path, va
                    "p50_ms": round(percentile(lat_ms, 50), 3),
                    "p99_ms": round(percentile(lat_ms, 99), 3),
                    "max_ms": round(max(lat_ms), 3)}
+        stages = stage_breakdown_ns(
+            {c.meas_counter: c.last_write_mono_ns for c in st.feed.sent},
+            [(m.meas_counter, m.header.seq, m.last_frame_mono_ns, m.header.pub_mono_ns)
+             for m in tracks.messages],
+            {m.radar_seq: m.header.pub_mono_ns for m in commands.messages}, line_times,
+            max_ns=70_000_000)
+        assert len(stages["radar"]) >= 100
+        figures["stages_ms"] = {name: {"p50": round(percentile([v / 1e6 for v in vals], 50), 3),
+                                       "p99": round(percentile([v / 1e6 for v in vals], 99), 3)}
+                                for name, vals in stages.items()}
         print(f"[{variant}] radar-to-brake latency: {figures}")
         OUT.mkdir(parents=True, exist_ok=True)
         (OUT / f"latency-{variant}.json").write_text(json.dumps(figures))
