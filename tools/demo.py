@@ -25,6 +25,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
+
 from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
 from common.config.loader import ConfigError
@@ -38,7 +40,7 @@ from tools.launch.table import load_table, resolve_launches
 from tools.sim.latency import chain_latencies_ns
 from tools.sim.plot import plot_timeline
 from tools.sim.radar_feed import RadarFeed
-from tools.sim.runner import RunResult, SimActuatorView, Simulator, percentile
+from tools.sim.runner import RunResult, SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook, Scenario, all_scenarios, find_scenario, load_scenario
 from tools.sim.stack import REPO, SERVICES, TOKENS, StackConfigs, write_configs
 from tools.sim.verdict import SUMMARY_HEADER, Sample, summary_line
@@ -291,19 +293,20 @@ def report(results: list[RunResult], feed: RadarFeed | None, actuator: Any, out:
         print(summary_line(r.verdict))
     lat: list[float] = []
     if feed is not None:
-        ends = [c.last_write_mono_ns for c in feed.sent]
-        lines = [r.t_ns for r in actuator.history]
+        ends = [c.last_write_mono_ns for c in feed.cycles()]
+        lines = [r.t_ns for r in actuator.commands_since(0)]
         lat = [x / 1e6 for x in chain_latencies_ns(ends, lines)]
         if lat:
             print(f"\nradar-to-brake latency (last CAN frame of a cycle -> command line on the "
-                  f"actuator), {len(lat)} of {len(ends)} cycles: p50 {percentile(lat, 50):.2f}"
-                  f" ms, p99 {percentile(lat, 99):.2f} ms")
+                  f"actuator), {len(lat)} of {len(ends)} cycles: p50 {np.percentile(lat, 50):.2f}"
+                  f" ms, p99 {np.percentile(lat, 99):.2f} ms")
     passed = sum(r.verdict.passed for r in results)
     print(f"\n{passed} of {len(results)} scenarios passed; plots and summary in {out}/")
     summary = {"scenarios": [asdict(r.verdict) | {"kind": r.verdict.kind.value}
                              for r in results],
-               "latency_ms": {"n": len(lat), "p50": percentile(lat, 50) if lat else None,
-                              "p99": percentile(lat, 99) if lat else None}}
+               "latency_ms": {"n": len(lat),
+                              "p50": float(np.percentile(lat, 50)) if lat else None,
+                              "p99": float(np.percentile(lat, 99)) if lat else None}}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return 0 if results and passed == len(results) else 1
 

@@ -116,5 +116,5 @@ def sim_stack(tmp_path: Path, endpoint: str, can_variant: str = "slcan",
 
 def brake_lines(actuator: SimActuator, start_ns: int, end_ns: int) -> list[tuple[int, int]]:
     """(time, level) of every command line the actuator received in [start, end]."""
-    return [(r.t_ns, r.cmd.level_pct) for r in actuator.history
-            if start_ns <= r.t_ns <= end_ns]
+    return [(r.t_ns, r.cmd.level_pct) for r in actuator.commands_since(start_ns)
+            if r.t_ns <= end_ns]

@@ -44,8 +44,8 @@ def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
         ego_x = world.ego_x_m + v * v / (-2 * a)
     else:
         ego_x = world.ego_x_m + v * dt + 0.5 * a * dt * dt
-    bodies = [Body(o.index, ObjectKind(o.kind), o.x_m + o.vx_mps * dt, o.y_m + o.vy_mps * dt,
-                   o.yaw_deg, o.length_m, o.width_m, o.height_m, o.vx_mps, o.vy_mps)
+    bodies = [Body(o.index, ObjectKind(o.kind), o.x_m, o.y_m, o.yaw_deg, o.length_m,
+                   o.width_m, o.height_m, o.vx_mps, o.vy_mps).shifted(dt)
               for o in world.objects]
     return bodies, ego_x
 

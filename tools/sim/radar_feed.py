@@ -188,11 +188,7 @@ class RadarFeed:
                 self._sleep(wait)
             self.sink.send(frames[i:i + BURST_FRAMES])
 
-    def cycle_before(self, mono_ns_: int) -> CycleSent | None:
-        """The last cycle whose last frame was written at or before `mono_ns_`."""
+    def cycles(self) -> list[CycleSent]:
+        """The cycles sent so far (a copy: the loop thread keeps appending)."""
         with self._lock:
-            for c in reversed(self.sent):
-                if c.last_write_mono_ns <= mono_ns_:
-                    return c
-        return None
-
+            return list(self.sent)

@@ -10,7 +10,6 @@ rest), as a real radar never stops: fusion keeps its heartbeat and the brake sta
 """
 
 import logging
-import math
 import random
 import threading
 import time
@@ -256,12 +255,3 @@ class Simulator:
         if ended:
             run.done.set()
 
-
-def percentile(values: list[float], q: float) -> float:
-    """The q-th percentile (0..100) by linear interpolation. Raises ValueError if empty."""
-    if not values:
-        raise ValueError("no values")
-    ordered = sorted(values)
-    k = (len(ordered) - 1) * q / 100.0
-    lo, hi = math.floor(k), math.ceil(k)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (k - lo)
