@@ -40,16 +40,23 @@ class Actuator(Protocol):
 
 class SimActuatorView:
     """The brake engineer's simulated actuator (services/brake/sim_actuator.py), read
-    in-process: its first-order position and the level of the last command it got."""
+    in-process: its first-order position and the level of the last command it got (kept
+    from its event listener: the loop asks every tick)."""
 
     def __init__(self, actuator: Any) -> None:
         self.actuator = actuator
+        self._commanded = 0.0
+        actuator.add_listener(self._on_event)
+
+    def _on_event(self, event: Any) -> None:
+        if event.cmd is not None:
+            self._commanded = float(event.cmd.level_pct)
 
     def position_pct(self) -> float:
         return float(self.actuator.position_pct())
 
     def commanded_pct(self) -> float:
-        return float(self.actuator.snapshot().target_pct)
+        return self._commanded
 
 
 @dataclass(frozen=True)
