@@ -1,0 +1,67 @@
+"""The shape every benchmark result takes, so that the suite can print one table, one
+JSON file and one chart.
+
+A figure is always measured beside its baseline in the same run (absolute times on a
+shared machine drift by 20% or more between runs); `ratio` is value / baseline.
+"""
+
+import os
+import platform
+from dataclasses import asdict, dataclass, field
+from importlib import metadata
+from typing import Any
+
+
+@dataclass
+class Figure:
+    group: str                    # "gate", "latency", "scale", "cost", ...
+    name: str                     # what was measured, e.g. "ROI 4.3% mean"
+    value: float
+    unit: str                     # "us", "ms", "%", "MB", "x", "Hz"
+    baseline: str = ""            # what it is compared with, measured in the same run
+    baseline_value: float | None = None
+    target: str = ""              # the bar, in words ("< 3.75 ms"), empty when none
+    target_met: bool | None = None
+    note: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ratio(self) -> float | None:
+        if self.baseline_value in (None, 0):
+            return None
+        assert self.baseline_value is not None
+        return self.value / self.baseline_value
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["ratio"] = self.ratio
+        return d
+
+
+def machine_info() -> dict[str, Any]:
+    """What the figures were measured on."""
+    cpu = ""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    versions = {}
+    for dist in ("eclipse-zenoh", "python-can", "opencv-python-headless", "numpy", "msgspec",
+                 "pyserial", "simplejpeg"):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[dist] = "not installed"
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (0.0, 0.0, 0.0)
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "kernel": platform.release(),
+        "load_avg_1_5_15": [round(x, 2) for x in load],
+        "versions": versions,
+    }
