@@ -1,9 +1,10 @@
 """A Zenoh router run from Python (zenoh's own router mode): `aeb router`."""
 
 import argparse
+import json
 import sys
 
-from common.bus import BusError, open_session
+from common.bus import BusError, open_session, zenoh_config
 from common.config.base import ZenohMode, ZenohSettings
 from common.log import kv, setup_logging
 from common.service import stop_event_on_signals
@@ -28,12 +29,16 @@ def main(argv: list[str] | None = None) -> int:
     listen = args.listen or ([] if args.config_file else ["tcp/127.0.0.1:7447"])
     stop = stop_event_on_signals()
     try:
-        session = open_session(router_settings(listen, args.connect, args.config_file))
+        settings = router_settings(listen, args.connect, args.config_file)
+        # What the router really listens on: the config file's endpoints when none are given.
+        listening = json.loads(zenoh_config(settings).get_json("listen/endpoints"))
+        session = open_session(settings)
     except (BusError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     with session:
-        log.info(kv("router_ready", listen=",".join(listen), zid=str(session.zid())))
+        log.info(kv("router_ready", listen=",".join(map(str, listening or [])),
+                    zid=str(session.zid())))
         stop.wait()
     log.info(kv("router_stopped"))
     return 0

@@ -74,6 +74,7 @@ class RealSenseSource(FrameSource):
             config.enable_device_from_file(self.bag, repeat_playback=self.loop)
             config.enable_stream(rs.stream.color)
         else:
+            self._require_device(rs)
             if self.serial:
                 config.enable_device(self.serial)
             config.enable_stream(rs.stream.color, self.width, self.height, rs.format.bgr8,
@@ -86,6 +87,22 @@ class RealSenseSource(FrameSource):
         if self.bag:
             self._playback = profile.get_device().as_playback()
             self._playback.set_real_time(True)
+
+    def _require_device(self, rs: Any) -> None:
+        """Raise SourceError at once when no (or not the configured) device is connected.
+
+        pyrealsense2's pipeline.start() waits 15 s for a missing device while holding the
+        GIL: the whole process, its signal handlers included, would freeze. Listing the
+        devices takes milliseconds.
+        """
+        serials = [d.get_info(rs.camera_info.serial_number)
+                   for d in rs.context().query_devices()]
+        if not serials:
+            raise SourceError("no RealSense device connected")
+        if self.serial and self.serial not in serials:
+            raise SourceError(
+                f"RealSense {self.serial} not connected (connected: {', '.join(serials)})"
+            )
 
     def read(self) -> Frame:
         rs, pipeline = self._rs, self._pipeline

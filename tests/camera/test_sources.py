@@ -293,9 +293,15 @@ class FakeColorFrame:
         return self._domain
 
 
-def fake_rs(frames: list, stopped_after: bool = False):
+def fake_rs(frames: list, stopped_after: bool = False, serials: tuple[str, ...] = ("123",)):
     """A stand-in for the parts of pyrealsense2 the source uses: records the calls."""
     calls: list = []
+
+    def device(serial: str):
+        return types.SimpleNamespace(get_info=lambda what: serial)
+
+    def context():
+        return types.SimpleNamespace(query_devices=lambda: [device(s) for s in serials])
 
     class Pipeline:
         def start(self, config):
@@ -323,7 +329,8 @@ def fake_rs(frames: list, stopped_after: bool = False):
         set_real_time=lambda v: calls.append(("real_time", v)),
         current_status=lambda: "stopped" if stopped_after else "playing")
     rs = types.SimpleNamespace(
-        pipeline=Pipeline, config=Config,
+        pipeline=Pipeline, config=Config, context=context,
+        camera_info=types.SimpleNamespace(serial_number="serial_number"),
         stream=types.SimpleNamespace(color="color"),
         format=types.SimpleNamespace(bgr8="bgr8", rgb8="rgb8", bgra8="bgra8", rgba8="rgba8",
                                      yuyv="yuyv"),
@@ -359,6 +366,19 @@ def test_realsense_device_stream_frames_stamps_and_timeout():
     src.close()
     src.close()
     assert calls.count(("stop",)) == 1
+
+
+@pytest.mark.parametrize(("serials", "wanted", "message"), [
+    ((), "", "no RealSense device connected"),
+    (("999",), "123", r"RealSense 123 not connected \(connected: 999\)"),
+])
+def test_realsense_missing_device_fails_at_once_without_starting(serials, wanted, message):
+    # pipeline.start() would block for 15 s holding the GIL: it must not be reached.
+    rs, calls = fake_rs([], serials=serials)
+    src = RealSenseSource(serial=wanted, loader=lambda: rs)
+    with pytest.raises(SourceError, match=message):
+        src.open()
+    assert not [c for c in calls if c[0] == "start"]
 
 
 def test_realsense_bag_plays_in_real_time_and_ends():
