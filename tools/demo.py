@@ -19,7 +19,6 @@ be started.
 import argparse
 import json
 import sys
-import threading
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -28,21 +27,18 @@ from typing import IO, Any
 import numpy as np
 
 from common.bus import Bus, BusError
-from common.config.base import ZenohMode, ZenohSettings
 from common.config.loader import ConfigError
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
 from common.log import setup_logging
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, render
 from tools.ab_report import Feeder
-from tools.launch.supervisor import LinePrinter, Supervisor
-from tools.launch.table import load_table, resolve_launches
 from tools.sim.latency import chain_latencies_ns
 from tools.sim.plot import plot_timeline
 from tools.sim.radar_feed import RadarFeed
-from tools.sim.runner import RunResult, SimActuatorView, Simulator
-from tools.sim.scenario import RadarLook, Scenario, all_scenarios, find_scenario, load_scenario
-from tools.sim.stack import REPO, SERVICES, TOKENS, StackConfigs, write_configs
+from tools.sim.runner import RunResult
+from tools.sim.scenario import Scenario, all_scenarios, find_scenario, load_scenario
+from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
 from tools.sim.verdict import SUMMARY_HEADER, Sample, summary_line
 
 DEMO_SCENARIOS = (
@@ -56,9 +52,6 @@ DEMO_SCENARIOS = (
     "no_threat_parked_cars_30kph",
     "no_threat_pedestrian_walking_beside_20kph",
 )
-CANDIDATE_CONFIG = REPO / "deploy" / "fusion-candidate.toml"
-START_TIMEOUT_S = 120.0
-SETTLE_TIMEOUT_S = 60.0
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -79,14 +72,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def free_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def pick_scenarios(spec: str) -> list[Scenario]:
     """Raises ConfigError naming an unknown or invalid scenario."""
     paths = all_scenarios() if spec == "all" else [
@@ -94,27 +79,6 @@ def pick_scenarios(spec: str) -> list[Scenario]:
     if not paths:
         raise ConfigError("no scenario selected")
     return [load_scenario(p) for p in paths]
-
-
-def write_table(folder: Path, endpoint: str, configs: StackConfigs,
-                candidate: bool = False) -> Path:
-    """The demo's process table (the same launcher as `aeb up`)."""
-    lines = [
-        "# Written by aeb demo: the stack under simulation.",
-        f'workdir = "{REPO}"', "stop_grace_s = 5.0", "",
-        "[router]", f'listen = ["{endpoint}"]', "",
-        "[zenoh]", f'connect = ["{endpoint}"]', "",
-        "[restart]", 'mode = "never"', "",
-    ]
-    for name in SERVICES:
-        lines += ["[[service]]", f'name = "{name}"', f'aeb = "{name}"',
-                  f'config = "{configs.of(name)}"', ""]
-    if candidate:
-        lines += ["[[service]]", 'name = "fusion-candidate"', 'aeb = "fusion"',
-                  f'config = "{CANDIDATE_CONFIG}"', ""]
-    path = folder / "table.toml"
-    path.write_text("\n".join(lines))
-    return path
 
 
 class Progress:
@@ -147,128 +111,51 @@ class Progress:
             self.out.write("\n")
 
 
-def wait_for_stack(bus: Bus, supervisor: Supervisor, timeout_s: float) -> str:
-    """Empty once every service's liveliness token is up, else why not."""
-    alive: dict[tuple[str, str], bool] = {}
-    lock = threading.Lock()
-
-    def on_health(service: str, instance: str, up: bool) -> None:
-        with lock:
-            alive[(service, instance)] = up
-
-    bus.subscribe_health(on_health)
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        with lock:
-            missing = [s for s in SERVICES if not alive.get(TOKENS[s], False)]
-        if not missing:
-            return ""
-        dead = [c.name for c in supervisor.children if c.finished]
-        if dead:
-            return f"{', '.join(dead)} exited"
-        time.sleep(0.05)
-    return f"no liveliness token from {', '.join(missing)} within {timeout_s:.0f} s"
-
-
-def tail(path: Path, n: int = 30) -> str:
-    try:
-        return "\n".join(path.read_text(errors="replace").splitlines()[-n:])
-    except OSError:
-        return ""
-
-
 def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> int:
-    from services.brake.sim_actuator import SimActuator
-    from services.radar.can_links import SlcanPtyLink
-
-    run_dir = out / "run"
-    run_dir.mkdir(parents=True, exist_ok=True)
-    log_path = out / "stack.log"
-    port = args.port or free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
     print("AEB demo: a closed-loop SIMULATION. Simulated: the vehicle, the ARS408 radar (CAN "
           "frames on a pty),\nthe camera (rendered frames) and the brake actuator (on a pty). "
           "Real: the router and the\nradar, camera, fusion and brake services, each in its "
-          f"own process. Logs: {log_path}\n", flush=True)
+          f"own process. Logs: {out / 'stack.log'}\n", flush=True)
     stop = stop_event_on_signals()
-    link = SlcanPtyLink()
-    actuator, _pair = SimActuator.on_pty(run_dir / "actuator")
-    actuator.start()
-    configs = write_configs(run_dir, endpoint, str(run_dir / "actuator"), link.path,
-                            camera_fps=args.camera_fps)
-    log_file = open(log_path, "w")  # noqa: SIM115 (closed in finally)
-    supervisor: Supervisor | None = None
-    poller_stop = threading.Event()
     results: list[RunResult] = []
-    feed: RadarFeed | None = None
     ab: Feeder | None = None
+    feed: RadarFeed | None = None
+    actuator: Any = None
     try:
-        table, workdir = load_table(write_table(run_dir, endpoint, configs, args.candidate))
-        launches = resolve_launches(table, workdir, "demo")
-        supervisor = Supervisor(launches, LinePrinter(
-            log_file, ["up", *(launch.name for launch in launches)], colour=False))
-        supervisor.start()
-        sup = supervisor
+        with closed_loop(out, args.port, args.camera_fps, args.candidate,
+                         log=sys.stdout) as loop:
+            ab = start_ab(loop.bus) if args.candidate else None
+            sim = loop.sim
+            for i, sc in enumerate(scenarios, 1):
+                if stop.is_set():
+                    break
+                if args.radar_mode != "scenario":
+                    import msgspec
 
-        def poll() -> None:
-            while not poller_stop.wait(0.1):
-                sup.poll()
-
-        threading.Thread(target=poll, name="supervise", daemon=True).start()
-        print(f"starting router ({endpoint}) and {', '.join(SERVICES)} ...", flush=True)
-        t0 = time.monotonic()
-        settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))
-        with Bus.open(settings, "ego", "sim") as bus:
-            problem = wait_for_stack(bus, supervisor, START_TIMEOUT_S)
-            if problem:
-                print(f"error: the stack did not start: {problem}\n{tail(log_path)}",
-                      file=sys.stderr)
-                return 2
-            print(f"all services up in {time.monotonic() - t0:.1f} s", flush=True)
-            ab = start_ab(bus) if args.candidate else None
-            feed = RadarFeed(link, RadarLook())
-            sim = Simulator(bus, feed, SimActuatorView(actuator)).start()
-            try:
-                if not sim.wait_settled(SETTLE_TIMEOUT_S):
-                    print(f"error: the stack never armed (fusion {sim.decision or 'silent'}, "
-                          f"brake {sim.brake_state or 'silent'})\n{tail(log_path)}",
-                          file=sys.stderr)
-                    return 2
-                for i, sc in enumerate(scenarios, 1):
-                    if stop.is_set():
-                        break
-                    if args.radar_mode != "scenario":
-                        import msgspec
-
-                        sc = msgspec.structs.replace(sc, radar=msgspec.structs.replace(
-                            sc.radar, mode=args.radar_mode))
-                    print(f"[{i}/{len(scenarios)}] {sc.name} ({sc.kind.value}): "
-                          f"{' '.join(sc.description.split())}", flush=True)
-                    progress = Progress(sys.stdout, sc.name)
-                    sim.on_sample = progress
-                    result = sim.run(sc)
-                    sim.on_sample = None
-                    progress.done()
-                    results.append(result)
-                    v = result.verdict
-                    plot = plot_timeline(result.samples, v, out / f"{sc.name}.png")
-                    print(f"  -> {'PASS' if v.passed else 'FAIL'}: {v.outcome}; plot {plot}",
+                    sc = msgspec.structs.replace(sc, radar=msgspec.structs.replace(
+                        sc.radar, mode=args.radar_mode))
+                print(f"[{i}/{len(scenarios)}] {sc.name} ({sc.kind.value}): "
+                      f"{' '.join(sc.description.split())}", flush=True)
+                progress = Progress(sys.stdout, sc.name)
+                sim.on_sample = progress
+                result = sim.run(sc)
+                sim.on_sample = None
+                progress.done()
+                results.append(result)
+                v = result.verdict
+                plot = plot_timeline(result.samples, v, out / f"{sc.name}.png")
+                print(f"  -> {'PASS' if v.passed else 'FAIL'}: {v.outcome}; plot {plot}",
+                      flush=True)
+                if i < len(scenarios) and not sim.wait_settled(SETTLE_TIMEOUT_S):
+                    print("  warning: the stack did not settle before the next run",
                           flush=True)
-                    if i < len(scenarios) and not sim.wait_settled(SETTLE_TIMEOUT_S):
-                        print("  warning: the stack did not settle before the next run",
-                              flush=True)
-            finally:
-                sim.stop()
+            feed, actuator = loop.feed, loop.actuator
+    except StackStartError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    finally:
-        poller_stop.set()
-        if supervisor is not None:
-            supervisor.shutdown()
-        link.close()
-        actuator.stop()
-        log_file.close()
     code = report(results, feed, actuator, out)
     if ab is not None:
         print("\n" + render(ab.comparator.report(), max_episodes=12))

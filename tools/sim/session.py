@@ -1,0 +1,178 @@
+"""A closed-loop session: the real stack (router + radar, camera, fusion, brake, each in
+its own process, started by the same supervisor as `aeb up`) wired to the SIMULATED
+radar link, camera plugin and actuator, plus the simulator driving them.
+
+Used by `aeb demo` and by the benchmarks that measure the stack while scenarios run.
+"""
+
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from common.bus import Bus
+from common.config.base import ZenohMode, ZenohSettings
+from tools.launch.supervisor import LinePrinter, Supervisor
+from tools.launch.table import load_table, resolve_launches
+from tools.sim.radar_feed import RadarFeed
+from tools.sim.runner import SimActuatorView, Simulator
+from tools.sim.scenario import RadarLook
+from tools.sim.stack import REPO, SERVICES, TOKENS, StackConfigs, write_configs
+
+CANDIDATE_CONFIG = REPO / "deploy" / "fusion-candidate.toml"
+START_TIMEOUT_S = 120.0
+SETTLE_TIMEOUT_S = 60.0
+
+
+class StackStartError(RuntimeError):
+    """The stack did not come up (a service exited or never declared its token)."""
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def write_table(folder: Path, endpoint: str, configs: StackConfigs,
+                candidate: bool = False) -> Path:
+    """The session's process table (the same launcher as `aeb up`)."""
+    lines = [
+        "# Written by the closed-loop session: the stack under simulation.",
+        f'workdir = "{REPO}"', "stop_grace_s = 5.0", "",
+        "[router]", f'listen = ["{endpoint}"]', "",
+        "[zenoh]", f'connect = ["{endpoint}"]', "",
+        "[restart]", 'mode = "never"', "",
+    ]
+    for name in SERVICES:
+        lines += ["[[service]]", f'name = "{name}"', f'aeb = "{name}"',
+                  f'config = "{configs.of(name)}"', ""]
+    if candidate:
+        lines += ["[[service]]", 'name = "fusion-candidate"', 'aeb = "fusion"',
+                  f'config = "{CANDIDATE_CONFIG}"', ""]
+    path = folder / "table.toml"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def wait_for_stack(bus: Bus, supervisor: Supervisor, timeout_s: float) -> str:
+    """Empty once every service's liveliness token is up, else why not."""
+    alive: dict[tuple[str, str], bool] = {}
+    lock = threading.Lock()
+
+    def on_health(service: str, instance: str, up: bool) -> None:
+        with lock:
+            alive[(service, instance)] = up
+
+    bus.subscribe_health(on_health)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with lock:
+            missing = [s for s in SERVICES if not alive.get(TOKENS[s], False)]
+        if not missing:
+            return ""
+        dead = [c.name for c in supervisor.children if c.finished]
+        if dead:
+            return f"{', '.join(dead)} exited"
+        time.sleep(0.05)
+    return f"no liveliness token from {', '.join(missing)} within {timeout_s:.0f} s"
+
+
+def tail(path: Path, n: int = 30) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-n:])
+    except OSError:
+        return ""
+
+
+@dataclass
+class ClosedLoop:
+    """What a running session offers: the bus, the simulator, the radar feed, the
+    simulated actuator, the supervisor (service processes: `pid(name)`)."""
+
+    endpoint: str
+    bus: Bus
+    sim: Simulator
+    feed: RadarFeed
+    actuator: Any
+    supervisor: Supervisor
+    log_path: Path
+
+    def pid(self, service: str) -> int:
+        proc = self.supervisor.child(service).proc
+        if proc is None:
+            raise KeyError(f"{service} is not running")
+        return proc.pid
+
+
+@contextmanager
+def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: bool = False,
+                log: IO[str] | None = None) -> Iterator[ClosedLoop]:
+    """Start the stack and the simulator; stop everything on exit.
+
+    Service output goes to `out/stack.log`. Raises StackStartError when the stack does
+    not come up or never arms, ConfigError for a bad table, BusError / OSError when the
+    bus or a pty cannot be opened.
+    """
+    from services.brake.sim_actuator import SimActuator
+    from services.radar.can_links import SlcanPtyLink
+
+    run_dir = out / "run"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    log_path = out / "stack.log"
+    endpoint = f"tcp/127.0.0.1:{port or free_port()}"
+    link = SlcanPtyLink()
+    actuator, _pair = SimActuator.on_pty(run_dir / "actuator")
+    actuator.start()
+    log_file = open(log_path, "w")  # noqa: SIM115 (closed in finally)
+    supervisor: Supervisor | None = None
+    poller_stop = threading.Event()
+    try:
+        configs = write_configs(run_dir, endpoint, str(run_dir / "actuator"), link.path,
+                                camera_fps=camera_fps)
+        table, workdir = load_table(write_table(run_dir, endpoint, configs, candidate))
+        launches = resolve_launches(table, workdir, "demo")
+        supervisor = Supervisor(launches, LinePrinter(
+            log_file, ["up", *(launch.name for launch in launches)], colour=False))
+        supervisor.start()
+        sup = supervisor
+
+        def poll() -> None:
+            while not poller_stop.wait(0.1):
+                sup.poll()
+
+        threading.Thread(target=poll, name="supervise", daemon=True).start()
+        if log is not None:
+            print(f"starting router ({endpoint}) and {', '.join(SERVICES)} ...", file=log,
+                  flush=True)
+        t0 = time.monotonic()
+        settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))
+        with Bus.open(settings, "ego", "sim") as bus:
+            problem = wait_for_stack(bus, supervisor, START_TIMEOUT_S)
+            if problem:
+                raise StackStartError(f"the stack did not start: {problem}\n{tail(log_path)}")
+            if log is not None:
+                print(f"all services up in {time.monotonic() - t0:.1f} s", file=log,
+                      flush=True)
+            feed = RadarFeed(link, RadarLook())
+            sim = Simulator(bus, feed, SimActuatorView(actuator)).start()
+            try:
+                if not sim.wait_settled(SETTLE_TIMEOUT_S):
+                    raise StackStartError(
+                        f"the stack never armed (fusion {sim.decision or 'silent'}, brake "
+                        f"{sim.brake_state or 'silent'})\n{tail(log_path)}")
+                yield ClosedLoop(endpoint, bus, sim, feed, actuator, supervisor, log_path)
+            finally:
+                sim.stop()
+    finally:
+        poller_stop.set()
+        if supervisor is not None:
+            supervisor.shutdown()
+        link.close()
+        actuator.stop()
+        log_file.close()
