@@ -18,7 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
     "monitor": ("tools.monitor", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab_report", "where a primary and a candidate fusion disagreed"),
-    "bench": ("benchmarks.__main__", "the benchmark suite"),
+    "bench": ("benchmarks.suite", "the benchmark suite"),
 }
 
 

@@ -1,0 +1,93 @@
+"""The benchmark suite: every section measured beside its baseline in the same run, one
+table, one JSON file and one PNG chart. `python -m benchmarks` or `aeb bench`.
+
+Sections (each a module with `run(quick, out_dir) -> list[Figure]`):
+- gate: the edge-density gate per ROI vs the paper's naive code, and the full frame;
+- radar: decode + tracking per cycle (object and cluster mode), clusters 50/250/500;
+- fusion: tracks received -> BrakeCommand with 1..128 tracks and 1/2/4 cameras;
+- brake: command receipt -> serial write;
+- latency: last CAN frame -> brake bytes on the actuator, per stage, vs the bare-hop floor;
+- cost: CPU share and memory of each service while demo scenarios run.
+"""
+
+import argparse
+import importlib
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from benchmarks.figures import Figure, machine_info
+from benchmarks.report import plot, print_table, write_json
+
+SECTIONS: dict[str, str] = {
+    "gate": "benchmarks.bench_gate",
+    "radar": "benchmarks.bench_radar",
+    "fusion": "benchmarks.bench_fusion",
+    "brake": "benchmarks.bench_brake",
+    "latency": "benchmarks.bench_latency",
+    "cost": "benchmarks.bench_cost",
+}
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="aeb bench", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="short runs (under a minute in all)")
+    p.add_argument("--only", default="", help=f"comma-separated sections of {list(SECTIONS)}")
+    p.add_argument("--out", default="out/bench", help="JSON, PNG and per-section files")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    names = [n.strip() for n in args.only.split(",") if n.strip()] or list(SECTIONS)
+    unknown = [n for n in names if n not in SECTIONS]
+    if unknown:
+        print(f"error: unknown section(s) {unknown}; choose from {list(SECTIONS)}",
+              file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    machine = machine_info()
+    print(f"benchmark suite ({'quick' if args.quick else 'full'}) on {machine['cpu']} "
+          f"x{machine['cores']}, load {machine['load_avg_1_5_15']}", flush=True)
+    figures: list[Figure] = []
+    failed: list[str] = []
+    timings: dict[str, float] = {}
+    t_all = time.monotonic()
+    for i, name in enumerate(names, 1):
+        print(f"[{i}/{len(names)}] {name} ...", flush=True)
+        t0 = time.monotonic()
+        try:
+            module = importlib.import_module(SECTIONS[name])
+            got = module.run(args.quick, out)
+        except Exception:
+            traceback.print_exc()
+            failed.append(name)
+            continue
+        timings[name] = round(time.monotonic() - t0, 1)
+        figures += got
+        print(f"[{i}/{len(names)}] {name}: {len(got)} figures in {timings[name]:.0f} s",
+              flush=True)
+    total = time.monotonic() - t_all
+    print()
+    print_table(figures, sys.stdout)
+    json_path = write_json(figures, machine, out / "suite.json", {
+        "mode": "quick" if args.quick else "full", "seconds": round(total, 1),
+        "section_seconds": timings, "failed_sections": failed})
+    png = plot(figures, out / "suite.png",
+               f"AEB benchmark suite ({'quick' if args.quick else 'full'}), "
+               f"{machine['cores']} cores, load {machine['load_avg_1_5_15'][0]}")
+    missed = [f"{f.group}/{f.name}" for f in figures if f.target_met is False]
+    print(f"\n{len(figures)} figures in {total:.0f} s; {json_path}, {png}")
+    if missed:
+        print(f"targets missed: {', '.join(missed)}")
+    if failed:
+        print(f"error: section(s) failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
