@@ -6,7 +6,6 @@ import time
 from dataclasses import dataclass, field
 
 _TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
-_PAGE = os.sysconf("SC_PAGE_SIZE")
 
 
 def cpu_seconds(pid: int) -> float:
@@ -17,18 +16,44 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) * _TICK_S
 
 
-def rss_bytes(pid: int) -> int:
-    """Resident set size of `pid`. Raises OSError when it is gone."""
-    with open(f"/proc/{pid}/statm", encoding="ascii") as f:
-        return int(f.read().split()[1]) * _PAGE
+@dataclass(frozen=True)
+class Memory:
+    """Bytes. `rss` counts shared pages (libraries, Zenoh's shared-memory pool) in full in
+    every process that maps them; `pss` shares them out; `shmem` is the shared-memory part
+    of `rss`."""
+
+    rss: int
+    pss: int
+    anon: int
+    shmem: int
+
+
+def memory(pid: int) -> Memory:
+    """Resident memory of `pid` from smaps_rollup. Raises OSError when it is gone."""
+    values: dict[str, int] = {}
+    with open(f"/proc/{pid}/smaps_rollup", encoding="ascii") as f:
+        for line in f:
+            parts = line.split()
+            if len(parts) == 3 and parts[2] == "kB":
+                values[parts[0].rstrip(":")] = int(parts[1]) * 1024
+    with open(f"/proc/{pid}/status", encoding="ascii") as f:
+        for line in f:
+            if line.startswith("RssShmem:"):
+                values["RssShmem"] = int(line.split()[1]) * 1024
+    return Memory(values.get("Rss", 0), values.get("Pss", 0), values.get("Anonymous", 0),
+                  values.get("RssShmem", 0))
 
 
 @dataclass
 class Usage:
     cpu_s: float = 0.0           # CPU seconds used over the window
     wall_s: float = 0.0
-    rss_max: int = 0
-    rss_samples: list[int] = field(default_factory=list)
+    peak: Memory = Memory(0, 0, 0, 0)   # the sample with the largest RSS
+    samples: list[Memory] = field(default_factory=list)
+
+    @property
+    def rss_max(self) -> int:
+        return self.peak.rss
 
     @property
     def cpu_pct(self) -> float:
@@ -57,12 +82,13 @@ class ProcSampler:
     def _sample_rss(self) -> None:
         for name, pid in self.pids.items():
             try:
-                rss = rss_bytes(pid)
+                mem = memory(pid)
             except OSError:
                 continue
             u = self.usage[name]
-            u.rss_samples.append(rss)
-            u.rss_max = max(u.rss_max, rss)
+            u.samples.append(mem)
+            if mem.rss > u.peak.rss:
+                u.peak = mem
 
     def _loop(self) -> None:
         while not self._stop.wait(self.period_s):
