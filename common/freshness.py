@@ -70,8 +70,14 @@ class Freshness:
         return last is not None and now_ns - last <= self.max_age_ns
 
     def rate_hz(self, now_ns: int) -> float:
+        """Arrivals per second over the window: (n - 1) intervals over the time from the
+        oldest arrival kept to now, so that it is right before the window has filled and
+        falls towards 0 as an input goes silent."""
         self._trim(now_ns)
-        return len(self._arrivals) / (self.window_ns / 1e9)
+        if len(self._arrivals) < 2:
+            return 0.0
+        span_ns = min(self.window_ns, now_ns - self._arrivals[0])
+        return (len(self._arrivals) - 1) / (span_ns / 1e9)
 
     def health(self, now_ns: int) -> InputHealth:
         alive = self.alive(now_ns)

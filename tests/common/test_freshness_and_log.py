@@ -32,7 +32,16 @@ def test_on_rate_from_the_registry_rate():
         slow.observe(t)
     h = slow.health(t)
     assert h.alive and not h.on_rate
-    assert h.rate_hz == pytest.approx(5.0)
+    assert h.rate_hz == pytest.approx(1 / 0.150)
+
+
+def test_rate_falls_as_an_input_goes_silent():
+    f = Freshness("x", max_age_s=1.0, window_s=2.0)
+    for i in range(11):
+        f.observe(i * 100_000_000)
+    assert f.rate_hz(1_000_000_000) == pytest.approx(10.0)
+    assert f.rate_hz(2_000_000_000) == pytest.approx(5.0)   # 10 intervals over 2 s
+    assert f.rate_hz(3_100_000_000) == 0.0                  # all older than the window
 
 
 def test_tracker_snapshot_names_each_input():

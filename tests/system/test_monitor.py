@@ -43,6 +43,7 @@ def test_rates_latencies_and_sequence_gaps():
     [view] = state.key_views(now)
     assert view.count == 39
     assert view.rate_hz == pytest.approx(1000 / 75.0, rel=0.1)
+    assert view.alive and view.on_rate
     assert view.age_p50_ms == pytest.approx(3.0)
     assert view.transport_p50_ms == pytest.approx(1.0)
     assert view.seq_gaps == 2
@@ -58,6 +59,12 @@ def test_rate_falls_to_zero_when_a_key_goes_silent():
     later = now + 10_000 * MS
     [view] = state.key_views(later)
     assert view.rate_hz == 0.0 and view.last_age_s == pytest.approx(10.0)
+    assert not view.alive and not view.on_rate
+    # Alive but at half the nominal rate: off rate.
+    slow = MonitorState(same_host=True)
+    now = feed_tracks(slow, 20, 150.0)
+    [view] = slow.key_views(now)
+    assert view.alive and not view.on_rate
 
 
 def test_snapshot_and_text_show_health_brake_tracks_and_targets():

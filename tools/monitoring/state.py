@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from common.freshness import Freshness
 from common.keys import KeySpec
 
 WINDOW_S = 5.0
@@ -25,8 +26,7 @@ _NS = 1_000_000_000
 @dataclass
 class KeyStats:
     spec_name: str
-    nominal_hz: float | None
-    arrivals: deque[int] = field(default_factory=deque)            # receipt mono ns
+    freshness: Freshness                                            # arrivals, rate, alive
     ages_ms: deque[tuple[int, float]] = field(default_factory=deque)
     transport_ms: deque[tuple[int, float]] = field(default_factory=deque)
     count: int = 0
@@ -38,8 +38,6 @@ class KeyStats:
         for q in (self.ages_ms, self.transport_ms):
             while q and q[0][0] < edge:
                 q.popleft()
-        while self.arrivals and self.arrivals[0] < edge:
-            self.arrivals.popleft()
 
 
 @dataclass(frozen=True)
@@ -49,6 +47,8 @@ class KeyView:
     count: int
     rate_hz: float
     nominal_hz: float | None
+    alive: bool                  # newest sample within the registry's max age
+    on_rate: bool                # alive and within 30% of the nominal rate
     last_age_s: float            # since the last receipt
     age_p50_ms: float | None
     age_p99_ms: float | None
@@ -87,9 +87,10 @@ class MonitorState:
                 rx_wall_ns: int) -> None:
         stats = self.keys.get(key)
         if stats is None:
-            stats = self.keys[key] = KeyStats(spec.name, spec.rate_hz)
+            stats = self.keys[key] = KeyStats(spec.name,
+                                              Freshness.from_spec(spec, window_s=WINDOW_S))
         stats.count += 1
-        stats.arrivals.append(rx_mono_ns)
+        stats.freshness.observe(rx_mono_ns)
         header = getattr(msg, "header", None)
         if header is not None:
             stats.ages_ms.append((rx_mono_ns, (rx_wall_ns - header.stamp_ns) / 1e6))
@@ -119,13 +120,12 @@ class MonitorState:
         views = []
         for key, stats in sorted(self.keys.items()):
             stats.trim(now_mono_ns)
-            span = min(WINDOW_S, max((now_mono_ns - (stats.arrivals[0] if stats.arrivals
-                                                      else now_mono_ns)) / _NS, 1e-9))
-            rate = (len(stats.arrivals) - 1) / span if len(stats.arrivals) > 1 else 0.0
+            h = stats.freshness.health(now_mono_ns)
             last = self.latest[key][1]
             a50, a99 = _percentiles(stats.ages_ms)
             t50, t99 = _percentiles(stats.transport_ms)
-            views.append(KeyView(key, stats.spec_name, stats.count, rate, stats.nominal_hz,
+            views.append(KeyView(key, stats.spec_name, stats.count, h.rate_hz,
+                                 h.nominal_rate_hz, h.alive, h.on_rate,
                                  (now_mono_ns - last) / _NS, a50, a99, t50, t99,
                                  stats.seq_gaps))
         return views

@@ -41,6 +41,7 @@ def snapshot(state: MonitorState, now_mono_ns: int, vehicle: str, endpoint: str)
         snap["keys"].append({
             "key": kv.key, "count": kv.count, "rate_hz": round(kv.rate_hz, 1),
             "nominal_hz": _round(kv.nominal_hz, 1), "last_s": round(kv.last_age_s, 2),
+            "status": "ok" if kv.on_rate else ("off-rate" if kv.alive else "STALE"),
             "age_p50_ms": _round(kv.age_p50_ms), "age_p99_ms": _round(kv.age_p99_ms),
             "transport_p50_ms": _round(kv.transport_p50_ms, 3),
             "transport_p99_ms": _round(kv.transport_p99_ms, 3), "seq_gaps": kv.seq_gaps,
@@ -114,14 +115,14 @@ def render_text(snap: dict[str, Any], now_wall: float | None = None) -> str:
                        f" {h['since_s']:.0f}s" for h in snap["health"])
     lines += ["", "HEALTH   " + (health or "no liveliness token seen")]
     lines += ["", f"{'KEY':<38} {'count':>7} {'Hz':>6} {'nom':>5} {'last s':>6} "
-                  f"{'age p50/p99 ms':>15} {'hop p50/p99 ms':>15} {'gaps':>5}"]
+                  f"{'age p50/p99 ms':>15} {'hop p50/p99 ms':>15} {'gaps':>5} status"]
     for k in snap["keys"]:
         key = k["key"].split("/", 2)[-1]
         age = f"{_f(k['age_p50_ms'], '.1f')}/{_f(k['age_p99_ms'], '.1f')}"
         hop = f"{_f(k['transport_p50_ms'], '.2f')}/{_f(k['transport_p99_ms'], '.2f')}"
         lines.append(f"{key:<38} {k['count']:>7} {k['rate_hz']:>6.1f} "
                      f"{_f(k['nominal_hz'], '.0f'):>5} {k['last_s']:>6.1f} {age:>15} "
-                     f"{hop:>15} {k['seq_gaps']:>5}")
+                     f"{hop:>15} {k['seq_gaps']:>5} {k['status']}")
     b = snap["brake"]
     lines.append("")
     if b is None:
