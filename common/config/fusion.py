@@ -63,13 +63,34 @@ class VerifierSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     params: dict[str, ParamValue] = msgspec.field(default_factory=dict)
 
 
+class PathPredictionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A target moving sideways is in the path iff, at constant velocity, it is inside the
+    corridor when the ego's front reaches it (x / closing speed along x, +- the margin);
+    its TTC is then that arrival time. Targets without a confirmed sideways motion, and
+    targets the ego reaches later than the horizon, are judged on their current offset."""
+
+    enabled: bool = True
+    # Predict no further than this (s): constant velocity is a guess, and lateral
+    # velocity noise grows into metres.
+    horizon_s: Positive = 4.0
+    # Slower sideways motion is treated as none: the radar's lateral velocity is noisy
+    # and would walk stationary objects beside the lane into the corridor.
+    min_lateral_speed_mps: NonNegative = 0.5
+    # ... and it must have lasted this many consecutive radar cycles, in one direction.
+    confirm_cycles: Annotated[int, msgspec.Meta(ge=1, le=20)] = 2
+    # The ego's arrival counts from this much before to this much after (s).
+    arrival_margin_s: NonNegative = 0.3
+
+
 class CorridorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """In path iff |y - center_y_m| <= half_width_m + margin_m (radar frame, y left)."""
+    """In path iff |y - center_y_m| <= half_width_m + margin_m (radar frame, y left), or,
+    with `prediction`, iff a sideways-moving target is there when the ego arrives."""
 
     enabled: bool = True
     half_width_m: NonNegative = 0.9
     margin_m: NonNegative = 0.3
     center_y_m: float = 0.0    # the vehicle's centre line in the radar frame
+    prediction: PathPredictionSettings = msgspec.field(default_factory=PathPredictionSettings)
 
 
 class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -37,6 +37,9 @@ class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     radar cycle's own values (what the decision used). `roi_xywh` is in pixels of the
     frame, empty when not visible or not projected. `gate_detail` holds what a verifier
     derived for this ROI (e.g. adapted thresholds), empty for fixed-parameter verifiers.
+    `path_predicted`: `in_path` was decided from the track's sideways motion (is it in
+    the corridor when the ego arrives?), and `ttc_s` is the time the ego's front reaches
+    it (x / closing speed along x), not r / |range rate|.
     """
 
     track_id: int
@@ -55,6 +58,7 @@ class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     frame_seq: int | None
     frame_age_ms: float | None     # radar cycle stamp - frame capture (negative: newer frame)
     gate_detail: dict[str, float] = msgspec.field(default_factory=dict)
+    path_predicted: bool = False
 
 
 class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -26,7 +26,14 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
-from services.fusion.decision import BrakeHold, DecisionRule, decide, severity
+from services.fusion.decision import (
+    BrakeHold,
+    DecisionRule,
+    Kinematics,
+    LateralMotion,
+    decide,
+    severity,
+)
 from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
 from services.fusion.roi import ColumnProjector, Roi
 from services.fusion.verifiers import Verifier
@@ -52,6 +59,11 @@ class FusionCore:
         self.source = f"fusion/{settings.instance}"
         self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
         self.rule = DecisionRule(settings.decision)
+        p = settings.decision.corridor.prediction
+        # Per-track memory of sideways motion, for path prediction (None when it is off).
+        self.lateral = (LateralMotion(p.min_lateral_speed_mps, p.confirm_cycles)
+                        if self.rule.predict else None)
+        self._moving: set[int] = set()     # this cycle's tracks moving sideways
         self._seq = 0
         self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
@@ -71,6 +83,7 @@ class FusionCore:
         confirmed = [t for t in tracks.tracks if t.confirmed and _finite(t)]
         invalid = [t for t in tracks.tracks if t.confirmed and not _finite(t)]
         self.invalid_tracks += len(invalid)
+        self._moving = self.lateral.update(confirmed) if self.lateral is not None else set()
         age_ns = now_wall_ns - tracks.header.stamp_ns
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
@@ -109,14 +122,17 @@ class FusionCore:
             frames_dropped=feed.dropped)
         return CycleResult(verified, cycle.command)
 
+    def _kinematics(self, t: RadarTrack) -> Kinematics:
+        return self.rule.kinematics(t, t.track_id in self._moving)
+
     def _stale_target(self, t: RadarTrack, age_ns: int) -> VerifiedTarget:
-        k = self.rule.kinematics(t)
+        k = self._kinematics(t)
         reason = (f"radar stale (age {age_ns / 1e6:.0f} ms, max "
                   f"{self._radar_max_age_ns / 1e6:.0f} ms)")
         return VerifiedTarget(
             t.track_id, t.x_m, t.y_m, t.range_m, t.range_rate_mps, k.in_path,
             Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
-            reason, None, None)
+            reason, None, None, path_predicted=k.window is not None)
 
     def _verify_all(self, cycle: "_Cycle", frame: DecodedFrame | None) -> list[VerifiedTarget]:
         rule = self.rule
@@ -129,7 +145,7 @@ class FusionCore:
         xy = [(t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s) for t in confirmed]
         rois: list[Roi | None] = (self.projector.rois(np.array(xy))
                                   if frame is not None and confirmed else [None] * len(confirmed))
-        kins = [rule.kinematics(t) for t in confirmed]
+        kins = [self._kinematics(t) for t in confirmed]
         threats = [rule.threat(k) for k in kins]
         frame_seq = frame.seq if frame is not None else None
         frame_age_ms = (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None
@@ -162,7 +178,8 @@ class FusionCore:
             tgt = VerifiedTarget(
                 t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
                 _NO_ROI if roi is None else tuple(roi), density, k.ttc_s, k.ttc_eff_s,
-                decision, reason, frame_seq, frame_age_ms, detail)
+                decision, reason, frame_seq, frame_age_ms, detail,
+                path_predicted=k.window is not None)
             out[i] = tgt
             return tgt
 
@@ -251,7 +268,7 @@ class FusionCore:
             # The held track as the radar sees it now, if it is still there.
             now = next((t for t in confirmed or () if t.track_id == track_id), None)
             range_m = now.range_m if now is not None else None
-            ttc_s = self.rule.kinematics(now).ttc_s if now is not None else None
+            ttc_s = self._kinematics(now).ttc_s if now is not None else None
         seq = self._seq
         self._seq += 1
         return BrakeCommand(
