@@ -14,6 +14,8 @@ from common.config.base import ServiceConfig
 from common.keys import RADAR_TRACKS
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
+_DEFAULT_CAMERA = "front"
+_DEFAULT_CALIBRATION = "deploy/calibration/d435_848x480.toml"
 
 NonNegative = Annotated[float, msgspec.Meta(ge=0)]
 Positive = Annotated[float, msgspec.Meta(gt=0)]
@@ -34,10 +36,21 @@ class GateScope(enum.Enum):
     ALL = "all"                # every visible confirmed track (densities for every track)
 
 
+class DecodePolicy(enum.Enum):
+    """Which arriving camera frames are decoded."""
+
+    EVERY_FRAME = "every_frame"    # every frame, on arrival
+    # Only the frames a radar cycle can use: while the radar's rhythm is steady, the
+    # newest frame waiting is decoded `decode_lead_s` before the next cycle is due (and
+    # any frame arriving after that, on arrival); frames overtaken by a newer one before
+    # then are never decoded. Radar irregular, late or silent: every frame.
+    BEFORE_RADAR = "before_radar"
+
+
 class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Which camera, and how a frame is matched to a radar cycle."""
 
-    camera: str = "front"
+    camera: str = _DEFAULT_CAMERA
     # |frame capture - radar cycle| allowed; farther frames make the verifier unavailable.
     max_skew_s: Positive = 0.1
     # True: the frame nearest the radar cycle, with each track predicted (constant
@@ -46,6 +59,17 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     ring_size: Annotated[int, msgspec.Meta(ge=1, le=64)] = 4
     # Frames waiting for the decoder; the oldest is dropped (and counted) when full.
     decode_queue: Annotated[int, msgspec.Meta(ge=1, le=16)] = 2
+    decode: DecodePolicy = DecodePolicy.EVERY_FRAME
+    # before_radar: how long before the next radar cycle is due the newest frame is decoded.
+    decode_lead_s: Annotated[float, msgspec.Meta(gt=0, le=0.1)] = 0.012
+
+
+class CameraInput(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One of several cameras: its frames come from `camera/<name>/jpeg`, and fusion
+    projects into it with its own calibration file."""
+
+    name: str
+    calibration: str
 
 
 class RoiSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -118,21 +142,39 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     instance: str = "primary"
     radar_sensor: str = "front"
     # Calibration TOML (common/calibration.py); relative paths are from the working directory.
-    calibration: str = "deploy/calibration/d435_848x480.toml"
+    calibration: str = _DEFAULT_CALIBRATION
     gate_scope: GateScope = GateScope.CANDIDATES
     frames: FrameSettings = msgspec.field(default_factory=FrameSettings)
     roi: RoiSettings = msgspec.field(default_factory=RoiSettings)
     verifier: VerifierSettings = msgspec.field(default_factory=VerifierSettings)
     decision: DecisionSettings = msgspec.field(default_factory=DecisionSettings)
     stats_interval_s: Positive = 10.0      # how often counters are logged
+    # Several cameras, each with its own calibration, instead of `frames.camera` and
+    # `calibration` (leave those out). A track is verified if any camera that sees it
+    # verifies it (docs/fusion.md). `frames` settings apply to every camera.
+    cameras: Annotated[tuple[CameraInput, ...], msgspec.Meta(max_length=8)] = ()
 
     def __post_init__(self) -> None:
-        for field, value in (("instance", self.instance), ("radar_sensor", self.radar_sensor),
-                             ("frames.camera", self.frames.camera)):
+        names = [c.name for c in self.cameras]
+        fields = [("instance", self.instance), ("radar_sensor", self.radar_sensor),
+                  ("frames.camera", self.frames.camera)]
+        fields += [(f"cameras[{i}].name", n) for i, n in enumerate(names)]
+        for field, value in fields:
             if not _CHUNK.match(value):
                 raise ValueError(f"{field} {value!r} must be letters, digits, '_', '-' or '.'")
-        if not self.calibration:
+        if not self.calibration or any(not c.calibration for c in self.cameras):
             raise ValueError("calibration must name a calibration TOML file")
+        if len(set(names)) != len(names):
+            raise ValueError(f"cameras: duplicate camera name in {names}")
+        if self.cameras and (self.frames.camera != _DEFAULT_CAMERA
+                             or self.calibration != _DEFAULT_CALIBRATION):
+            raise ValueError("give either frames.camera and calibration (one camera) or "
+                             "[[fusion.cameras]], not both")
+
+    @property
+    def camera_inputs(self) -> tuple[CameraInput, ...]:
+        """Every camera this instance verifies with, in the order they are tried."""
+        return self.cameras or (CameraInput(self.frames.camera, self.calibration),)
 
 
 class FusionConfig(ServiceConfig, frozen=True, forbid_unknown_fields=True):

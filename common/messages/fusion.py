@@ -29,6 +29,16 @@ class VerifierStatus(enum.Enum):
     STALE_RADAR = "stale_radar"    # radar input older than allowed: never brakes
 
 
+class CameraCheck(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One camera's view of a track, in instances with several cameras. `not_checked`
+    here also means a camera after the one that verified the track (not gated)."""
+
+    camera: str
+    verification: Verification
+    roi_xywh: tuple[int, ...] = ()
+    density: float | None = None
+
+
 class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """One confirmed radar track after verification and decision.
 
@@ -40,6 +50,11 @@ class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     `path_predicted`: `in_path` was decided from the track's sideways motion (is it in
     the corridor when the ego arrives?), and `ttc_s` is the time the ego's front reaches
     it (x / closing speed along x), not r / |range rate|.
+
+    With several cameras, `camera` is the camera whose verdict decided (the first that
+    verified; else the rejecting one with the highest density; empty when none sees the
+    track), and `roi_xywh`, `density`, `frame_seq`, `frame_age_ms`, `x_m`, `y_m` are that
+    camera's; `cameras` lists every camera's own check. With one camera `cameras` is empty.
     """
 
     track_id: int
@@ -59,6 +74,8 @@ class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     frame_age_ms: float | None     # radar cycle stamp - frame capture (negative: newer frame)
     gate_detail: dict[str, float] = msgspec.field(default_factory=dict)
     path_predicted: bool = False
+    camera: str = ""
+    cameras: tuple[CameraCheck, ...] = ()
 
 
 class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -77,6 +94,9 @@ class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     frames_received: int = 0       # camera frames seen by this instance since start
     frames_undecodable: int = 0    # ... of which could not be decoded (counted, skipped)
     frames_dropped: int = 0        # ... dropped before decoding because the decoder lagged
+    frames_skipped: int = 0        # ... not decoded: overtaken before a radar cycle needed them
+    # Cameras without a usable frame this cycle, and why (the others verified as usual).
+    cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)
 
 
 class BrakeCommand(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

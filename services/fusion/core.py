@@ -1,18 +1,18 @@
 """The fusion core: one radar cycle and the decoded frames in, VerifiedTargets and
 exactly one BrakeCommand out. Pure: no Zenoh, no clocks (the shell passes the time), no
-threads; its only state is the brake hold and the sequence number.
+threads; its state is the brake hold, the sequence number and each track's recent
+sideways motion (for path prediction).
 
-Per confirmed track: kinematics and the radar's threat (decision.py); the frame nearest
-the cycle within the skew bound (frames.py), the track predicted to that frame's time,
-its column projected to a ROI (roi.py), the verifier (verifiers.py), the decision. The
-command is the most severe decision (ties: the smallest TTC_eff), or a heartbeat.
+Per confirmed track: kinematics and the radar's threat (decision.py); per camera, the
+frame nearest the cycle within the skew bound (frames.py), the track predicted to that
+frame's time and its column projected to a ROI (roi.py); the verifier (verifiers.py) in
+the cameras that see it, combined (cameras.py); the decision. The command is the most
+severe decision (ties: the smallest TTC_eff), or a heartbeat.
 """
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-
-import numpy as np
 
 from common.config.fusion import FusionSettings, GateScope
 from common.messages import (
@@ -26,6 +26,7 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
+from services.fusion.cameras import Camera, CameraView, camera_views, check_track
 from services.fusion.decision import (
     BrakeHold,
     DecisionRule,
@@ -34,8 +35,8 @@ from services.fusion.decision import (
     decide,
     severity,
 )
-from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
-from services.fusion.roi import ColumnProjector, Roi
+from services.fusion.frames import FrameFeed
+from services.fusion.roi import ColumnProjector
 from services.fusion.verifiers import Verifier
 
 _NO_ROI: tuple[int, ...] = ()
@@ -50,10 +51,23 @@ class CycleResult:
 
 
 class FusionCore:
-    def __init__(self, settings: FusionSettings, projector: ColumnProjector,
+    """`projectors`: one ColumnProjector (the one camera of the settings), or one per
+    camera by name, in the order of `settings.camera_inputs`."""
+
+    def __init__(self, settings: FusionSettings,
+                 projectors: ColumnProjector | Mapping[str, ColumnProjector],
                  verifier: Verifier) -> None:
         self.s = settings
-        self.projector = projector
+        names = [c.name for c in settings.camera_inputs]
+        if isinstance(projectors, ColumnProjector):
+            if len(names) != 1:
+                raise ValueError(f"one projector for {len(names)} cameras")
+            projectors = {names[0]: projectors}
+        if sorted(projectors) != sorted(names):
+            raise ValueError(f"projectors for {sorted(projectors)}, cameras {names}")
+        self.cameras = tuple(Camera(n, projectors[n]) for n in names)
+        self.projector = self.cameras[0].projector
+        self.camera_names = ",".join(names)
         self.verifier = verifier
         self.verifier_params = verifier.params()
         self.source = f"fusion/{settings.instance}"
@@ -69,17 +83,23 @@ class FusionCore:
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
 
-    def process(self, tracks: RadarTracks, feed: FrameFeed, now_wall_ns: int,
-                now_mono_ns: int, on_command: CommandSink | None = None) -> CycleResult:
-        """Decide one radar cycle. `now_wall_ns` judges the radar's age; `now_mono_ns`
-        stamps the messages' pub_mono_ns (the shell refreshes it at publish).
+    def process(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
+                now_wall_ns: int, now_mono_ns: int,
+                on_command: CommandSink | None = None) -> CycleResult:
+        """Decide one radar cycle. `feeds`: each camera's frames, in camera order (one
+        FrameFeed for a single camera). `now_wall_ns` judges the radar's age;
+        `now_mono_ns` stamps the messages' pub_mono_ns (the shell refreshes it at publish).
 
         `on_command` receives the cycle's BrakeCommand as soon as it is decided, before
         the gate has run on tracks that cannot change it: threats are checked most urgent
         first, and once one of them reaches the most its radar threat allows, nothing
         after it can be more severe. The targets are completed afterwards.
+        Raises ValueError when the number of feeds is not the number of cameras.
         """
         s = self.s
+        feeds = (feeds,) if isinstance(feeds, FrameFeed) else tuple(feeds)
+        if len(feeds) != len(self.cameras):
+            raise ValueError(f"{len(feeds)} frame feeds for {len(self.cameras)} cameras")
         confirmed = [t for t in tracks.tracks if t.confirmed and _finite(t)]
         invalid = [t for t in tracks.tracks if t.confirmed and not _finite(t)]
         self.invalid_tracks += len(invalid)
@@ -88,26 +108,25 @@ class FusionCore:
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
         radar_stale = abs(age_ns) > self._radar_max_age_ns
-        frame: DecodedFrame | None = None
+        views: list[CameraView] = []
         reason_unavailable = ""
         if radar_stale:
             status = VerifierStatus.STALE_RADAR
         else:
-            frame = select_frame(feed.frames, tracks.header.stamp_ns, self._max_skew_ns,
-                                 s.frames.align)
-            if frame is None:
-                status = VerifierStatus.UNAVAILABLE
-                reason_unavailable = unavailable_reason(feed, tracks.header.stamp_ns,
-                                                        self._max_skew_ns)
-            else:
+            views = camera_views(self.cameras, feeds, confirmed, tracks.header.stamp_ns,
+                                 self._max_skew_ns, s.frames.align)
+            if any(v.frame is not None for v in views):
                 status = VerifierStatus.OK
+            else:
+                status = VerifierStatus.UNAVAILABLE
+                reason_unavailable = _reasons(views)
         cycle = _Cycle(tracks, confirmed, status, reason_unavailable, age_ns, now_wall_ns,
                        now_mono_ns, on_command)
         if radar_stale:
             targets = [self._stale_target(t, age_ns) for t in confirmed]
             self._send(cycle, targets)
         else:
-            targets = self._verify_all(cycle, frame)
+            targets = self._verify_all(cycle, views)
         assert cycle.command is not None
         targets += [_invalid_target(t) for t in invalid]
         header = Header(seq=cycle.command.header.seq, source=self.source,
@@ -116,10 +135,13 @@ class FusionCore:
             header=header, instance=s.instance, radar_sensor=tracks.sensor,
             radar_seq=tracks.header.seq, verifier=self.verifier.name,
             verifier_params=self.verifier_params, verifier_status=status,
-            targets=tuple(targets), processing_ns=0, camera=s.frames.camera,
+            targets=tuple(targets), processing_ns=0, camera=self.camera_names,
             unavailable_reason=reason_unavailable, radar_age_ms=age_ns / 1e6,
-            frames_received=feed.received, frames_undecodable=feed.undecodable,
-            frames_dropped=feed.dropped)
+            frames_received=sum(f.received for f in feeds),
+            frames_undecodable=sum(f.undecodable for f in feeds),
+            frames_dropped=sum(f.dropped for f in feeds),
+            frames_skipped=sum(f.skipped for f in feeds),
+            cameras_unavailable={v.name: v.reason for v in views if v.frame is None})
         return CycleResult(verified, cycle.command)
 
     def _kinematics(self, t: RadarTrack) -> Kinematics:
@@ -134,52 +156,42 @@ class FusionCore:
             Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
             reason, None, None, path_predicted=k.window is not None)
 
-    def _verify_all(self, cycle: "_Cycle", frame: DecodedFrame | None) -> list[VerifiedTarget]:
+    def _verify_all(self, cycle: "_Cycle", views: list[CameraView]) -> list[VerifiedTarget]:
         rule = self.rule
         confirmed = cycle.confirmed
         radar_stamp_ns = cycle.tracks.header.stamp_ns
-        if frame is not None and self.s.frames.align:
-            dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9
-        else:
-            dt_s = 0.0
-        xy = [(t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s) for t in confirmed]
-        rois: list[Roi | None] = (self.projector.rois(np.array(xy))
-                                  if frame is not None and confirmed else [None] * len(confirmed))
         kins = [self._kinematics(t) for t in confirmed]
         threats = [rule.threat(k) for k in kins]
-        frame_seq = frame.seq if frame is not None else None
-        frame_age_ms = (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None
         gate_all = self.s.gate_scope is GateScope.ALL
         verify = self.verifier.verify
+        # Where a track no camera sees is reported: the first camera with a frame.
+        fallback = next((v for v in views if v.frame is not None), views[0])
         out: list[VerifiedTarget | None] = [None] * len(confirmed)
 
         def evaluate(i: int) -> VerifiedTarget:
-            t, k, roi = confirmed[i], kins[i], rois[i]
+            t, k = confirmed[i], kins[i]
             threat, threat_reason = threats[i]
-            density: float | None = None
-            detail: dict[str, float] = {}
-            if frame is None:
-                verification = Verification.UNAVAILABLE
-                if threat is not Decision.NONE:
-                    threat_reason = f"{threat_reason}; {cycle.reason_unavailable}"
-            elif roi is None:
-                verification = Verification.NOT_VISIBLE
-            elif threat is Decision.NONE and not gate_all:
-                verification = Verification.NOT_CHECKED
-            else:
-                result = verify(frame.gray, roi)
-                density, detail = result.density, result.detail
-                verification = (Verification.VERIFIED if result.verified
-                                else Verification.REJECTED)
+            check = check_track(i, views, threat is not Decision.NONE or gate_all, verify)
+            verification = check.verification
+            density = check.result.density if check.result is not None else None
+            if verification is Verification.UNAVAILABLE and threat is not Decision.NONE:
+                threat_reason = f"{threat_reason}; {_reasons(views, i)}"
             decision, reason = decide(threat, threat_reason, verification, rule.policy)
             if verification is Verification.REJECTED:
                 reason = f"{reason}; density {density:.4f}"
-            x, y = xy[i]
+            view = check.view or fallback
+            frame = view.frame
+            x, y = view.xy[i]
             tgt = VerifiedTarget(
                 t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
-                _NO_ROI if roi is None else tuple(roi), density, k.ttc_s, k.ttc_eff_s,
-                decision, reason, frame_seq, frame_age_ms, detail,
-                path_predicted=k.window is not None)
+                _NO_ROI if check.roi is None or verification is Verification.UNAVAILABLE
+                else tuple(check.roi), density, k.ttc_s, k.ttc_eff_s, decision, reason,
+                frame.seq if frame is not None else None,
+                (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None,
+                check.result.detail if check.result is not None else {},
+                path_predicted=k.window is not None,
+                camera=check.view.name if check.view is not None else "",
+                cameras=check.per_camera)
             out[i] = tgt
             return tgt
 
@@ -225,7 +237,7 @@ class FusionCore:
             header=header, instance=self.s.instance, radar_sensor=tracks.sensor,
             radar_seq=tracks.header.seq, verifier=self.verifier.name,
             verifier_params=self.verifier_params, verifier_status=VerifierStatus.UNAVAILABLE,
-            targets=(), processing_ns=0, camera=self.s.frames.camera,
+            targets=(), processing_ns=0, camera=self.camera_names,
             unavailable_reason=reason, radar_age_ms=age_ns / 1e6)
         return CycleResult(targets, command)
 
@@ -279,6 +291,16 @@ class FusionCore:
             verifier_status=status, held=held, track_id=track_id, range_m=range_m,
             ttc_s=ttc_s, reason=reason, radar_seq=tracks.header.seq,
             radar_last_frame_mono_ns=tracks.last_frame_mono_ns)
+
+
+def _reasons(views: list[CameraView], track: int | None = None) -> str:
+    """Why the cameras (that would see `track`, or all) have no usable frame; one camera:
+    its reason alone, as before there were several."""
+    missing = [v for v in views if v.frame is None
+               and (track is None or v.rois[track] is not None)]
+    if len(views) == 1:
+        return missing[0].reason if missing else ""
+    return "; ".join(f"{v.name}: {v.reason}" for v in missing)
 
 
 def _finite(t: RadarTrack) -> bool:

@@ -1,9 +1,12 @@
-"""Camera frames for fusion: decoded to grayscale on arrival, in a worker thread, into a
-small ring of recent frames; and the pure choice of the frame for a radar cycle.
+"""Camera frames for fusion: decoded to grayscale off the critical path, in a worker
+thread per camera, into a small ring of recent frames; and the pure choice of the frame
+for a radar cycle.
 
 The radar callback never waits for a JPEG decode: it takes a snapshot of the ring (a
 tuple of references, under a lock held for microseconds) and works on frames already
 decoded. Decoding goes through common.imaging.decode_gray, the project's one path.
+With `decode = "before_radar"` the worker decodes only the frames a radar cycle can use
+(services/fusion/rhythm.py); the others are counted as skipped.
 """
 
 import logging
@@ -13,9 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.clock import mono_ns
+from common.config.fusion import DecodePolicy, FrameSettings
 from common.imaging import ImageDecodeError, decode_gray
 from common.log import RateLimitedLog
 from common.messages import CompressedFrame, DecodeError, decode
+from services.fusion.rhythm import RadarRhythm
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,6 +43,7 @@ class FrameFeed:
     dropped: int = 0
     last_error: str = ""
     last_error_rx_mono_ns: int | None = None
+    skipped: int = 0       # overtaken by a newer frame before a radar cycle needed them
 
 
 class FrameError(ValueError):
@@ -97,26 +104,46 @@ def unavailable_reason(feed: FrameFeed, radar_stamp_ns: int, max_skew_ns: int) -
 
 
 class FrameDecoder:
-    """Decodes frames in its own thread; `submit` (from Zenoh's thread) never blocks."""
+    """Decodes one camera's frames in its own thread; `submit` (from Zenoh's thread)
+    never blocks. With `rhythm` (decode = before_radar) a frame waits undecoded until the
+    next radar cycle is near, and only the newest waiting frame is decoded."""
 
     def __init__(self, width: int, height: int, ring_size: int, queue_size: int,
-                 log: logging.Logger) -> None:
+                 log: logging.Logger, camera: str = "", rhythm: RadarRhythm | None = None,
+                 lead_s: float = 0.012) -> None:
         self.width = width
         self.height = height
+        self.camera = camera
         self._pending: deque[tuple[bytes, int]] = deque()
-        self._queue_size = queue_size
+        # Waiting for the radar, only the newest frame is worth keeping.
+        self._queue_size = 1 if rhythm is not None else queue_size
+        self._rhythm = rhythm
+        self._lead_ns = round(lead_s * 1e9)
         self._ring: deque[DecodedFrame] = deque(maxlen=ring_size)
         self._cond = threading.Condition()
         self._received = 0
         self._undecodable = 0
         self._dropped = 0
+        self._skipped = 0
         self._last_error = ""
         self._last_error_rx: int | None = None
         self.errors_by_reason: dict[str, int] = {}
         self._stop = False
-        self._thread = threading.Thread(target=self._run, name="frame-decoder", daemon=True)
+        self._thread = threading.Thread(target=self._run, daemon=True,
+                                        name=f"frame-decoder-{camera}" if camera
+                                        else "frame-decoder")
         self._log = log
         self._rl = RateLimitedLog(log)
+
+    @classmethod
+    def for_policy(cls, width: int, height: int, settings: FrameSettings,
+                   log: logging.Logger, camera: str = "",
+                   rhythm: RadarRhythm | None = None) -> "FrameDecoder":
+        """A decoder as `settings` ([fusion.frames]) asks; `rhythm` is used only with
+        decode = before_radar."""
+        use = rhythm if settings.decode is DecodePolicy.BEFORE_RADAR else None
+        return cls(width, height, settings.ring_size, settings.decode_queue, log, camera,
+                   use, settings.decode_lead_s)
 
     def start(self) -> None:
         self._thread.start()
@@ -135,7 +162,10 @@ class FrameDecoder:
             self._received += 1
             if len(self._pending) >= self._queue_size:
                 self._pending.popleft()
-                self._dropped += 1
+                if self._rhythm is not None:
+                    self._skipped += 1      # by design: a newer frame will be used instead
+                else:
+                    self._dropped += 1      # the decoder could not keep up
             self._pending.append((payload, rx_mono_ns))
             self._cond.notify()
 
@@ -150,25 +180,40 @@ class FrameDecoder:
                 self._last_error = str(exc)
                 self._last_error_rx = rx_mono_ns
             self._rl.warning(f"frame:{exc.reason}", "frame_unusable", reason=exc.reason,
-                             error=str(exc))
+                             camera=self.camera, error=str(exc))
             return
         with self._cond:
             self._ring.append(frame)
 
+    def _next(self) -> tuple[bytes, int] | None:
+        """The next frame to decode, once it is time (None: stopping)."""
+        with self._cond:
+            while True:
+                if self._stop:
+                    return None
+                if not self._pending:
+                    self._cond.wait()
+                    continue
+                at = (None if self._rhythm is None
+                      else self._rhythm.decode_at(mono_ns(), self._lead_ns))
+                if at is None:
+                    return self._pending.popleft()
+                # A newer frame (notify) replaces this one; the timeout is the due time.
+                self._cond.wait(max(0.0, (at - mono_ns()) / 1e9))
+
     def _run(self) -> None:
         while True:
-            with self._cond:
-                while not self._pending and not self._stop:
-                    self._cond.wait()
-                if self._stop:
-                    return
-                payload, rx = self._pending.popleft()
+            item = self._next()
+            if item is None:
+                return
             try:
-                self.decode_now(payload, rx)
+                self.decode_now(*item)
             except Exception as exc:  # a decoder bug must not end frame delivery silently
-                self._rl.error("frame:bug", "frame_decoder_failed", error=repr(exc))
+                self._rl.error("frame:bug", "frame_decoder_failed", camera=self.camera,
+                               error=repr(exc))
 
     def snapshot(self) -> FrameFeed:
         with self._cond:
             return FrameFeed(tuple(self._ring), self._received, self._undecodable,
-                             self._dropped, self._last_error, self._last_error_rx)
+                             self._dropped, self._last_error, self._last_error_rx,
+                             self._skipped)

@@ -21,18 +21,21 @@ from common.service import load_service_config, service_argparser, stop_event_on
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.node import FusionNode, run_until
+from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.verifiers import VerifierConfigError, create
 
 
-def build_core(cfg: FusionConfig) -> tuple[FusionCore, Calibration]:
-    """The core of a configured instance. Raises ConfigError or VerifierConfigError."""
+def build_core(cfg: FusionConfig) -> tuple[FusionCore, dict[str, Calibration]]:
+    """The core of a configured instance and each camera's calibration, by camera name.
+    Raises ConfigError or VerifierConfigError."""
     s = cfg.fusion
-    cal = Calibration.load(s.calibration)
+    cals = {c.name: Calibration.load(c.calibration) for c in s.camera_inputs}
     verifier = create(s.verifier.name, s.verifier.params)
     geometry = ColumnGeometry(s.roi.column_height_m, s.roi.column_half_width_m,
                               s.roi.padding_px)
-    return FusionCore(s, ColumnProjector(cal, geometry), verifier), cal
+    projectors = {name: ColumnProjector(cal, geometry) for name, cal in cals.items()}
+    return FusionCore(s, projectors, verifier), cals
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,6 +47,10 @@ def main(argv: list[str] | None = None) -> int:
     cfg = load_service_config(args, FusionConfig)
     overrides = {k: v for k, v in (("instance", args.instance),
                                    ("calibration", args.calibration)) if v}
+    if args.calibration and cfg.fusion.cameras:
+        print("error: --calibration applies to a single camera; this config has "
+              "[[fusion.cameras]], each with its own calibration", file=sys.stderr)
+        return 2
     if overrides:
         try:
             cfg = msgspec.convert(
@@ -56,12 +63,14 @@ def main(argv: list[str] | None = None) -> int:
     s = cfg.fusion
     log = setup_logging(f"fusion.{s.instance}", cfg.log.level.value)
     try:
-        core, cal = build_core(cfg)
+        core, cals = build_core(cfg)
     except (ConfigError, VerifierConfigError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    for warning in cal.warnings():
-        log.warning(kv("calibration_implausible", file=s.calibration, detail=warning))
+    for name, cal in cals.items():
+        for warning in cal.warnings():
+            log.warning(kv("calibration_implausible", camera=name, file=cal.origin,
+                           detail=warning))
     stop = stop_event_on_signals()
     try:
         bus = Bus.open(cfg.zenoh, cfg.vehicle, core.source)
@@ -69,14 +78,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     with bus:
-        decoder = FrameDecoder(cal.width, cal.height, s.frames.ring_size,
-                               s.frames.decode_queue, log)
-        node = FusionNode(bus, s, core, decoder, log, cal)
+        rhythm = RadarRhythm()
+        decoders = [FrameDecoder.for_policy(cal.width, cal.height, s.frames, log, name, rhythm)
+                    for name, cal in cals.items()]
+        node = FusionNode(bus, s, core, decoders, log, cals, rhythm)
         node.start()
         token = bus.declare_health("fusion", s.instance)
         log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,
                     params=core.verifier_params, radar=s.radar_sensor,
-                    camera=s.frames.camera, calibration=s.calibration))
+                    cameras=core.camera_names, decode=s.frames.decode.value,
+                    calibration=",".join(c.calibration for c in s.camera_inputs)))
         try:
             run_until(stop, node, s.stats_interval_s)
         finally:

@@ -1,10 +1,12 @@
-"""The fusion I/O shell: frames to the decoder, radar cycles through the core, messages
-out. Exactly one BrakeCommand per RadarTracks, published before the targets."""
+"""The fusion I/O shell: each camera's frames to its decoder, radar cycles through the
+core, messages out. Exactly one BrakeCommand per RadarTracks, published before the
+targets."""
 
 import logging
 import threading
 import time
 from collections import deque
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import msgspec
@@ -29,16 +31,27 @@ from common.messages import (
 from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, FusionCore
 from services.fusion.frames import FrameDecoder
+from services.fusion.rhythm import RadarRhythm
 
 
 class FusionNode:
+    """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
+    single camera). `calibrations`: what each camera's CameraInfo is checked against.
+    `rhythm`: told every radar cycle's arrival (decoders with decode = before_radar
+    share it)."""
+
     def __init__(self, bus: Bus, settings: FusionSettings, core: FusionCore,
-                 decoder: FrameDecoder, log: logging.Logger,
-                 calibration: Calibration | None = None) -> None:
+                 decoders: FrameDecoder | Sequence[FrameDecoder], log: logging.Logger,
+                 calibrations: Calibration | Mapping[str, Calibration] | None = None,
+                 rhythm: RadarRhythm | None = None) -> None:
         self.bus = bus
         self.s = settings
         self.core = core
-        self.decoder = decoder
+        self.decoders = ([decoders] if isinstance(decoders, FrameDecoder) else list(decoders))
+        if len(self.decoders) != len(core.cameras):
+            raise ValueError(f"{len(self.decoders)} decoders for {len(core.cameras)} cameras")
+        self.camera_names = [c.name for c in core.cameras]
+        self.rhythm = rhythm
         self.log = log
         self.counters = ReasonCounter()
         self._rl = RateLimitedLog(log)
@@ -47,35 +60,46 @@ class FusionNode:
         self._decided_ns = 0
         self._proc_us: deque[float] = deque(maxlen=512)
         self._subs: list[zenoh.Subscriber[None]] = []
-        self.calibration = calibration
+        if isinstance(calibrations, Calibration):
+            calibrations = {self.camera_names[0]: calibrations}
+        self.calibrations: dict[str, Calibration] = dict(calibrations or {})
         self._cmd_pub = bus.publisher(FUSION_BRAKE_CMD, instance=settings.instance)
         self._tgt_pub = bus.publisher(FUSION_TARGETS, instance=settings.instance)
 
+    @property
+    def decoder(self) -> FrameDecoder:
+        """The first camera's decoder (the only one in a single-camera instance)."""
+        return self.decoders[0]
+
     def start(self) -> None:
-        self.decoder.start()
-        self._subs.append(self.bus.subscribe_raw(CAMERA_JPEG, self.decoder.submit,
-                                                 camera=self.s.frames.camera))
+        for name, decoder in zip(self.camera_names, self.decoders, strict=True):
+            decoder.start()
+            self._subs.append(self.bus.subscribe_raw(CAMERA_JPEG, decoder.submit, camera=name))
         self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
                                                  sensor=self.s.radar_sensor))
-        if self.calibration is not None:
-            self._subs.append(self.bus.subscribe(CAMERA_INFO, self.on_camera_info,
-                                                 camera=self.s.frames.camera))
+        for name in self.camera_names:
+            if name in self.calibrations:
+                self._subs.append(self.bus.subscribe(CAMERA_INFO, self.on_camera_info,
+                                                     camera=name))
 
     def stop(self) -> None:
         for sub in self._subs:
             sub.undeclare()
         self._subs.clear()
-        self.decoder.stop()
+        for decoder in self.decoders:
+            decoder.stop()
 
     def on_camera_info(self, info: CameraInfo, key: str) -> None:
         """Warn (rate-limited) and count when the camera's calibration is not ours."""
-        if self.calibration is None:
+        ours = self.calibrations.get(info.camera)
+        if ours is None:
             return
-        diff = calibration_differences(self.calibration, info)
+        diff = calibration_differences(ours, info)
         if diff:
             self.counters.add("camera_calibration_mismatch")
-            self._rl.warning("calibration", "camera_calibration_differs", camera=info.camera,
-                             ours=self.s.calibration, differences="; ".join(diff))
+            self._rl.warning(f"calibration:{info.camera}", "camera_calibration_differs",
+                             camera=info.camera, ours=ours.origin,
+                             differences="; ".join(diff))
 
     def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
         self.on_tracks_payload(payload, key, rx_mono_ns)
@@ -95,9 +119,11 @@ class FusionNode:
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
         """Process one cycle: the BrakeCommand is published the moment the core has
         decided it, the targets when every track is done."""
+        if self.rhythm is not None:
+            self.rhythm.on_cycle(rx_mono_ns)
         with self._lock:
             self._check_order(tracks)
-            feed = self.decoder.snapshot()
+            feeds = [d.snapshot() for d in self.decoders]
             sent: list[BrakeCommand] = []
 
             def publish(cmd: BrakeCommand) -> None:
@@ -107,7 +133,7 @@ class FusionNode:
                 self._decided_ns = mono_ns()
 
             try:
-                result = self.core.process(tracks, feed, wall_ns(), mono_ns(), publish)
+                result = self.core.process(tracks, feeds, wall_ns(), mono_ns(), publish)
             except Exception as exc:  # one command per cycle even when a bug bites
                 self.counters.add("processing_error")
                 self._rl.error("core", "fusion_cycle_failed", radar_seq=tracks.header.seq,
@@ -149,11 +175,17 @@ class FusionNode:
                              reason=result.targets.unavailable_reason or cmd.reason)
 
     def stats(self) -> dict[str, Any]:
-        feed = self.decoder.snapshot()
+        feeds = [d.snapshot() for d in self.decoders]
         proc = sorted(self._proc_us)
         out: dict[str, Any] = dict(self.counters.snapshot())
-        out.update(frames=feed.received, frames_unusable=feed.undecodable,
-                   frames_dropped=feed.dropped, invalid_tracks=self.core.invalid_tracks)
+        out.update(frames=sum(f.received for f in feeds),
+                   frames_unusable=sum(f.undecodable for f in feeds),
+                   frames_dropped=sum(f.dropped for f in feeds),
+                   frames_skipped=sum(f.skipped for f in feeds),
+                   invalid_tracks=self.core.invalid_tracks)
+        if len(feeds) > 1:
+            for name, f in zip(self.camera_names, feeds, strict=True):
+                out[f"frames_{name}"] = f"{f.received}/{f.skipped}/{f.undecodable}/{f.dropped}"
         if proc:
             out.update(proc_p50_us=proc[len(proc) // 2], proc_max_us=proc[-1])
         return out

@@ -134,7 +134,7 @@ def test_a_camera_calibration_other_than_ours_is_counted_and_named():
     assert calibration_differences(CAL, info(t_m=tuple(moved), width=640)) == [
         "size 640x480 != 848x480", "t differs"]
     node, _ = node_with(FixedVerifier())
-    node.calibration = CAL
+    node.calibrations = {"front": CAL}
     node.on_camera_info(info(), "k")
     node.on_camera_info(info(k=(1.0,) * 9), "k")
     assert node.counters.get("camera_calibration_mismatch") == 1

@@ -1,0 +1,129 @@
+"""Several cameras in one radar cycle, and how their verdicts combine (pure).
+
+Each camera has its own calibration (a ColumnProjector) and its own frames. Per cycle,
+each camera picks its frame (frames.py), predicts every confirmed track to that frame's
+capture time and projects it into its image. A track is then checked in the cameras that
+see it, in configured order:
+
+- **verified** if any camera verifies it; the first that does decides, and the cameras
+  after it are not gated (their verdict could not change the outcome);
+- **rejected** if at least one camera with a usable frame sees it and every such camera
+  rejects it; the deciding camera is the one with the highest density (the closest call);
+- **not checked** (no threat, gate_scope = candidates) when a camera with a usable frame
+  sees it but the gate was not needed;
+- **unavailable** only if some camera would see it but none of those has a usable frame;
+- **not visible** only if no camera sees it (all project it behind themselves or outside
+  their image).
+"""
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.messages import RadarTrack, Verification
+from common.messages.fusion import CameraCheck
+from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
+from services.fusion.roi import ColumnProjector, Roi
+from services.fusion.verifiers import GateResult
+
+Gate = Callable[[np.ndarray, Roi], GateResult]
+
+
+@dataclass(frozen=True, slots=True)
+class Camera:
+    name: str
+    projector: ColumnProjector
+
+
+@dataclass(frozen=True, slots=True)
+class CameraView:
+    """One camera in one radar cycle: its frame (None: unavailable, `reason` says why),
+    each confirmed track predicted to that frame's capture time (x, y), and its ROI."""
+
+    name: str
+    frame: DecodedFrame | None
+    reason: str
+    xy: list[list[float]]
+    rois: list[Roi | None]
+
+
+def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
+                 tracks: Sequence[RadarTrack], radar_stamp_ns: int, max_skew_ns: int,
+                 align: bool) -> list[CameraView]:
+    """Every camera's frame and projections for one cycle. Tracks are predicted to the
+    frame's time only with `align`; a camera without a usable frame projects them as
+    they are (to tell "would see it" from "not visible")."""
+    views = []
+    if tracks:
+        pos = np.array([(t.x_m, t.y_m) for t in tracks])
+        vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks])
+    for cam, feed in zip(cameras, feeds, strict=True):
+        frame = select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align)
+        reason = "" if frame is not None else unavailable_reason(feed, radar_stamp_ns,
+                                                                 max_skew_ns)
+        if not tracks:
+            views.append(CameraView(cam.name, frame, reason, [], []))
+            continue
+        dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
+        xy = pos + vel * dt_s if dt_s else pos
+        views.append(CameraView(cam.name, frame, reason, xy.tolist(), cam.projector.rois(xy)))
+    return views
+
+
+@dataclass(frozen=True, slots=True)
+class TrackCheck:
+    """One track checked in every camera: the combined verification, the deciding
+    camera's view (None when no camera sees it) and gate result, and each camera's own
+    check (only when there are several cameras)."""
+
+    verification: Verification
+    view: CameraView | None
+    roi: Roi | None
+    result: GateResult | None
+    per_camera: tuple[CameraCheck, ...] = ()
+
+
+def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -> TrackCheck:
+    """Track `i` in every camera, combined by the rule in the module docstring. `gate`:
+    run the verifier (False: the track is no threat and the gate scope is candidates)."""
+    several = len(views) > 1
+    verified: tuple[CameraView, Roi, GateResult] | None = None
+    rejected: tuple[CameraView, Roi, GateResult] | None = None
+    unchecked: tuple[CameraView, Roi] | None = None
+    unavailable: CameraView | None = None
+    per_camera: list[CameraCheck] = []
+    for v in views:
+        roi = v.rois[i]
+        if roi is None:
+            state, density = Verification.NOT_VISIBLE, None
+        elif v.frame is None:
+            state, density = Verification.UNAVAILABLE, None
+            unavailable = unavailable or v
+        elif not gate or verified is not None:
+            state, density = Verification.NOT_CHECKED, None
+            if verified is None and unchecked is None:
+                unchecked = (v, roi)
+        else:
+            result = verify(v.frame.gray, roi)
+            density = result.density
+            if result.verified:
+                state = Verification.VERIFIED
+                verified = (v, roi, result)
+            else:
+                state = Verification.REJECTED
+                if rejected is None or result.density > rejected[2].density:
+                    rejected = (v, roi, result)
+        if several:
+            per_camera.append(CameraCheck(v.name, state, () if roi is None else tuple(roi),
+                                          density))
+    cams = tuple(per_camera)
+    if verified is not None:
+        return TrackCheck(Verification.VERIFIED, *verified, cams)
+    if rejected is not None:
+        return TrackCheck(Verification.REJECTED, *rejected, cams)
+    if unchecked is not None:
+        return TrackCheck(Verification.NOT_CHECKED, unchecked[0], unchecked[1], None, cams)
+    if unavailable is not None:
+        return TrackCheck(Verification.UNAVAILABLE, unavailable, None, None, cams)
+    return TrackCheck(Verification.NOT_VISIBLE, None, None, None, cams)
