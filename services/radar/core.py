@@ -31,15 +31,15 @@ from services.radar.detections import (
 )
 from services.radar.tracker import KalmanTracker
 
-# By base ID: an int hashes faster than an Enum or a MessageSpec, and this lookup runs
-# for every frame.
-_LIST_ROLES: dict[int, tuple[OutputMode, int]] = {
-    BY_KIND[kind].base_id: role for kind, role in (
-        (Kind.OBJECT_GENERAL, (OutputMode.OBJECTS, ListRole.GENERAL)),
-        (Kind.OBJECT_QUALITY, (OutputMode.OBJECTS, ListRole.QUALITY)),
-        (Kind.OBJECT_EXTENDED, (OutputMode.OBJECTS, ListRole.EXTENDED)),
-        (Kind.CLUSTER_GENERAL, (OutputMode.CLUSTERS, ListRole.GENERAL)),
-        (Kind.CLUSTER_QUALITY, (OutputMode.CLUSTERS, ListRole.QUALITY)),
+# By base ID (an int hashes faster than an Enum or a MessageSpec; this lookup runs for
+# every frame): output mode, list role, the message's DLC.
+_LIST_ROLES: dict[int, tuple[OutputMode, int, int]] = {
+    BY_KIND[kind].base_id: (mode, role, BY_KIND[kind].dlc) for kind, mode, role in (
+        (Kind.OBJECT_GENERAL, OutputMode.OBJECTS, ListRole.GENERAL),
+        (Kind.OBJECT_QUALITY, OutputMode.OBJECTS, ListRole.QUALITY),
+        (Kind.OBJECT_EXTENDED, OutputMode.OBJECTS, ListRole.EXTENDED),
+        (Kind.CLUSTER_GENERAL, OutputMode.CLUSTERS, ListRole.GENERAL),
+        (Kind.CLUSTER_QUALITY, OutputMode.CLUSTERS, ListRole.QUALITY),
     )
 }
 
@@ -138,12 +138,13 @@ class SensorCore:
         self.frames_total += 1
         role = _LIST_ROLES.get(spec.base_id)
         if role is not None:   # the hot path: hundreds of frames per cycle
+            mode, list_role, dlc = role
             usable: bytes | None = data
-            if not spec.dlc <= len(data) <= 8:
+            if not dlc <= len(data) <= 8:
                 self.rejected.add(f"wrong_dlc:{spec.dbc_name}")
                 usable = None   # arrived, so the cycle need not wait for it; marks it incomplete
             asm = self.assembler
-            done = asm.on_list_frame(role[0], role[1], usable, mono_ns)
+            done = asm.on_list_frame(mode, list_role, usable, mono_ns)
             if done:
                 return [self.process(c) for c in done]
             if asm.generals_in is not None and not self._filter_needs_extras:

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from common.config.radar import MergeSettings, PrefilterSettings
 from common.messages.radar import OutputMode
-from services.radar.ars408.codec import Columns, decode_columns
+from services.radar.ars408.codec import decode_columns
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
 from services.radar.cycle import RawCycle
 from services.radar.neighbours import pairs_within_self
@@ -24,6 +24,7 @@ I = npt.NDArray[np.int64]  # noqa: E741 (a column type, not a loop index)
 
 UNKNOWN = -1
 _NO_IDS = np.zeros(0, dtype=np.int64)
+_ROW_BINS = np.arange(4, dtype=np.int64)
 
 # Column order of Detections.f and Detections.i.
 X, Y, VX, VY, RCS = range(5)
@@ -32,47 +33,63 @@ RADAR_ID, DYN_PROP, OBJ_CLASS, PROB_OF_EXIST, INVALID_STATE = range(5)
 
 @dataclass(frozen=True)
 class Detections:
-    """`f` (m, 5): x, y, vx, vy (m, m/s), rcs (dBsm). `i` (m, 5): radar ID, DynProp, object
-    class (0x60D), ProbOfExist (0x60C), InvalidState (0x702); UNKNOWN (-1) when the radar
-    did not send it."""
+    """`floats` (5, m): rows x, y, vx, vy (m, m/s), rcs (dBsm). `ints` (5, m): rows radar
+    ID, DynProp, object class (0x60D), ProbOfExist (0x60C), InvalidState (0x702); UNKNOWN
+    (-1) when the radar did not send it.
 
-    f: F
-    i: I
+    One row per attribute: numpy is several times slower on strided columns, and the
+    pipeline works attribute by attribute over all detections. `f` and `i` are the
+    (m, 5) views (a detection per row)."""
+
+    floats: F
+    ints: I
+
+    @property
+    def f(self) -> F:
+        return self.floats.T
+
+    @property
+    def i(self) -> I:
+        return self.ints.T
 
     @property
     def x(self) -> F:
-        return self.f[:, X]
+        return self.floats[X]
 
     @property
     def y(self) -> F:
-        return self.f[:, Y]
+        return self.floats[Y]
 
     @property
     def vx(self) -> F:
-        return self.f[:, VX]
+        return self.floats[VX]
 
     @property
     def vy(self) -> F:
-        return self.f[:, VY]
+        return self.floats[VY]
 
     @property
     def rcs(self) -> F:
-        return self.f[:, RCS]
+        return self.floats[RCS]
 
     @property
     def radar_id(self) -> I:
-        return self.i[:, RADAR_ID]
+        return self.ints[RADAR_ID]
 
     def __len__(self) -> int:
-        return len(self.f)
+        return int(self.floats.shape[1])
 
     def take(self, index: npt.NDArray[Any]) -> "Detections":
-        """Rows selected by a boolean mask or an index array."""
-        return Detections(self.f[index], self.i[index])
+        """Detections selected by a boolean mask or an index array."""
+        if index.dtype == np.bool_:
+            return Detections(np.compress(index, self.floats, axis=1),
+                              np.compress(index, self.ints, axis=1))
+        return Detections(np.take(self.floats, index, axis=1),
+                          np.take(self.ints, index, axis=1))
 
     @staticmethod
     def empty() -> "Detections":
-        return Detections(np.zeros((0, 5)), np.zeros((0, 5), dtype=np.int64))
+        return Detections(np.zeros((5, 0)), np.zeros((5, 0), dtype=np.int64))
 
     @staticmethod
     def of(x: Any, y: Any, vx: Any = 0.0, vy: Any = 0.0, rcs: Any = 10.0,
@@ -80,12 +97,12 @@ class Detections:
            prob_of_exist: Any = UNKNOWN, invalid_state: Any = UNKNOWN) -> "Detections":
         """Build from columns (scalars broadcast): for tests and simulators."""
         n = len(np.atleast_1d(x))
-        f = np.empty((n, 5))
+        f = np.empty((5, n))
         for k, v in enumerate((x, y, vx, vy, rcs)):
-            f[:, k] = v
-        i = np.empty((n, 5), dtype=np.int64)
+            f[k] = v
+        i = np.empty((5, n), dtype=np.int64)
         for k, v in enumerate((radar_id, dyn_prop, obj_class, prob_of_exist, invalid_state)):
-            i[:, k] = v
+            i[k] = v
         return Detections(f, i)
 
 
@@ -101,14 +118,15 @@ def _signal_index(spec: MessageSpec, *attrs: str) -> list[int]:
     return [fields.index(a) for a in attrs]
 
 
-# General frames: the float columns x, y, vx, vy, rcs and the integer id, dyn_prop,
-# at the same positions for objects (0x60B) and clusters (0x701).
+# General frames: the float rows x, y, vx, vy, rcs and the integer id, dyn_prop, at the
+# same signal positions for objects (0x60B) and clusters (0x701).
 _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_lat_m",
                            "vrel_long_mps", "vrel_lat_mps", "rcs_dbsm")
-_GENERAL_ID, _GENERAL_DYN = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "id", "dyn_prop")
-_CLUSTER_F = _signal_index(BY_KIND[Kind.CLUSTER_GENERAL], "dist_long_m", "dist_lat_m",
-                           "vrel_long_mps", "vrel_lat_mps", "rcs_dbsm")
-assert _CLUSTER_F == _GENERAL_F
+_GENERAL_I = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "id", "dyn_prop")
+assert (_signal_index(BY_KIND[Kind.CLUSTER_GENERAL], "dist_long_m", "dist_lat_m", "vrel_long_mps",
+                      "vrel_lat_mps", "rcs_dbsm", "id", "dyn_prop") == _GENERAL_F + _GENERAL_I)
+# Every list message carries the radar's ID as its first signal.
+assert all(spec.signals[0].attr == "id" for specs in _SPECS.values() for spec in specs if spec)
 
 
 def _present(frames: list[bytes | None]) -> list[bytes]:
@@ -119,7 +137,7 @@ def occurrence_keys(ids: I) -> I:
     """`id + 256 * k` for the k-th frame carrying `id` in this cycle: a key that stays
     unique when IDs repeat (a cluster cycle of more than 256 clusters wraps the 8-bit ID),
     and pairs the k-th quality frame of an ID with the k-th general frame of that ID."""
-    if len(ids) == 0 or int(np.bincount(ids).max()) == 1:
+    if len(ids) == 0 or (len(ids) <= 256 and int(np.bincount(ids).max()) == 1):
         return ids
     order = np.argsort(ids, kind="stable")
     ordered = ids[order]
@@ -132,7 +150,7 @@ def _attach(
     spec: MessageSpec, frames: list[bytes | None], general_ids: I, keys: I,
     rows_of_keys: I | None, target: I, column: str, rejected: dict[str, int],
 ) -> None:
-    """Copy `column` of quality / extended frames into the integer column `target`.
+    """Copy signal `column` of quality / extended frames into the integer row `target`.
 
     The radar sends them in the order of the general frames: then it is one copy.
     Otherwise they are matched by ID key; `rows_of_keys` maps the general frames' keys
@@ -141,13 +159,14 @@ def _attach(
     datas = _present(frames)
     if not datas:
         return
-    cols: Columns = decode_columns(spec, datas)
+    cols = decode_columns(spec, datas)
     for reason, n in cols.rejected.items():
         rejected[reason] = rejected.get(reason, 0) + n
-    ids = cols.values["id"]
+    ids = cols.raw[0]
+    values = cols.raw[_signal_index(spec, column)[0]]
     if (rows_of_keys is None and cols.all_valid and len(ids) == len(general_ids)
-            and np.array_equal(ids, general_ids)):
-        target[:] = cols.values[column]
+            and bool((ids == general_ids).all())):
+        target[:] = values
         return
     qkeys = occurrence_keys(ids)[cols.valid]
     lut = np.full(int(max(keys.max(initial=0), qkeys.max(initial=0))) + 1, -1, dtype=np.int64)
@@ -157,7 +176,7 @@ def _attach(
     if unmatched:
         rejected[f"unmatched_id:{spec.dbc_name}"] = unmatched
     ok = rows >= 0
-    target[rows[ok]] = cols.values[column][cols.valid][ok]
+    target[rows[ok]] = values[cols.valid][ok]
 
 
 @dataclass
@@ -186,7 +205,7 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         return GeneralFrames(Detections.empty(), _NO_IDS, _NO_IDS, None, rejected)
     cols = decode_columns(general_spec, datas)
     rejected.update(cols.rejected)
-    ids = cols.raw[:, _GENERAL_ID]
+    ids = cols.raw[0]
     keys = occurrence_keys(ids)
     keep: npt.NDArray[np.bool_] | None = None if cols.all_valid else cols.valid
     if cycle.mode is OutputMode.OBJECTS and keys is not ids:
@@ -195,33 +214,32 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         if dupes:
             rejected[f"duplicate_id:{general_spec.dbc_name}"] = dupes
         keep = cols.valid & unique
-    f = cols.phys[:, _GENERAL_F]
-    i = np.full((len(ids), 5), UNKNOWN, dtype=np.int64)
-    i[:, RADAR_ID] = ids
-    i[:, DYN_PROP] = cols.raw[:, _GENERAL_DYN]
+    f = cols.phys[_GENERAL_F]
+    i = np.full((5, len(ids)), UNKNOWN, dtype=np.int64)
+    i[RADAR_ID:DYN_PROP + 1] = cols.raw[_GENERAL_I]
     rows: I | None = None
     if keep is not None:
-        f, i = f[keep], i[keep]
+        f, i = np.compress(keep, f, axis=1), np.compress(keep, i, axis=1)
         rows = np.full(len(keys), -2, dtype=np.int64)
-        rows[keep] = np.arange(len(f))
+        rows[keep] = np.arange(f.shape[1])
     return GeneralFrames(Detections(f, i), ids, keys, rows, rejected)
 
 
 def attach_extras(cycle: RawCycle, g: GeneralFrames) -> None:
     """Decode the cycle's quality / extended frames into the detections' ProbOfExist,
-    class (objects) or InvalidState (clusters) columns; rejections go to `g.rejected`."""
+    class (objects) or InvalidState (clusters) rows; rejections go to `g.rejected`."""
     if not len(g.det):
         return
     _, quality_spec, extended_spec = _SPECS[cycle.mode]
-    i = g.det.i
+    i = g.det.ints
     if cycle.mode is OutputMode.OBJECTS:
         assert extended_spec is not None
-        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[:, PROB_OF_EXIST],
+        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[PROB_OF_EXIST],
                 "prob_of_exist", g.rejected)
-        _attach(extended_spec, cycle.extended, g.ids, g.keys, g.rows, i[:, OBJ_CLASS],
+        _attach(extended_spec, cycle.extended, g.ids, g.keys, g.rows, i[OBJ_CLASS],
                 "obj_class", g.rejected)
     else:
-        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[:, INVALID_STATE],
+        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[INVALID_STATE],
                 "invalid_state", g.rejected)
 
 
@@ -244,10 +262,10 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
         keep &= x > 0
     if s.min_prob_of_exist > 0:
         # Unknown (no quality frames) passes: the filter cannot judge it.
-        p = det.i[:, PROB_OF_EXIST]
+        p = det.ints[PROB_OF_EXIST]
         keep &= (p == UNKNOWN) | (p >= s.min_prob_of_exist)
     if s.drop_cluster_invalid_states:
-        keep &= ~np.isin(det.i[:, INVALID_STATE], np.asarray(s.drop_cluster_invalid_states))
+        keep &= ~np.isin(det.ints[INVALID_STATE], np.asarray(s.drop_cluster_invalid_states))
     return det.take(keep)
 
 
@@ -255,7 +273,8 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
     """Centroid merge: the strongest unmerged detection seeds a group of every unmerged
     detection within `distance_m` whose velocity differs by at most `velocity_mps`; the
     group becomes one detection at the mean position and velocity, with the seed's RCS,
-    radar ID and attributes.
+    radar ID and attributes. When anything merges, the result is ordered by RCS
+    (strongest first, ties in input order); otherwise it is the input.
 
     Seeds, not chains: a chain of returns along a guard rail does not collapse into one
     phantom point between its ends; a group spans at most 2 * distance_m.
@@ -263,20 +282,23 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
     n = len(det)
     if not s.enabled or n < 2:
         return det
-    ii, jj = pairs_within_self(det.x, det.y, s.distance_m)
-    dv = det.f[ii, VX:VY + 1] - det.f[jj, VX:VY + 1]
-    similar = (dv * dv).sum(axis=1) <= s.velocity_mps**2
+    fl = det.floats
+    ii, jj = pairs_within_self(fl[X], fl[Y], s.distance_m)
+    vx, vy = fl[VX], fl[VY]
+    dvx = vx[ii] - vx[jj]
+    dvy = vy[ii] - vy[jj]
+    similar = dvx * dvx + dvy * dvy <= s.velocity_mps**2
     if not similar.any():
         return det
-    # Sparse neighbour lists in plain Python: numpy per-row calls would cost more than
-    # the few pairs a scene has.
+    # Sparse neighbour lists and the seed walk in plain Python: numpy per-row calls
+    # would cost more than the few pairs a scene has.
     neighbours: dict[int, list[int]] = {}
     for i, j in zip(ii[similar].tolist(), jj[similar].tolist(), strict=True):
         neighbours.setdefault(i, []).append(j)
         neighbours.setdefault(j, []).append(i)
     group = [-1] * n
     seeds: list[int] = []
-    for i in np.argsort(-det.rcs, kind="stable").tolist():
+    for i in np.argsort(-fl[RCS], kind="stable").tolist():
         if group[i] >= 0:
             continue
         g = len(seeds)
@@ -286,9 +308,10 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
             if group[j] < 0:
                 group[j] = g
     k = len(seeds)
-    member = np.zeros((k, n))
-    member[group, np.arange(n)] = 1.0
-    seed = np.asarray(seeds, dtype=np.int64)
-    f = det.f[seed]
-    f[:, X:VY + 1] = (member @ det.f[:, X:VY + 1]) / member.sum(axis=1)[:, None]
-    return Detections(f, det.i[seed])
+    out = det.take(np.asarray(seeds, dtype=np.int64))
+    # Each group's mean: one weighted bincount over all four rows (row r of group g at
+    # bin r * k + g).
+    bins = (np.asarray(group, dtype=np.int64) + _ROW_BINS[:, None] * k).ravel()
+    sums = np.bincount(bins, weights=fl[X:VY + 1].ravel(), minlength=4 * k).reshape(4, k)
+    out.floats[X:VY + 1] = sums / np.bincount(group, minlength=k)
+    return out

@@ -15,10 +15,15 @@ association cost (`radar_id_bonus`) but never overrides the gate: the radar swap
 
 Implementation: with a constant-velocity model, white-acceleration noise per axis,
 diagonal measurement noise and a diagonal initial covariance, x and y never correlate,
-so the 4x4 covariance is two 2x2 blocks [[var_p, cov_pv], [cov_pv, var_v]], one per axis.
-They are stored as (n, 2) arrays (column 0 the x axis, column 1 the y axis) and every
-step is a closed-form elementwise formula: no batched 4x4 inverses (numpy calls cost
-microseconds each on a small CPU, whatever their size).
+so the 4x4 covariance is two 2x2 blocks [[var_p, cov_pv], [cov_pv, var_v]], one per axis,
+and every step is a closed-form elementwise formula over all tracks at once. numpy calls
+cost microseconds each on a small CPU whatever their size, so the whole state is one
+float matrix (`state`) and one integer matrix (`meta`), a row per quantity and a column
+per track: a birth or a deletion is one call per matrix, and every formula runs on
+contiguous rows. Association never looks at all n x m pairs: the chi-square gate bounds each
+axis (|dx| <= sqrt(chi2 S_xx), |dy| <= sqrt(chi2 S_yy)), so a strip grid
+(`neighbours.candidates_in_boxes`) yields the few candidates per track, and only they get
+the 4-d Mahalanobis distance.
 """
 
 import numpy as np
@@ -26,47 +31,103 @@ import numpy.typing as npt
 
 from common.config.radar import TrackerSettings
 from common.messages.radar import RadarTrack
-from services.radar.detections import DYN_PROP, OBJ_CLASS, RADAR_ID, RCS, VY, Detections
-from services.radar.neighbours import pairs_within
+from services.radar.detections import DYN_PROP, OBJ_CLASS, RADAR_ID, RCS, Detections, X, Y
+from services.radar.neighbours import candidates_in_boxes
 
 F = npt.NDArray[np.float64]
 I = npt.NDArray[np.int64]  # noqa: E741
 B = npt.NDArray[np.bool_]
 
 _EMPTY = np.zeros(0, dtype=np.int64)
+# Up to this many track x detection pairs, the gate's boxes are tested on the dense
+# matrix: fewer numpy calls than the strip grid.
+_DENSE_MAX = 2048
 
-# Columns of KalmanTracker.cov: per axis (x, y) the 2x2 block [[var_p, cov_pv], [cov_pv, var_v]].
-VAR_P = slice(0, 2)
-COV_PV = slice(2, 4)
-VAR_V = slice(4, 6)
-# Columns of KalmanTracker.meta.
+# Rows of KalmanTracker.state: the state [x, y, vx, vy]; per axis (x, y) the 2x2
+# covariance block [[var_p, cov_pv], [cov_pv, var_v]]; the last detection's RCS.
+POS = slice(0, 2)
+VEL = slice(2, 4)
+STATE = slice(0, 4)
+COV = slice(4, 10)
+VAR_P = slice(4, 6)
+COV_PV = slice(6, 8)
+VAR_V = slice(8, 10)
+TRACK_RCS = 10
+N_STATE = 11
+# Rows of KalmanTracker.meta.
 ID, HITS, MISSES, CONFIRMED, META_RADAR_ID, META_DYN_PROP, META_OBJ_CLASS = range(7)
+N_META = 7
+_DET_META = slice(RADAR_ID, OBJ_CLASS + 1)
+assert (RADAR_ID, DYN_PROP, OBJ_CLASS) == (0, 1, 2)
+# Index helpers of KalmanTracker._innovation and _update (rows of S and of the stacks).
+_COEF_ROWS = [4, 5, 2, 3, 0, 1]              # S rows v, b, a -> alpha, beta, gamma
+_AXES = [0, 1, 0, 1, 0, 1]
+_C1_ROWS = [0, 1, 4, 5, 0, 1, 0, 1, 4, 5]    # alpha, gamma, alpha, alpha, gamma
+_U2_ROWS = [2, 3, 0, 1, 6, 7, 8, 9, 6, 7]    # dv, dp, cov, var_v, cov
 
 
 def covariance_step(dt: float, accel_std: float) -> tuple[F, F]:
-    """(M, q) with cov' = cov @ M + q: the covariance prediction F P F^T + Q written
-    on the per-axis blocks, Q from piecewise-constant white acceleration."""
+    """(M, q) with cov' = M @ cov + q: the covariance prediction F P F^T + Q written on
+    the per-axis blocks (rows var_p x/y, cov_pv x/y, var_v x/y), Q from
+    piecewise-constant white acceleration."""
     m = np.eye(6)
     for axis in range(2):
         p, c, v = axis, 2 + axis, 4 + axis
-        m[c, p] = 2 * dt          # var_p' = var_p + 2 dt cov + dt^2 var_v
-        m[v, p] = dt * dt
-        m[v, c] = dt              # cov' = cov + dt var_v
+        m[p, c] = 2 * dt          # var_p' = var_p + 2 dt cov + dt^2 var_v
+        m[p, v] = dt * dt
+        m[c, v] = dt              # cov' = cov + dt var_v
     q = accel_std**2
     noise = np.array([q * dt**4 / 4] * 2 + [q * dt**3 / 2] * 2 + [q * dt * dt] * 2)
-    return m, noise
+    return m, noise[:, None]
+
+
+def greedy_pairs(ti: I, di: I, cost: F) -> tuple[I, I]:
+    """Greedy global nearest neighbour: pairs in order of cost (ties: lower track row,
+    then lower detection row), each taken unless its track or detection already is.
+
+    A pair alone on its track and on its detection is taken whatever its cost, so only
+    the contested pairs go through the sequential loop."""
+    alone = (np.bincount(ti)[ti] == 1) & (np.bincount(di)[di] == 1)
+    contested = np.flatnonzero(~alone)
+    if len(contested) == 0:
+        return ti, di
+    ct, cd = ti[contested], di[contested]
+    order = np.lexsort((cd, ct, cost[contested]))
+    used_t: set[int] = set()
+    used_d: set[int] = set()
+    mt: list[int] = []
+    md: list[int] = []
+    for t, d in zip(ct[order].tolist(), cd[order].tolist(), strict=True):
+        if t in used_t or d in used_d:
+            continue
+        used_t.add(t)
+        used_d.add(d)
+        mt.append(t)
+        md.append(d)
+    return (np.concatenate([ti[alone], np.asarray(mt, dtype=np.int64)]),
+            np.concatenate([di[alone], np.asarray(md, dtype=np.int64)]))
 
 
 class KalmanTracker:
-    """State: `x` (n, 4) [x, y, vx, vy]; `cov` (n, 6) the per-axis covariance blocks;
-    `rcs` (n,); `meta` (n, 7) track ID, consecutive hits, consecutive misses, confirmed,
-    and the last detection's radar ID, DynProp and class."""
+    """`state` (11, n): a row per quantity ([x, y, vx, vy], the per-axis covariance
+    blocks, the RCS), a column per track; `meta` (7, n): track ID, consecutive hits,
+    consecutive misses, confirmed, and the last detection's radar ID, DynProp and class.
+    Rows, not columns: numpy is several times slower on strided data."""
 
     def __init__(self, settings: TrackerSettings) -> None:
         self.s = settings
-        self.r_pos = np.array([settings.pos_x_std_m**2, settings.pos_y_std_m**2])
-        self.r_vel = np.array([settings.vel_x_std_mps**2, settings.vel_y_std_mps**2])
-        self._cov0 = np.concatenate([self.r_pos, [0.0, 0.0], self.r_vel])
+        r_pos = [settings.pos_x_std_m**2, settings.pos_y_std_m**2]
+        r_vel = [settings.vel_x_std_mps**2, settings.vel_y_std_mps**2]
+        # S = P + R on the covariance rows (cov_pv gets no noise); P0 = R.
+        self._r_cov = np.array([[*r_pos, 0.0, 0.0, *r_vel]]).T
+        # The update's per-block gains (see _update): position, velocity, var_p,
+        # cov_pv, var_v.
+        self._update_scale = np.array([[-r for r in r_pos] + [-r for r in r_vel]
+                                       + r_pos + r_pos + r_vel]).T
+        self._chi2 = settings.gate_chi2
+        self._min_misses = min(settings.delete_after_misses,
+                               settings.delete_tentative_after_misses)
+        self._cap = settings.gate_max_distance_m
         self.next_id = 1
         self.last_t: float | None = None
         self.resets = 0
@@ -74,21 +135,26 @@ class KalmanTracker:
         self._clear()
 
     def _clear(self) -> None:
-        self.x: F = np.zeros((0, 4))
-        self.cov: F = np.zeros((0, 6))
-        self.rcs: F = np.zeros(0)
-        self.meta: I = np.zeros((0, 7), dtype=np.int64)
+        self.state: F = np.zeros((N_STATE, 0))
+        self.meta: I = np.zeros((N_META, 0), dtype=np.int64)
+        # Per track, from the innovation covariance S of this cycle (see _innovation).
+        self._coef: F = np.zeros((6, 0))
 
     def __len__(self) -> int:
-        return len(self.x)
+        return int(self.state.shape[1])
+
+    @property
+    def x(self) -> F:
+        """(n, 4) [x, y, vx, vy] of every track (a view)."""
+        return self.state[STATE].T
 
     @property
     def ids(self) -> I:
-        return self.meta[:, ID]
+        return self.meta[ID]
 
     @property
     def confirmed(self) -> B:
-        return self.meta[:, CONFIRMED].astype(np.bool_)
+        return self.meta[CONFIRMED].astype(np.bool_)
 
     def reset(self) -> None:
         self._clear()
@@ -110,108 +176,141 @@ class KalmanTracker:
 
     def predict(self, dt: float) -> None:
         """x' = F x, P' = F P F^T + Q."""
+        if not len(self):
+            return
         cached = self._step_cache
         if cached is None or cached[0] != dt:
             cached = self._step_cache = (dt, *covariance_step(dt, self.s.accel_std_mps2))
-        self.x[:, 0:2] += dt * self.x[:, 2:4]
-        self.cov = self.cov @ cached[1] + cached[2]
+        st = self.state
+        st[POS] += dt * st[VEL]
+        st[COV] = cached[1] @ st[COV] + cached[2]
+
+    def _innovation(self) -> F:
+        """Per track and axis, with S = P + R = [[a, b], [b, v]]: rows alpha, beta, gamma
+        (2 each) = [v, 2 b, a] / det(S), so that the Mahalanobis distance of an innovation
+        (dp, dv) is alpha dp^2 - beta dp dv + gamma dv^2 (summed over the axes); and the
+        gate's half-widths on position, sqrt(chi2 a) capped (2, n)."""
+        s = self.state[COV] + self._r_cov
+        a, b, v = s[0:2], s[2:4], s[4:6]
+        coef = s[_COEF_ROWS] / (a * v - b * b)[_AXES]
+        coef[2:4] *= 2.0
+        self._coef = coef
+        return np.minimum(np.sqrt(self._chi2 * a), self._cap)
+
+    def _gated_dense(self, det: Detections) -> tuple[I, I, F]:
+        """Every track x detection pair, as matrices: fewer numpy calls when both are few."""
+        diff = det.floats[STATE, None, :] - self.state[STATE, :, None]   # (4, n, m)
+        dp, dv = diff[POS], diff[VEL]
+        c = self._coef[:, :, None]
+        d2 = (c[0:2] * dp * dp - c[2:4] * dp * dv + c[4:6] * dv * dv).sum(axis=0)
+        ok = (d2 <= self._chi2) & ((dp * dp).sum(axis=0) <= self._cap**2)
+        ti, di = np.nonzero(ok)
+        return ti, di, d2[ti, di]
+
+    def _gated_sparse(self, det: Detections, half: F) -> tuple[I, I, F]:
+        """The pairs inside the gate's per-axis boxes first (a strip grid), the distance
+        for those only."""
+        st = self.state
+        ti, di = candidates_in_boxes(st[X], st[Y], float(half[X].max()), half[Y], det.x, det.y)
+        if len(ti) == 0:
+            return _EMPTY, _EMPTY, np.zeros(0)
+        d = np.take(det.floats[STATE], di, axis=1) - np.take(st[STATE], ti, axis=1)
+        dp, dv = d[POS], d[VEL]
+        c = np.take(self._coef, ti, axis=1)
+        d2 = (c[0:2] * dp * dp - c[2:4] * dp * dv + c[4:6] * dv * dv).sum(axis=0)
+        ok = np.flatnonzero((d2 <= self._chi2) & ((dp * dp).sum(axis=0) <= self._cap**2))
+        return ti[ok], di[ok], d2[ok]
 
     def associate(self, det: Detections) -> tuple[I, I]:
         """(track rows, detection rows) matched, by greedy nearest neighbour on the gated
         Mahalanobis cost."""
-        # Euclidean pre-gate on position first, the Mahalanobis distance only for the
-        # candidate pairs.
-        ti, di = pairs_within(self.x[:, 0], self.x[:, 1], det.x, det.y,
-                              self.s.gate_max_distance_m)
+        if not len(self) or not len(det):
+            return _EMPTY, _EMPTY
+        half = self._innovation()
+        if len(self) * len(det) <= _DENSE_MAX:
+            ti, di, cost = self._gated_dense(det)
+        else:
+            ti, di, cost = self._gated_sparse(det, half)
         if len(ti) == 0:
             return _EMPTY, _EMPTY
-        d = det.f[di, 0:VY + 1] - self.x[ti]
-        dp, dv = d[:, 0:2], d[:, 2:4]
-        c = self.cov[ti]
-        a = c[:, VAR_P] + self.r_pos              # innovation covariance S = P + R, per axis
-        b = c[:, COV_PV]
-        v = c[:, VAR_V] + self.r_vel
-        d2 = ((dp * dp * v - 2 * dp * dv * b + dv * dv * a) / (a * v - b * b)).sum(axis=1)
-        gated = d2 <= self.s.gate_chi2
-        ti, di, cost = ti[gated], di[gated], d2[gated]
         if self.s.radar_id_bonus > 0:
-            rid = det.i[di, RADAR_ID]
-            same = (self.meta[ti, META_RADAR_ID] == rid) & (rid >= 0)
+            rid = det.ints[RADAR_ID][di]
+            same = (self.meta[META_RADAR_ID][ti] == rid) & (rid >= 0)
             cost = cost - self.s.radar_id_bonus * same
-        order = np.argsort(cost, kind="stable")
-        used_t: set[int] = set()
-        used_d: set[int] = set()
-        mt: list[int] = []
-        md: list[int] = []
-        for t, dd in zip(ti[order].tolist(), di[order].tolist(), strict=True):
-            if t in used_t or dd in used_d:
-                continue
-            used_t.add(t)
-            used_d.add(dd)
-            mt.append(t)
-            md.append(dd)
-        return np.asarray(mt, dtype=np.int64), np.asarray(md, dtype=np.int64)
+        return greedy_pairs(ti, di, cost)
 
     def _update(self, rows: I, det: Detections, drows: I) -> None:
+        """Kalman update of tracks `rows` with detections `drows` (after associate, whose
+        coefficients it reuses).
+
+        With K = P S^-1 per axis and R = diag(r_p, r_v), the update simplifies to
+        x' = z - R S^-1 (z - x) and P' = R S^-1 P: position' = z_p - r_p (alpha dp - beta'
+        dv), velocity' = z_v - r_v (gamma dv - beta' dp), var_p' = r_p (alpha var_p -
+        beta' cov), cov' = r_p (alpha cov - beta' var_v), var_v' = r_v (gamma var_v -
+        beta' cov), with beta' = beta / 2: one stacked expression for all five blocks."""
         if len(rows) == 0:
             return
-        c = self.cov[rows]
-        pa, pb, pc = c[:, VAR_P], c[:, COV_PV], c[:, VAR_V]
-        a, v = pa + self.r_pos, pc + self.r_vel      # S = P + R
-        inv_det = 1.0 / (a * v - pb * pb)
-        pb2 = pb * pb
-        # K = P S^-1, closed form per axis.
-        k11 = (pa * v - pb2) * inv_det
-        k12 = (pb * a - pa * pb) * inv_det
-        k21 = (pb * v - pc * pb) * inv_det
-        k22 = (pc * a - pb2) * inv_det
-        d = det.f[drows, 0:VY + 1] - self.x[rows]
-        dp, dv = d[:, 0:2], d[:, 2:4]
-        self.x[rows] += np.concatenate([k11 * dp + k12 * dv, k21 * dp + k22 * dv], axis=1)
-        # P' = (I - K) P; the block stores cov_pv once, which keeps it symmetric.
-        self.cov[rows] = np.concatenate(
-            [(1 - k11) * pa - k12 * pb, (1 - k11) * pb - k12 * pc, (1 - k22) * pc - k21 * pb],
-            axis=1)
-        self.rcs[rows] = det.f[drows, RCS]
-        self.meta[rows, META_RADAR_ID:] = det.i[drows][:, [RADAR_ID, DYN_PROP, OBJ_CLASS]]
+        c = np.take(self.state, rows, axis=1)
+        k = np.take(self._coef, rows, axis=1)
+        z = np.take(det.floats, drows, axis=1)
+        u1 = np.concatenate([z[STATE] - c[STATE], c[COV]])      # dp, dv, var_p, cov, var_v
+        u2 = u1[_U2_ROWS].reshape(5, 2, -1)                      # dv, dp, cov, var_v, cov
+        new = self._update_scale * (k[_C1_ROWS] * u1 - (0.5 * k[2:4] * u2).reshape(10, -1))
+        new[STATE] += z[STATE]
+        self.state[:COV.stop, rows] = new
+        self.state[TRACK_RCS, rows] = z[RCS]
+        self.meta[META_RADAR_ID:, rows] = np.take(det.ints[_DET_META], drows, axis=1)
 
     def _birth(self, det: Detections, drows: I) -> None:
         k = len(drows)
-        if k == 0:
-            return
-        meta = np.zeros((k, 7), dtype=np.int64)
-        meta[:, ID] = np.arange(self.next_id, self.next_id + k)
-        meta[:, HITS] = 1
-        meta[:, CONFIRMED] = self.s.confirm_hits <= 1
-        meta[:, META_RADAR_ID:] = det.i[drows][:, [RADAR_ID, DYN_PROP, OBJ_CLASS]]
+        fd = np.take(det.floats, drows, axis=1)
+        new = np.empty((N_STATE, k))
+        new[STATE] = fd[STATE]
+        new[COV] = self._r_cov      # P0 = R
+        new[TRACK_RCS] = fd[RCS]
+        meta = np.zeros((N_META, k), dtype=np.int64)
+        meta[ID] = np.arange(self.next_id, self.next_id + k)
+        meta[HITS] = 1
+        meta[CONFIRMED] = self.s.confirm_hits <= 1
+        meta[META_RADAR_ID:] = np.take(det.ints[_DET_META], drows, axis=1)
         self.next_id += k
-        self.x = np.concatenate([self.x, det.f[drows, 0:VY + 1]])
-        self.cov = np.concatenate([self.cov, np.broadcast_to(self._cov0, (k, 6))])
-        self.rcs = np.concatenate([self.rcs, det.f[drows, RCS]])
-        self.meta = np.concatenate([self.meta, meta])
+        self.state = np.concatenate([self.state, new], axis=1)
+        self.meta = np.concatenate([self.meta, meta], axis=1)
 
     def step(self, det: Detections, t_s: float) -> None:
         """Advance to time `t_s` (seconds, the cycle's source clock) with this cycle's
         detections."""
         self.predict(self._dt(t_s))
         rows, drows = self.associate(det)
-        matched = np.zeros(len(self), dtype=np.bool_)
-        matched[rows] = True
         self._update(rows, det, drows)
+        if len(self):
+            self._count(rows)
+        if len(rows) < len(det):
+            unmatched = np.ones(len(det), dtype=np.bool_)
+            unmatched[drows] = False
+            self._birth(det, np.flatnonzero(unmatched))
+
+    def _count(self, rows: I) -> None:
+        """Hits and misses after an update of `rows`; confirmation; deletion."""
+        s = self.s
         meta = self.meta
-        meta[:, HITS] = np.where(matched, meta[:, HITS] + 1, 0)
-        meta[:, MISSES] = np.where(matched, 0, meta[:, MISSES] + 1)
-        confirmed = (meta[:, CONFIRMED] > 0) | (meta[:, HITS] >= self.s.confirm_hits)
-        meta[:, CONFIRMED] = confirmed
-        limit = np.where(confirmed, self.s.delete_after_misses,
-                         self.s.delete_tentative_after_misses)
-        keep = meta[:, MISSES] < limit
+        hits, misses = meta[HITS], meta[MISSES]
+        hits += 1
+        misses += 1
+        misses[rows] = 0
+        if len(rows) < len(self):
+            matched = np.zeros(len(self), dtype=np.bool_)
+            matched[rows] = True
+            hits *= matched
+        confirmed = meta[CONFIRMED]
+        confirmed |= hits >= s.confirm_hits
+        if len(rows) == len(self) or misses.max() < self._min_misses:
+            return                       # nobody reached a deletion limit
+        limit = np.where(confirmed > 0, s.delete_after_misses, s.delete_tentative_after_misses)
+        keep = misses < limit
         if not keep.all():
-            self.x, self.cov, self.rcs, self.meta = (
-                self.x[keep], self.cov[keep], self.rcs[keep], meta[keep])
-        unmatched = np.ones(len(det), dtype=np.bool_)
-        unmatched[drows] = False
-        self._birth(det, np.flatnonzero(unmatched))
+            self.state = np.compress(keep, self.state, axis=1)
+            self.meta = np.compress(keep, meta, axis=1)
 
     def annotate_class(self, det: Detections) -> None:
         """Set the object class of the tracks updated or born this cycle from `det` (the
@@ -219,25 +318,26 @@ class KalmanTracker:
         if not len(self) or not len(det):
             return
         lut = np.full(256, -1, dtype=np.int64)
-        lut[det.radar_id] = det.i[:, OBJ_CLASS]
+        lut[det.radar_id] = det.ints[OBJ_CLASS]
         meta = self.meta
-        fresh = (meta[:, MISSES] == 0) & (meta[:, META_RADAR_ID] >= 0)
-        meta[fresh, META_OBJ_CLASS] = lut[meta[fresh, META_RADAR_ID]]
+        fresh = (meta[MISSES] == 0) & (meta[META_RADAR_ID] >= 0)
+        meta[META_OBJ_CLASS, fresh] = lut[meta[META_RADAR_ID, fresh]]
 
     def tracks(self) -> list[RadarTrack]:
         """Every track, confirmed or not, as messages."""
         if not len(self):
             return []
-        x, y, vx, vy = self.x.T
+        st = self.state
+        x, y, vx, vy = st[0], st[1], st[2], st[3]
         r = np.hypot(x, y)
         rr = np.divide(x * vx + y * vy, r, out=np.zeros_like(r), where=r > 0)
-        m = self.meta.T.tolist()
-        # One tolist() per column: per-element float() conversions would dominate.
+        # One tolist() per matrix: per-element conversions would dominate.
+        f = st.tolist()
+        m = self.meta.tolist()
         columns = zip(
-            m[ID], x.tolist(), y.tolist(), vx.tolist(), vy.tolist(), r.tolist(),
-            rr.tolist(), self.rcs.tolist(), [c > 0 for c in m[CONFIRMED]], m[HITS],
-            m[MISSES], self.cov[:, 0].tolist(), self.cov[:, 1].tolist(),
-            m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS],
+            m[ID], f[0], f[1], f[2], f[3], r.tolist(), rr.tolist(), f[TRACK_RCS],
+            [c > 0 for c in m[CONFIRMED]], m[HITS], m[MISSES], f[VAR_P.start],
+            f[VAR_P.start + 1], m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS],
             strict=True,
         )
         return [RadarTrack(*c) for c in columns]

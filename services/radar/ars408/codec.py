@@ -3,8 +3,9 @@
 - `decode(spec, data)`: one frame to its record (raises FrameError).
 - `decode_frame(arb_id, data)`: classify the ID, then decode (raises FrameError).
 - `encode(record, sensor_id)`: a record to a `Frame` (raises EncodeError).
-- `decode_columns(spec, datas)`: many frames of one message to numpy columns, with a
-  per-frame validity mask; what the cycle decoder uses (one numpy op per signal).
+- `decode_columns(spec, datas)`: many frames of one message to one numpy row per
+  signal, with a per-frame validity mask; what the cycle decoder uses (a few numpy
+  operations for all signals of all frames).
 """
 
 from collections.abc import Sequence
@@ -124,20 +125,33 @@ def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> Fra
 BoolArray = npt.NDArray[np.bool_]
 
 
-class Columns(NamedTuple):
-    """Many frames of one message decoded: one array per signal, plus which rows are valid.
+class Columns:
+    """Many frames of one message decoded: one row per signal, plus which frames are valid.
 
-    `raw` (int64) and `phys` (float64) are (frames, signals) matrices in signal order;
-    `values` holds their columns by attribute name (integers from `raw`). `rejected` maps
-    ``out_of_range:<signal>`` to the number of rows it invalidated.
+    `raw` (int64) and `phys` (float64) are (signals, frames) matrices in signal order, so
+    that a signal is a contiguous row (numpy is several times slower on strided columns);
+    `values` maps attribute names to those rows (integers from `raw`). `rejected` maps
+    ``out_of_range:<signal>`` to the number of frames it invalidated.
     """
 
-    values: dict[str, npt.NDArray[Any]]
-    valid: npt.NDArray[np.bool_]
-    all_valid: bool
-    rejected: dict[str, int]
-    raw: npt.NDArray[np.int64]
-    phys: npt.NDArray[np.float64]
+    __slots__ = ("_attrs", "all_valid", "phys", "raw", "rejected", "valid")
+
+    def __init__(self, attrs: tuple[tuple[str, bool], ...], valid: BoolArray, all_valid: bool,
+                 rejected: dict[str, int], raw: npt.NDArray[np.int64],
+                 phys: npt.NDArray[np.float64]) -> None:
+        self._attrs = attrs
+        self.valid = valid
+        self.all_valid = all_valid
+        self.rejected = rejected
+        self.raw = raw
+        self.phys = phys
+
+    @property
+    def values(self) -> dict[str, npt.NDArray[Any]]:
+        """Every signal by attribute name (built on demand: the cycle decoder indexes
+        rows directly)."""
+        return {attr: self.raw[k] if is_int else self.phys[k]
+                for k, (attr, is_int) in enumerate(self._attrs)}
 
 
 def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[np.int64]:
@@ -163,16 +177,17 @@ def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[
 
 
 class _Layout(NamedTuple):
-    """A message's signals as vectors, to decode every signal in one numpy operation."""
+    """A message's signals as column vectors, to decode every signal in one numpy
+    operation; `checked` lists the rows that have a valid range."""
 
-    attrs: tuple[str, ...]
+    attrs: tuple[tuple[str, bool], ...]
     shifts: npt.NDArray[np.int64]
     masks: npt.NDArray[np.int64]
     scales: npt.NDArray[np.float64]
     offsets: npt.NDArray[np.float64]
+    checked: npt.NDArray[np.intp]
     lo: npt.NDArray[np.float64]
     hi: npt.NDArray[np.float64]
-    checked: bool
 
 
 _layouts: dict[str, _Layout] = {}
@@ -182,15 +197,16 @@ def _layout(spec: MessageSpec) -> _Layout:
     found = _layouts.get(spec.dbc_name)
     if found is None:
         sigs = spec.signals
+        checked = [k for k, s in enumerate(sigs) if s.valid is not None]
         found = _layouts[spec.dbc_name] = _Layout(
-            attrs=tuple(s.attr for s in sigs),
-            shifts=np.array([s.shift for s in sigs], dtype=np.int64),
-            masks=np.array([s.mask for s in sigs], dtype=np.int64),
-            scales=np.array([s.scale for s in sigs]),
-            offsets=np.array([s.offset for s in sigs]),
-            lo=np.array([s.valid[0] - _EPS if s.valid else -np.inf for s in sigs]),
-            hi=np.array([s.valid[1] + _EPS if s.valid else np.inf for s in sigs]),
-            checked=any(s.valid for s in sigs),
+            attrs=tuple((s.attr, s.is_integer) for s in sigs),
+            shifts=np.array([[s.shift] for s in sigs], dtype=np.int64),
+            masks=np.array([[s.mask] for s in sigs], dtype=np.int64),
+            scales=np.array([[s.scale] for s in sigs]),
+            offsets=np.array([[s.offset] for s in sigs]),
+            checked=np.array(checked, dtype=np.intp),
+            lo=np.array([[sigs[k].valid[0] - _EPS] for k in checked]),   # type: ignore[index]
+            hi=np.array([[sigs[k].valid[1] + _EPS] for k in checked]),   # type: ignore[index]
         )
     return found
 
@@ -198,32 +214,28 @@ def _layout(spec: MessageSpec) -> _Layout:
 def decode_columns(spec: MessageSpec, datas: Sequence[bytes | bytearray]) -> Columns:
     """Vectorised `decode` of DLC-checked payloads of one message.
 
-    Every signal is decoded at once as an (n, signals) matrix: numpy costs microseconds
+    Every signal is decoded at once as a (signals, n) matrix: numpy costs microseconds
     per call whatever the size, so the number of calls, not of values, sets the cost.
-    Integer signals come back as int64 columns, scaled ones as float64 (column views).
     """
     lay = _layout(spec)
     w = words(datas, spec.dlc)
-    raw = (w[:, None] >> lay.shifts) & lay.masks
+    raw = (w >> lay.shifts) & lay.masks
     phys = raw * lay.scales + lay.offsets
     rejected: dict[str, int] = {}
-    all_valid = True
-    if lay.checked:
-        ok = (phys >= lay.lo) & (phys <= lay.hi)
-        valid = cast(BoolArray, ok.all(axis=1))
+    if len(lay.checked):
+        checked = phys[lay.checked] if len(lay.checked) < len(phys) else phys
+        ok = (checked >= lay.lo) & (checked <= lay.hi)
+        valid = cast(BoolArray, ok.all(axis=0))
         all_valid = bool(valid.all())
         if not all_valid:
             bad_rows = ~valid
-            for k, sig in enumerate(spec.signals):
-                bad = int(np.count_nonzero(bad_rows & ~ok[:, k]))
+            for k, row in enumerate(lay.checked.tolist()):
+                bad = int(np.count_nonzero(bad_rows & ~ok[k]))
                 if bad:
-                    rejected[f"out_of_range:{sig.dbc_name}"] = bad
-                # A row counts once, under its first bad signal.
-                bad_rows &= ok[:, k]
+                    rejected[f"out_of_range:{spec.signals[row].dbc_name}"] = bad
+                # A frame counts once, under its first bad signal.
+                bad_rows &= ok[k]
     else:
         valid = np.ones(len(w), dtype=np.bool_)
-    values: dict[str, npt.NDArray[Any]] = {
-        sig.attr: raw[:, k] if sig.is_integer else phys[:, k]
-        for k, sig in enumerate(spec.signals)
-    }
-    return Columns(values, valid, all_valid, rejected, raw, phys)
+        all_valid = True
+    return Columns(lay.attrs, valid, all_valid, rejected, raw, phys)
