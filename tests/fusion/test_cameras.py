@@ -5,6 +5,7 @@ import logging
 import subprocess
 import sys
 import tomllib
+from typing import Any
 
 import numpy as np
 import pytest
@@ -126,8 +127,8 @@ def rig_cal(name: str) -> Calibration:
     return Calibration(spec, name)
 
 
-AHEAD = dict(x=8.0, y=0.0, vx=-5.0)            # seen by the front camera only
-LEFT = dict(x=6.0, y=6.0, vx=-5.0, vy=0.0)     # seen by the left camera only (45 deg)
+AHEAD: dict[str, Any] = dict(x=8.0, y=0.0, vx=-5.0)    # seen by the front camera only
+LEFT: dict[str, Any] = dict(x=6.0, y=6.0, vx=-5.0)     # seen by the left camera only (45 deg)
 
 
 def test_each_track_is_verified_in_the_camera_that_sees_it():
