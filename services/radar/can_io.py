@@ -10,8 +10,12 @@ from typing import Protocol
 import can
 
 from common.config.radar import CanSettings, Pace, ReplaySettings
+from services.radar.slcan_bulk import BulkSlcanBus
 
 REPLAY = "replay"
+SLCAN = "slcan"
+# `[radar.can] options = { bulk_read = false }`: python-can's own byte-by-byte slcan reader
+BULK_READ = "bulk_read"
 _LOOP_GAP_S = 0.075   # time inserted between the end of a log and its restart (one cycle)
 
 
@@ -43,12 +47,22 @@ def check_settings(c: CanSettings, r: ReplaySettings) -> None:
 
 def open_port(c: CanSettings, r: ReplaySettings) -> CanPort:
     """Open the configured bus. Raises whatever python-can raises when the device is not
-    there (CanError, OSError, ...): the service retries with backoff."""
+    there (CanError, OSError, ...): the service retries with backoff.
+
+    `slcan` opens services.radar.slcan_bulk.BulkSlcanBus (python-can's slcan with a bulk
+    read) unless the options say ``bulk_read = false``."""
     if c.interface == REPLAY:
         return ReplayPort(r.file, pace=r.pace, loop=r.loop)
     kwargs = dict(c.options)
     if c.bitrate:
         kwargs.setdefault("bitrate", c.bitrate)
+    if c.interface == SLCAN and kwargs.pop(BULK_READ, True):
+        # python-can's configuration sources still apply, as in can.Bus
+        config = can.util.load_config(
+            config={"interface": SLCAN, "channel": c.channel, **kwargs})
+        config.pop("interface", None)
+        return BulkSlcanBus(config.pop("channel", c.channel), **config)
+    kwargs.pop(BULK_READ, None)
     bus: CanPort = can.Bus(interface=c.interface, channel=c.channel, **kwargs)
     return bus
 

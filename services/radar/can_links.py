@@ -147,7 +147,11 @@ class SlcanPtyLink(_Link):
 
     def send(self, frames: Iterable[Frame]) -> None:
         """Write radar -> service frames. Raises OSError once the link is closed."""
-        data = b"".join(slcan_line(f) for f in frames)
+        self.send_raw(b"".join(slcan_line(f) for f in frames))
+
+    def send_raw(self, data: bytes) -> None:
+        """Write bytes as the adapter would (line noise, a line cut in two, ...). Raises
+        OSError once the link is closed."""
         with self._write_lock:
             view = memoryview(data)
             while view:

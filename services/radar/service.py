@@ -46,8 +46,10 @@ class RadarOutput(Protocol):
 class RadarService:
     """Rejections that belong to no single radar are counted in `bus_rejected`
     (``error_frame``, ``remote_frame``, ``extended_id``, ``unknown_id``, ``host_frame``,
-    ``unconfigured_sensor_id``, ``internal_error``, ``bus_failure``) and reported in every
-    radar's status under a ``bus:`` prefix."""
+    ``unconfigured_sensor_id``, ``internal_error``, ``bus_failure``, and lines the slcan
+    reader dropped: ``slcan_malformed``, ``slcan_length``, ``slcan_unknown``,
+    ``slcan_not_ascii``, ``slcan_too_long``) and reported in every radar's status under a
+    ``bus:`` prefix."""
 
     def __init__(
         self,
@@ -78,6 +80,7 @@ class RadarService:
         self._fps_sample: dict[int, tuple[int, int, float]] = {}
         self._rl = RateLimitedLog(_log)
         self._period_ns = int(settings.status_period_s * NS_PER_S)
+        self._port_errors: dict[int, dict[str, int]] = {}
 
     # -- main loop ----------------------------------------------------------------------
 
@@ -135,6 +138,8 @@ class RadarService:
         finally:
             with self._send_lock:
                 self._port = None
+            self._count_port_errors(port)
+            self._port_errors.pop(id(port), None)
             try:
                 port.shutdown()
             except Exception as exc:
@@ -151,9 +156,22 @@ class RadarService:
             elif getattr(port, "ended", False):
                 return True
             if mono >= next_housekeeping:
+                self._count_port_errors(port)
                 self._housekeeping(mono, wall)
                 next_housekeeping = mono + _HOUSEKEEPING_NS
         return False
+
+    def _count_port_errors(self, port: CanPort) -> None:
+        """Lines the interface dropped (BulkSlcanBus.line_errors) into `bus_rejected`, as
+        ``slcan_<reason>``: never silent, never a reason to drop the bus."""
+        errors = getattr(port, "line_errors", None)
+        if errors is None:
+            return
+        seen = self._port_errors.setdefault(id(port), {})
+        for reason, n in errors.snapshot().items():
+            if n > seen.get(reason, 0):
+                self.bus_rejected.add(f"slcan_{reason}", n - seen.get(reason, 0))
+                seen[reason] = n
 
     def _after_end(self, stop: threading.Event) -> int:
         self.ended = True
