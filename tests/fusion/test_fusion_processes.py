@@ -26,7 +26,7 @@ from common.messages import (
     VerifierStatus,
 )
 from services.fusion.roi import Roi
-from services.fusion.synthetic import Obstacle, Scene, render
+from services.fusion.synthetic import Obstacle, Scene, render, rig_calibration_toml
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
 
@@ -215,3 +215,98 @@ def test_camera_and_fusion_processes_verify_decide_and_survive_a_corrupt_frame(r
         finally:
             fusion.stop()
             camera.stop()
+
+
+class Cameras:
+    """Plays several cameras: each publishes its rendered frame every 40 ms with a fresh
+    capture stamp, until switched off."""
+
+    def __init__(self, bus, images: dict[str, np.ndarray]) -> None:
+        self.pubs = {n: bus.publisher(CAMERA_JPEG, camera=n) for n in images}
+        self.jpegs = {n: encode_jpeg(img, 80) for n, img in images.items()}
+        self.on = set(images)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        seq = 0
+        while not self.stop.wait(0.04):
+            for name in list(self.on):
+                self.pubs[name].put(CompressedFrame(
+                    header=Header(seq=seq, source=f"camera/{name}", stamp_ns=wall_ns(),
+                                  pub_mono_ns=0),
+                    camera=name, width=848, height=480, jpeg=self.jpegs[name]))
+            seq += 1
+
+
+def test_fusion_process_with_two_cameras_verifies_each_track_where_it_is_seen(router, tmp_path):
+    from tests.fusion.test_cameras import rig_cal
+
+    names = ("front", "left")
+    for n in names:
+        (tmp_path / f"{n}.toml").write_text(rig_calibration_toml(n))
+    cfg = tmp_path / "fusion.toml"
+    cfg.write_text(f"""
+[zenoh]
+connect = ["{router}"]
+[fusion]
+instance = "{INSTANCE}"
+stats_interval_s = 1.0
+[[fusion.cameras]]
+name = "front"
+calibration = "{tmp_path / 'front.toml'}"
+[[fusion.cameras]]
+name = "left"
+calibration = "{tmp_path / 'left.toml'}"
+[fusion.frames]
+max_skew_s = 0.5
+decode = "before_radar"
+[fusion.decision]
+hold_s = 0.0
+radar_max_age_s = 1.0
+[fusion.decision.corridor]
+enabled = false
+""")
+    ahead, left = (8.0, 0.8), (6.0, 6.0)      # a box in each camera's view only
+    scene = Scene(obstacles=(Obstacle(*ahead, kind="box"), Obstacle(*left, kind="box")), seed=4)
+    with open_bus(router) as bus:
+        watch = HealthWatch(bus)
+        commands, targets = Collector(), Collector()
+        bus.subscribe(FUSION_BRAKE_CMD, commands, instance=INSTANCE)
+        bus.subscribe(FUSION_TARGETS, targets, instance=INSTANCE)
+        cameras = Cameras(bus, {n: render(rig_cal(n), scene) for n in names})
+        fusion = ServiceProcess("fusion", python_module("services.fusion", "-c", str(cfg)),
+                                tmp_path)
+        try:
+            watch.wait_alive("fusion", INSTANCE)
+            cameras.thread.start()
+            radar = Radar(bus, commands, targets)
+            wait_for(lambda: not radar.cycle()[1].cameras_unavailable, 60, interval_s=0.05,
+                     what="frames from both cameras")
+            cmd, tgt = radar.cycle(track(1, *ahead, vx=-5.0), track(2, *left, vx=-5.0))
+            one, two = tgt.targets
+            assert (one.camera, one.verification) == ("front", Verification.VERIFIED)
+            assert (two.camera, two.verification) == ("left", Verification.VERIFIED)
+            assert [c.verification for c in two.cameras] == [Verification.NOT_VISIBLE,
+                                                             Verification.VERIFIED]
+            assert two.density is not None and two.density > 0.025
+            assert cmd.decision is Decision.BRAKE and tgt.camera == "front,left"
+
+            # The left camera stops: its track is unavailable (a warning), the other is not.
+            cameras.on.discard("left")
+            wait_for(lambda: "left" in radar.cycle()[1].cameras_unavailable, 30,
+                     interval_s=0.05, what="left camera unavailable")
+            cmd, tgt = radar.cycle(track(2, *left, vx=-5.0))
+            assert tgt.verifier_status is VerifierStatus.OK
+            assert tgt.targets[0].verification is Verification.UNAVAILABLE
+            assert cmd.decision is Decision.WARNING
+            cmd, tgt = radar.cycle(track(1, *ahead, vx=-5.0))
+            assert cmd.decision is Decision.BRAKE and tgt.targets[0].camera == "front"
+
+            fusion.signal(signal.SIGTERM)
+            wait_for(lambda: not fusion.alive(), 30, what="fusion exit")
+            assert fusion.proc.returncode == 0, fusion.output()
+            assert "frames_left=" in fusion.output()
+        finally:
+            cameras.stop.set()
+            fusion.stop()
