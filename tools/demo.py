@@ -46,11 +46,13 @@ DEMO_SCENARIOS = (
     "cardboard_box_30kph",
     "pedestrian_standing_20kph",
     "pedestrian_crossing_20kph",
+    "bicycle_crossing_20kph",
     "pedestrian_behind_parked_car_20kph",
     "bicycle_ahead_slow_20kph",
     "multi_object_25kph",
     "no_threat_parked_cars_30kph",
     "no_threat_pedestrian_walking_beside_20kph",
+    "no_threat_pedestrian_crossed_20kph",
 )
 
 
