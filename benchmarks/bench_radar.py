@@ -1,18 +1,24 @@
-"""Radar decode + tracking time per cycle (issue 2; cluster counts for issue 6).
+"""Radar decode + tracking time per cycle (issue 2), and how it grows with clusters per
+cycle (issue 6: 50, 250, 500).
 
-Scenes are synthetic ARS408 transmissions built with the project's encoder: N targets
-moving at constant velocity with measurement noise, all inside the prefilter window
-(forward, range <= 25 m, RCS > -20 dBsm), so that every detection reaches the merge and
-the tracker: the worst case for the pipeline. Object mode sends general + quality +
-extended frames per object; cluster mode general + quality per cluster.
+Scenes are synthetic ARS408 transmissions built with the project's encoder: targets
+moving at constant velocity with measurement noise. Object mode sends general + quality +
+extended frames per object; cluster mode general + quality per cluster. `spread` scenes
+put the targets over the radar's field (a third inside the 25 m prefilter window, 5
+returns per target in cluster mode); the stress scenes put every detection, as an
+independent target, inside the window: the worst case for merge and tracker.
 
 Per-cycle figures are CPU time of the benchmark thread (`time.thread_time_ns`): what the
-cycle costs, unaffected by other processes taking the CPU (the CI machine is shared;
-wall-clock figures there move by 2-3x with its load). Rows per scene, all measured in
-this run:
+cycle costs, less disturbed by other processes taking the CPU than wall time (the CI
+machine is shared; wall-clock figures there move by 2-3x with its load; thread time still
+moves by up to 2x on a busy virtual machine, so compare rows of one run). Rows per scene,
+all measured in this run:
 - `pipeline`: every frame through `SensorCore.on_frame` (classify, assembly, decode,
   prefilter, merge, Kalman tracker, messages): CPU time per cycle, and `after last
   frame`, the part spent once the cycle's last frame arrived (the latency share).
+- `baseline previous tracker`: the same, with the previous merge and tracker
+  (benchmarks/radar_reference.py, the code before they were vectorised over contiguous
+  rows), interleaved cycle by cycle with `pipeline` so that both see the same machine.
 - `baseline decode only`: assembly + table decoder, no prefilter / merge / tracking.
 - `baseline scalar decode`: the table's per-frame scalar decoder on every frame.
 - `baseline cantools`: the same frames through cantools and the exported DBC, when
@@ -23,7 +29,10 @@ CAN driver, no Zenoh) and reports `RadarTracks.processing_ns`, the time from the
 last frame to its tracks message: paced in real time (the CPU idles 70 ms between
 cycles, as in the vehicle) and, as the baseline, as fast as possible (caches warm).
 
-Run: `python -m benchmarks.bench_radar [--quick] [--out out/bench]`.
+Run: `python -m benchmarks.bench_radar [--quick] [--out out/bench]`; PNGs
+radar_cycle_time.png and radar_cluster_scale.png under --out. The suite
+(`python -m benchmarks`) calls `run(quick, out_dir)`: groups "radar" (object and cluster
+mode per cycle, the 2 ms target) and "scale" (clusters 50 / 250 / 500).
 """
 
 import argparse
@@ -37,6 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.figures import Figure, machine_info
+from benchmarks.radar_reference import ReferenceCore
 from common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
 from common.messages.radar import OutputMode, RadarStatus, RadarTracks
 from services.radar.ars408 import (
@@ -154,25 +165,49 @@ class Result:
         return float(np.percentile(self.per_cycle_ms, 95))
 
 
-def run_pipeline(cycles: list[Classified]) -> tuple[list[float], list[float]]:
+def _feed_cycle(core: SensorCore, frames: Classified, t_s: float) -> tuple[float, float]:
+    """One cycle's frames through `core`: (CPU ms for the cycle, CPU ms after its last
+    frame)."""
+    clock = CPU_CLOCK
+    start = clock()
+    for spec, data in frames[:-1]:
+        core.on_frame(spec, data, t_s, 0, 0)
+    last = clock()
+    spec, data = frames[-1]
+    results = core.on_frame(spec, data, t_s, 0, 0)
+    end = clock()
+    assert len(results) == 1 and results[0].complete, "benchmark cycle did not complete"
+    return (end - start) / 1e6, (end - last) / 1e6
+
+
+def run_pipeline(cycles: list[Classified], core_type: type[SensorCore] = SensorCore
+                 ) -> tuple[list[float], list[float]]:
+    """Per-cycle CPU ms and CPU ms after the last frame, every cycle through one core."""
     s = RadarSettings()
-    core = SensorCore(s.sensors[0], s)
+    core = core_type(s.sensors[0], s)
     per_cycle: list[float] = []
     after_last: list[float] = []
-    clock = CPU_CLOCK
     for k, frames in enumerate(cycles):
-        t_s = k * CYCLE_S
-        start = clock()
-        for spec, data in frames[:-1]:
-            core.on_frame(spec, data, t_s, 0, 0)
-        last = clock()
-        spec, data = frames[-1]
-        results = core.on_frame(spec, data, t_s, 0, 0)
-        end = clock()
-        assert len(results) == 1 and results[0].complete, "benchmark cycle did not complete"
-        per_cycle.append((end - start) / 1e6)
-        after_last.append((end - last) / 1e6)
+        total, after = _feed_cycle(core, frames, k * CYCLE_S)
+        per_cycle.append(total)
+        after_last.append(after)
     return per_cycle, after_last
+
+
+def run_paired(cycles: list[Classified]) -> tuple[Result, Result]:
+    """The current pipeline and the reference one (previous merge + tracker), each cycle
+    through both, alternating which goes first: both see the same machine state."""
+    s = RadarSettings()
+    cores = (SensorCore(s.sensors[0], s), ReferenceCore(s.sensors[0], s))
+    times: tuple[list[float], list[float]] = ([], [])
+    after: tuple[list[float], list[float]] = ([], [])
+    for k, frames in enumerate(cycles):
+        for which in ((0, 1) if k % 2 else (1, 0)):
+            total, tail = _feed_cycle(cores[which], frames, k * CYCLE_S)
+            times[which].append(total)
+            after[which].append(tail)
+    return (Result("", "pipeline", times[0], after[0]),
+            Result("", BASELINE_REFERENCE, times[1], after[1]))
 
 
 _ROLES = {"Obj_1_General": ListRole.GENERAL, "Obj_2_Quality": ListRole.QUALITY,
@@ -229,22 +264,36 @@ SCENES = (
     Scene("objects 100, all in window", OutputMode.OBJECTS, 100, spread=False),
     Scene("clusters 250, all in window", OutputMode.CLUSTERS, 250, spread=False),
 )
-CLUSTER_COUNTS = (50, 250, 500)   # for issue 6
+CLUSTER_COUNTS = (50, 250, 500)   # issue 6
+BASELINE_REFERENCE = "baseline previous tracker"
+# Figure names for the suite's table (the scene names above are the benchmark's own).
+_MODE_NAMES = {
+    SCENES[0].name: "objects 100 +quality +extended, spread",
+    SCENES[1].name: "clusters 250 +quality, spread",
+    SCENES[2].name: "objects 100 +q +ext, all within 25 m",
+    SCENES[3].name: "clusters 250 +quality, all within 25 m",
+}
+
+
+def scale_scene(n: int) -> Scene:
+    return Scene(f"clusters {n}, spread (5/target)", OutputMode.CLUSTERS, n, per_target=5)
 
 
 def measure(quick: bool) -> list[Result]:
+    """Every scene (and the cluster counts of the scale figure): the pipeline beside its
+    baselines, all in this run."""
     n_cycles = 40 if quick else 200
-    scenes = list(SCENES)
-    if not quick:
-        scenes += [Scene(f"clusters {n}, spread (5/target)", OutputMode.CLUSTERS, n,
-                         per_target=5) for n in CLUSTER_COUNTS if n != 250]
+    scenes = list(SCENES) + [scale_scene(n) for n in CLUSTER_COUNTS if n != 250]
     cantools_decode = cantools_decoder()
     results: list[Result] = []
     for scene in scenes:
-        cycles = scene_cycles(scene, n_cycles)
-        run_pipeline(cycles[:5])   # warm-up: imports, numpy code paths
-        per_cycle, after_last = run_pipeline(cycles)
-        results.append(Result(scene.name, "pipeline", per_cycle, after_last))
+        cycles = scene_cycles(scene, n_cycles + 5)
+        run_paired(cycles[:5])   # warm-up: imports, numpy code paths
+        current, reference = run_paired(cycles[5:])
+        cycles = cycles[5:]
+        for r in (current, reference):
+            r.scene = scene.name
+        results += [current, reference]
         results.append(Result(scene.name, "baseline decode only",
                               run_decode_only(cycles, scene.mode)))
         results.append(Result(scene.name, "baseline scalar decode",
@@ -278,14 +327,26 @@ def replay_processing_ms(pace: Pace, cycles: int) -> list[float]:
     return out[3:]    # the first cycles pay for imports and first numpy calls
 
 
-def replay_table(quick: bool) -> str:
+@dataclass
+class Replay:
+    """processing_ns (ms) on the recording, paced in real time and back to back."""
+
+    realtime_ms: list[float]
+    fast_ms: list[float]
+
+
+def measure_replay(quick: bool) -> Replay:
     cycles = 40 if quick else 200
+    return Replay(replay_processing_ms(Pace.REALTIME, cycles),
+                  replay_processing_ms(Pace.FAST, cycles))
+
+
+def replay_table(replay: Replay) -> str:
     lines = ["Service shell on the recording: RadarTracks.processing_ns (wall clock, ms)",
              f"{'recording (3-11 objects/cycle)':<34} {'pace':<24} {'median ms':>9} "
              f"{'p95 ms':>8} {'max ms':>8}"]
-    for pace, label in ((Pace.REALTIME, "real time (idle between)"),
-                        (Pace.FAST, "baseline: back to back")):
-        values = replay_processing_ms(pace, cycles)
+    for values, label in ((replay.realtime_ms, "real time (idle between)"),
+                          (replay.fast_ms, "baseline: back to back")):
         lines.append(f"{'after last frame (processing_ns)':<34} {label:<24} "
                      f"{statistics.median(values):>9.3f} {np.percentile(values, 95):>8.3f} "
                      f"{max(values):>8.3f}")
@@ -294,33 +355,91 @@ def replay_table(quick: bool) -> str:
 
 def table(results: list[Result]) -> str:
     lines = ["CPU time per cycle (ms, this thread)",
-             f"{'scene':<34} {'method':<24} {'median ms':>9} {'p95 ms':>8} "
+             f"{'scene':<34} {'method':<26} {'median ms':>9} {'p95 ms':>8} "
              f"{'after last frame ms':>20}"]
     for r in results:
         after = f"{statistics.median(r.after_last_ms):.3f}" if r.after_last_ms else "-"
-        lines.append(f"{r.scene:<34} {r.method:<24} {r.median_ms:>9.3f} {r.p95_ms:>8.3f} "
+        lines.append(f"{r.scene:<34} {r.method:<26} {r.median_ms:>9.3f} {r.p95_ms:>8.3f} "
                      f"{after:>20}")
     return "\n".join(lines)
 
 
-def plot(results: list[Result], out_dir: Path) -> Path:
+def _find(results: list[Result], scene: str, method: str) -> Result | None:
+    return next((r for r in results if r.scene == scene and r.method == method), None)
+
+
+def figures(results: list[Result], replay: Replay | None = None) -> list[Figure]:
+    """The suite's figures: group "radar" (each mode's median and p95 per cycle against
+    the 2 ms target, beside the previous tracker measured in the same run; the
+    recording's last-frame-to-tracks time) and group "scale" (clusters per cycle)."""
+    load = [round(x, 2) for x in machine_info()["load_avg_1_5_15"]]
+    figs: list[Figure] = []
+    for scene, name in _MODE_NAMES.items():
+        cur = _find(results, scene, "pipeline")
+        ref = _find(results, scene, BASELINE_REFERENCE)
+        dec = _find(results, scene, "baseline decode only")
+        if cur is None or ref is None:
+            continue
+        after = statistics.median(cur.after_last_ms or [0.0])
+        extra = {"cycles": len(cur.per_cycle_ms), "load_avg_1_5_15": load,
+                 "after_last_frame_median_ms": round(after, 3),
+                 "decode_only_median_ms": None if dec is None else round(dec.median_ms, 3)}
+        for stat, value, base in (("median", cur.median_ms, ref.median_ms),
+                                  ("p95", cur.p95_ms, ref.p95_ms)):
+            figs.append(Figure(
+                "radar", f"{name}: {stat} per cycle", round(value, 3), "ms",
+                baseline="previous merge + tracker", baseline_value=round(base, 3),
+                target=f"< {TARGET_MS:g} ms", target_met=value < TARGET_MS,
+                note="CPU time of decode, prefilter, merge, tracking and messages",
+                extra=extra))
+    if replay is not None:
+        figs.append(Figure(
+            "radar", "recording: last frame -> tracks p95", round(float(
+                np.percentile(replay.realtime_ms, 95)), 3), "ms",
+            baseline="same, frames back to back",
+            baseline_value=round(float(np.percentile(replay.fast_ms, 95)), 3),
+            note="RadarTracks.processing_ns through the service shell, paced in real time",
+            extra={"median_ms": round(statistics.median(replay.realtime_ms), 3)}))
+    for n in CLUSTER_COUNTS:
+        scene = scale_scene(n).name
+        cur = _find(results, scene, "pipeline")
+        ref = _find(results, scene, BASELINE_REFERENCE)
+        if cur is None or ref is None:
+            continue
+        figs.append(Figure(
+            "scale", f"radar: {n} clusters per cycle, median", round(cur.median_ms, 3), "ms",
+            baseline="previous merge + tracker", baseline_value=round(ref.median_ms, 3),
+            note="clusters spread over the field, 5 returns per target, quality frames",
+            extra={"p95_ms": round(cur.p95_ms, 3), "baseline_p95_ms": round(ref.p95_ms, 3),
+                   "cycles": len(cur.per_cycle_ms), "load_avg_1_5_15": load}))
+    return figs
+
+
+def _pyplot():  # type: ignore[no-untyped-def]
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    scenes = list(dict.fromkeys(r.scene for r in results))
+    return plt
+
+
+def plot(results: list[Result], out_dir: Path) -> Path:
+    plt = _pyplot()
+    scenes = [s.name for s in SCENES]
     methods = list(dict.fromkeys(r.method for r in results))
-    fig, ax = plt.subplots(figsize=(10, 4.5))
+    fig, ax = plt.subplots(figsize=(11, 4.8))
     width = 0.8 / len(methods)
     for j, method in enumerate(methods):
-        values = [next((r.median_ms for r in results if r.scene == s and r.method == method),
-                       0.0) for s in scenes]
-        ax.bar([i + j * width for i in range(len(scenes))], values, width, label=method)
-    ax.axhline(TARGET_MS, color="red", linestyle="--", label=f"target {TARGET_MS} ms")
+        found = [_find(results, s, method) for s in scenes]
+        ax.bar([i + j * width for i in range(len(scenes))],
+               [0.0 if r is None else r.median_ms for r in found], width, label=method,
+               yerr=[[0.0] * len(found), [0.0 if r is None else r.p95_ms - r.median_ms
+                                          for r in found]], capsize=2)
+    ax.axhline(TARGET_MS, color="red", linestyle="--", label=f"target {TARGET_MS:g} ms")
     ax.set_xticks([i + width * (len(methods) - 1) / 2 for i in range(len(scenes))])
     ax.set_xticklabels(scenes, fontsize=8)
-    ax.set_ylabel("median CPU time per cycle (ms, thread time)")
+    ax.set_ylabel("CPU time per cycle (ms, thread time)\nbar: median, whisker: p95")
     ax.set_title("ARS408 decode + tracking per radar cycle")
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -331,23 +450,66 @@ def plot(results: list[Result], out_dir: Path) -> Path:
     return path
 
 
+def plot_scale(results: list[Result], out_dir: Path) -> Path:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for method, style in (("pipeline", "o-"), (BASELINE_REFERENCE, "s--"),
+                          ("baseline decode only", "^:")):
+        found = [(n, _find(results, scale_scene(n).name, method)) for n in CLUSTER_COUNTS]
+        points = [(n, r) for n, r in found if r is not None]
+        if not points:
+            continue
+        ax.errorbar([n for n, _ in points], [r.median_ms for _, r in points],
+                    yerr=[[0.0] * len(points), [r.p95_ms - r.median_ms for _, r in points]],
+                    fmt=style, capsize=3, label=method)
+    ax.axhline(TARGET_MS, color="red", linestyle="--", label=f"target {TARGET_MS:g} ms (250)")
+    ax.set_xlabel("clusters per cycle (spread, 5 returns per target, quality frames)")
+    ax.set_ylabel("CPU time per cycle (ms)\npoint: median, whisker: p95")
+    ax.set_title("Radar decode + tracking vs clusters per cycle")
+    ax.set_xticks(list(CLUSTER_COUNTS))
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "radar_cluster_scale.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def run(quick: bool, out_dir: Path) -> list[Figure]:
+    """The suite's entry: measure, write both PNGs under `out_dir`, return the figures."""
+    results = measure(quick)
+    replay = measure_replay(quick)
+    plot(results, out_dir)
+    plot_scale(results, out_dir)
+    return figures(results, replay)
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench_radar", description=__doc__)
-    parser.add_argument("--quick", action="store_true", help="fewer cycles, two scenes")
-    parser.add_argument("--out", default="out/bench", help="directory for the PNG")
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_radar",
+                                     description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="40 cycles per scene, not 200")
+    parser.add_argument("--out", default="out/bench", help="directory for the PNGs")
     args = parser.parse_args(argv)
+    out = Path(args.out)
+    machine = machine_info()
+    print(f"{machine['cpu']} x{machine['cores']}, load {machine['load_avg_1_5_15']}")
     results = measure(args.quick)
     print(table(results))
     print()
-    print(replay_table(args.quick))
-    pipeline = [r for r in results if r.method == "pipeline"]
-    worst = max(r.median_ms for r in pipeline[:2])
-    verdict = "meets" if worst < TARGET_MS else "MISSES"
-    print(f"\nobject 100 / cluster 250 pipeline: worst median {worst:.3f} ms per cycle, "
-          f"{verdict} the {TARGET_MS} ms target")
+    replay = measure_replay(args.quick)
+    print(replay_table(replay))
+    print()
+    for f in figures(results, replay):
+        met = "" if f.target_met is None else (" meets" if f.target_met else " MISSES")
+        ratio = f" ({f.ratio:.2f}x)" if f.ratio is not None else ""
+        print(f"[{f.group}] {f.name}: {f.value:.3f} {f.unit}, {f.baseline} "
+              f"{f.baseline_value}{ratio}{met} {f.target}".rstrip())
     if not any(r.method == "baseline cantools" for r in results):
         print("(cantools not installed: no cantools row; `pip install cantools` to add it)")
-    print(f"plot: {plot(results, Path(args.out))}")
+    print(f"plots: {plot(results, out)}, {plot_scale(results, out)}")
+    print(f"load average after the run: {[round(x, 2) for x in machine_info()['load_avg_1_5_15']]}")
     return 0
 
 

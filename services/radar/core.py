@@ -241,10 +241,9 @@ class SensorCore:
         for reason, n in g.rejected.items():
             self.rejected.add(reason, n)
         t = self.settings.tracker
-        tracks = tuple(
-            tr for tr in self.tracker.tracks()
-            if not (t.drop_receding and tr.range_rate_mps > t.receding_min_mps)
-        )
+        tracks = tuple(self.tracker.tracks())
+        if t.drop_receding:
+            tracks = tuple(tr for tr in tracks if not tr.range_rate_mps > t.receding_min_mps)
         complete = cycle.complete and not g.rejected
         self.cycles_total += 1
         self.cycles_incomplete += not complete

@@ -26,6 +26,8 @@ axis (|dx| <= sqrt(chi2 S_xx), |dy| <= sqrt(chi2 S_yy)), so a strip grid
 the 4-d Mahalanobis distance.
 """
 
+from itertools import starmap
+
 import numpy as np
 import numpy.typing as npt
 
@@ -334,10 +336,9 @@ class KalmanTracker:
         # One tolist() per matrix: per-element conversions would dominate.
         f = st.tolist()
         m = self.meta.tolist()
-        columns = zip(
+        return list(starmap(RadarTrack, zip(
             m[ID], f[0], f[1], f[2], f[3], r.tolist(), rr.tolist(), f[TRACK_RCS],
-            [c > 0 for c in m[CONFIRMED]], m[HITS], m[MISSES], f[VAR_P.start],
+            (self.meta[CONFIRMED] > 0).tolist(), m[HITS], m[MISSES], f[VAR_P.start],
             f[VAR_P.start + 1], m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS],
             strict=True,
-        )
-        return [RadarTrack(*c) for c in columns]
+        )))
