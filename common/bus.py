@@ -41,6 +41,13 @@ _CONGESTION = {
 }
 
 
+def _handler(on_sample: Callable[[zenoh.Sample], None],
+             direct: bool) -> Callable[[zenoh.Sample], None]:
+    """zenoh-python runs a plain callable on its own callback thread (`indirect`); a
+    direct one runs on the receive thread that got the sample."""
+    return zenoh.handlers.Callback(on_sample, indirect=False) if direct else on_sample
+
+
 class BusError(RuntimeError):
     """The Zenoh configuration is invalid or the session could not be opened."""
 
@@ -110,6 +117,11 @@ class TypedPublisher(Generic[T]):
     def put(self, msg: T) -> None:
         self._pub.put(encode(msg))
 
+    def put_bytes(self, payload: bytes) -> None:
+        """Publish bytes as they are, with this key's QoS (for relays and benchmark
+        floors: nothing checks that they decode as the key's message)."""
+        self._pub.put(payload)
+
     def undeclare(self) -> None:
         self._pub.undeclare()
 
@@ -165,10 +177,13 @@ class Bus:
         self,
         spec: KeySpec[T],
         callback: Callable[[T, str], None],
+        direct: bool = False,
         **params: str,
     ) -> zenoh.Subscriber[None]:
         """Subscribe to a key (missing parameters become `*`); `callback(msg, key)` gets
-        decoded messages only. Undecodable payloads are counted and logged."""
+        decoded messages only. Undecodable payloads are counted and logged.
+
+        `direct`: see `subscribe_raw`."""
         msg_type = spec.msg_type
         if msg_type is None:
             raise ValueError(f"key {spec.name!r} carries no message")
@@ -191,14 +206,21 @@ class Bus:
                 self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
                 _log.debug("callback traceback", exc_info=True)
 
-        return self.session.declare_subscriber(expr, on_sample)
+        return self.session.declare_subscriber(expr, _handler(on_sample, direct))
 
     def subscribe_raw(
-        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None], **params: str
+        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None],
+        direct: bool = False, **params: str,
     ) -> zenoh.Subscriber[None]:
         """Subscribe without decoding: `callback(payload, key, receipt_mono_ns)`.
 
         For shells that decode off Zenoh's thread (e.g. JPEG frames) or time the receipt.
+
+        `direct`: run the callback on Zenoh's receive thread instead of handing each
+        sample to zenoh-python's callback thread (one thread wake-up less per sample).
+        Only for short callbacks on the latency path: while it runs, every other sample
+        arriving on the same link waits, and it must never wait for Zenoh itself (a
+        query, a subscription).
         """
         expr = spec.wildcard(self.vehicle, **params)
 
@@ -212,7 +234,7 @@ class Bus:
                 self.callback_errors.add(spec.name)
                 self._rl.error(f"cb:{spec.name}", "callback_failed", error=repr(exc))
 
-        return self.session.declare_subscriber(expr, on_sample)
+        return self.session.declare_subscriber(expr, _handler(on_sample, direct))
 
     def declare_queryable(
         self, spec: KeySpec[T], reply: Callable[[], T], **params: str

@@ -151,6 +151,9 @@ class RadarFeed:
         self.sent: deque[CycleSent] = deque(maxlen=history)
         self._lock = threading.Lock()
         self.errors = 0
+        # Called on the caller's thread after every cycle with what was sent and its frames
+        # (e.g. a benchmark replaying the same frames elsewhere); keep it short.
+        self.on_cycle: Callable[[CycleSent, Sequence[Frame]], None] | None = None
 
     def reset(self, look: RadarLook, seed: int) -> None:
         """A new scene: a fresh model (IDs, ghosts, noise) with the scenario's radar look."""
@@ -175,7 +178,16 @@ class RadarFeed:
         with self._lock:
             self.sent.append(sent)
         self.meas_counter = (self.meas_counter + 1) % 65536
+        if self.on_cycle is not None:
+            self.on_cycle(sent, frames)
         return sent
+
+    def send_paced(self, frames: Sequence[Frame]) -> tuple[int, int]:
+        """Write frames at the bus rate, as a cycle's are; returns the monotonic times
+        before the first and after the last write. Raises what the sink raises."""
+        first = self._clock()
+        self._send_paced(frames, first)
+        return first, self._clock()
 
     def _send_paced(self, frames: Sequence[Frame], start_ns: int) -> None:
         if self.frame_time_s <= 0:

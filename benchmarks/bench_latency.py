@@ -1,0 +1,472 @@
+"""Radar-to-brake latency on one host: from the last CAN frame of a radar cycle to the
+brake command's bytes on the actuator's serial line, per stage, beside its floor.
+
+    python -m benchmarks.bench_latency [--quick] [--out out/bench]
+
+The stack runs as in `aeb demo` (tools/sim/session.py): a router, then radar, camera,
+fusion and brake, each its own process. This process is the SIMULATED vehicle: the
+closed-loop simulator writes real ARS408 frames on the radar's slcan pty (python-can's
+`slcan` interface in the radar, as with a USB-CAN adapter), publishes the world that the
+camera's plugin renders (so fusion verifies against real frames), and the simulated
+actuator (services/brake/sim_actuator.py) reads the brake's pty and stamps each line.
+Scenarios run one after the other (threats brake, others do not) with the empty road in
+between, so every decision path is in the figures.
+
+The floor, in the same run, interleaved half a radar period after each cycle: the same
+frames written on a second slcan pty, read by three relay processes that do nothing but
+forward (benchmarks/floor_relay.py): pty -> relay -> Zenoh hop (RadarTracks' key, QoS and
+size, through the same router) -> relay -> Zenoh hop (BrakeCommand's) -> relay -> a
+command line on a serial pty that this process reads. Two floors are reported:
+- same transport: last frame written -> line read, through the relays;
+- Zenoh only: the two hops of those chains (the issue's "bare hops with no work").
+
+Every message carries the stamps that split the chain into the same seven stages for
+both (benchmarks/latency_chain.py). Targets (issue 6): p99 < 3.75 ms (5% of a 75 ms
+radar cycle); p50 <= 1.5x the floor. Prints a table; writes bench_latency.json and
+bench_latency.png (CDF of the stack and both floors, stage medians) under --out.
+"""
+
+import argparse
+import contextlib
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from benchmarks.bench_brake import LineTimes
+from benchmarks.figures import Figure, machine_info
+from benchmarks.floor_relay import VEHICLE as FLOOR_VEHICLE
+from benchmarks.latency_chain import (
+    STAGE_TITLES,
+    STAGES,
+    BrakeStamp,
+    Chain,
+    CommandStamp,
+    Summary,
+    TracksStamp,
+    floor_chains,
+    stack_chains,
+    stages_ns,
+    summarize,
+    zenoh_ns,
+)
+from common.bus import Bus
+from common.clock import mono_ns
+from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
+from services.brake.pty_pair import PtyPair
+from services.radar.ars408 import Frame
+from services.radar.can_links import SlcanPtyLink
+from tools.sim.radar_feed import CycleSent, RadarFeed
+from tools.sim.scenario import RadarLook, find_scenario, load_scenario
+from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
+
+P99_TARGET_MS = 3.75          # 5% of a 75 ms radar cycle
+P50_TARGET_RATIO = 1.5        # times the floor
+# Scenarios in turn until the measuring time is spent (threats brake, the others not).
+SCENARIOS = ("pedestrian_standing_20kph", "no_threat_parked_cars_30kph",
+             "multi_object_25kph", "pedestrian_crossing_20kph", "stationary_car_30kph",
+             "no_threat_pedestrian_walking_beside_20kph")
+QUICK_MEASURE_S = 12.0
+FULL_MEASURE_S = 75.0
+FLOOR_OFFSET_S = 0.037        # half a radar period after the stack's cycle
+RELAY_START_S = 60.0
+
+
+@dataclass
+class Collected:
+    """What the stack published, as stamps (filled by Zenoh callbacks)."""
+
+    tracks: list[TracksStamp] = field(default_factory=list)
+    processing_ns: dict[int, int] = field(default_factory=dict)
+    commands: dict[int, CommandStamp] = field(default_factory=dict)
+    brake: dict[int, BrakeStamp] = field(default_factory=dict)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def on_tracks(self, msg: RadarTracks, key: str) -> None:
+        with self.lock:
+            self.tracks.append(TracksStamp(msg.meas_counter, msg.header.seq,
+                                           msg.last_frame_mono_ns, msg.header.pub_mono_ns))
+
+    def on_targets(self, msg: VerifiedTargets, key: str) -> None:
+        with self.lock:
+            self.processing_ns[msg.radar_seq] = msg.processing_ns
+
+    def on_command(self, msg: BrakeCommand, key: str) -> None:
+        with self.lock:
+            self.commands[msg.radar_seq] = CommandStamp(msg.header.seq, msg.header.pub_mono_ns)
+
+    def on_status(self, msg: BrakeStatus, key: str) -> None:
+        if msg.cmd_to_serial_us is None or msg.last_cmd_rx_mono_ns <= 0:
+            return
+        with self.lock:
+            self.brake.setdefault(msg.last_cmd_seq, BrakeStamp(
+                msg.last_cmd_rx_mono_ns,
+                msg.last_cmd_rx_mono_ns + round(msg.cmd_to_serial_us * 1000)))
+
+    def subscribe(self, bus: Bus, instance: str = "primary") -> list[Any]:
+        return [bus.subscribe(RADAR_TRACKS, self.on_tracks, sensor="front"),
+                bus.subscribe(FUSION_TARGETS, self.on_targets, instance=instance),
+                bus.subscribe(FUSION_BRAKE_CMD, self.on_command, instance=instance),
+                bus.subscribe(BRAKE_STATUS, self.on_status)]
+
+
+class FloorFeed:
+    """Writes each stack cycle's frames again on the floor's slcan pty, `offset_s` after
+    the stack's last frame, at the same pace (RadarFeed.send_paced)."""
+
+    def __init__(self, link: SlcanPtyLink, offset_s: float) -> None:
+        self._pacer = RadarFeed(link, RadarLook())
+        self._offset_ns = round(offset_s * 1e9)
+        self._pending: deque[tuple[int, int, list[Frame]]] = deque(maxlen=8)
+        self._cond = threading.Condition()
+        self._stop = False
+        self.written: dict[int, int] = {}
+        self.errors = 0
+        self._thread = threading.Thread(target=self._run, name="floor-feed", daemon=True)
+        self._thread.start()
+
+    def on_cycle(self, sent: CycleSent, frames: Sequence[Frame]) -> None:
+        """RadarFeed.on_cycle: called on the simulator's loop thread."""
+        with self._cond:
+            self._pending.append((sent.last_write_mono_ns, sent.meas_counter, list(frames)))
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._pending and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                end, counter, frames = self._pending.popleft()
+                due = end + self._offset_ns
+                while not self._stop and mono_ns() < due:
+                    self._cond.wait((due - mono_ns()) / 1e9)
+                if self._stop:
+                    return
+            try:
+                _, last = self._pacer.send_paced(frames)
+            except OSError:
+                self.errors += 1
+                continue
+            self.written[counter] = last
+
+    def stop(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(5)
+
+
+@dataclass
+class Floor:
+    link: SlcanPtyLink
+    feed: FloorFeed
+    lines: LineTimes
+    reports: list[tuple[int, ...]]
+
+
+def read_reports(stream: Any, into: list[tuple[int, ...]]) -> None:
+    """The `serial` relay's stamp lines (until its stdout closes); other lines skipped."""
+    for raw in stream:
+        parts = raw.split()
+        if len(parts) == 7:
+            with contextlib.suppress(ValueError):
+                into.append(tuple(int(p) for p in parts))
+
+
+@contextmanager
+def floor_chain(loop: ClosedLoop, work: Path) -> Iterator[Floor]:
+    """The three relays on the stack's router, their ptys, the interleaved feed.
+    Raises RuntimeError when a relay does not come up."""
+    link = SlcanPtyLink()
+    pty = PtyPair(work / "floor-serial")
+    procs: list[subprocess.Popen[str]] = []
+    log = open(work / "floor-relays.log", "w")  # noqa: SIM115 (closed below)
+    feed: FloorFeed | None = None
+    lines: LineTimes | None = None
+    up: dict[str, threading.Event] = {r: threading.Event() for r in ("can", "hop", "serial")}
+
+    def on_health(service: str, instance: str, alive: bool) -> None:
+        role = service.removeprefix("floor-")
+        if alive and role in up:
+            up[role].set()
+
+    floor_bus = Bus(loop.bus.session, FLOOR_VEHICLE, "bench")   # shares the session
+    sub = floor_bus.subscribe_health(on_health)
+    try:
+        base = [sys.executable, "-m", "benchmarks.floor_relay"]
+        common_args = ["--connect", loop.endpoint, "--vehicle", FLOOR_VEHICLE]
+        for role, extra in (("serial", ["--port", str(pty.path)]), ("hop", []),
+                            ("can", ["--channel", link.path])):
+            procs.append(subprocess.Popen(
+                [*base, role, *common_args, *extra], stdout=subprocess.PIPE, stderr=log,
+                text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"}))
+        reports: list[tuple[int, ...]] = []
+        stdout = procs[0].stdout
+        assert stdout is not None
+        threading.Thread(target=read_reports, args=(stdout, reports), daemon=True).start()
+        for role, event in up.items():
+            if not event.wait(RELAY_START_S):
+                raise RuntimeError(f"floor relay {role!r} did not come up: "
+                                   f"{(work / 'floor-relays.log').read_text()[-2000:]}")
+        link.wait_open(RELAY_START_S)
+        lines = LineTimes(pty.master_fd)
+        feed = FloorFeed(link, FLOOR_OFFSET_S)
+        yield Floor(link, feed, lines, reports)
+    finally:
+        if feed is not None:
+            feed.stop()
+        if lines is not None:
+            lines.stop()
+        sub.undeclare()
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        log.close()
+        link.close()
+        pty.remove()
+
+
+@dataclass
+class Measured:
+    stack: list[Chain]
+    floor: list[Chain]
+    cycles: int
+    floor_cycles: int
+    seconds: float
+    verdicts: list[str]
+    load_before: tuple[float, float, float]
+    load_after: tuple[float, float, float]
+
+
+def measure(quick: bool, out_dir: Path, log: bool = True,
+            seconds: float | None = None) -> Measured:
+    """Run the stack and its floor together for `seconds` of cycles (default by mode);
+    every chain seen at every stage."""
+    measure_s = seconds or (QUICK_MEASURE_S if quick else FULL_MEASURE_S)
+    load_before = os.getloadavg()
+    collected = Collected()
+    verdicts: list[str] = []
+    run_dir = out_dir / "latency-run"
+    with closed_loop(run_dir, log=sys.stdout if log else None) as loop, \
+            floor_chain(loop, run_dir / "run") as floor:
+        subs = collected.subscribe(loop.bus)
+        t0 = mono_ns()
+        first_cycle = len(loop.feed.cycles())
+        loop.feed.on_cycle = floor.feed.on_cycle
+        deadline = time.monotonic() + measure_s
+        i = 0
+        try:
+            while time.monotonic() < deadline:
+                sc = load_scenario(find_scenario(SCENARIOS[i % len(SCENARIOS)]))
+                i += 1
+                if log:
+                    print(f"  {sc.name} ...", flush=True)
+                result = loop.sim.run(sc, timeout_s=max(1.0, deadline - time.monotonic()))
+                verdicts.append(f"{sc.name}: {result.verdict.outcome}")
+                loop.sim.wait_settled(min(SETTLE_TIMEOUT_S, 10.0))
+        finally:
+            loop.feed.on_cycle = None
+        time.sleep(0.3)     # the last chains reach the lines
+        for s in subs:
+            s.undeclare()
+        cycles = loop.feed.cycles()[first_cycle:]
+        written = {c.meas_counter: c.last_write_mono_ns for c in cycles}
+        lines = sorted(r.t_ns for r in loop.actuator.commands_since(t0))
+        with collected.lock:
+            stack = stack_chains(written, list(collected.tracks), dict(collected.processing_ns),
+                                 dict(collected.commands), dict(collected.brake), lines)
+        floor_lines = sorted(t for t in floor.lines.times if t >= t0)
+        fl = floor_chains(dict(floor.feed.written), list(floor.reports), floor_lines)
+        seconds = (mono_ns() - t0) / 1e9
+        floor_cycles = len(floor.feed.written)
+    return Measured(stack, fl, len(cycles), floor_cycles, seconds, verdicts, load_before,
+                    os.getloadavg())
+
+
+def _ms(s: Summary | None, attr: str) -> float:
+    return float("nan") if s is None else float(getattr(s, attr))
+
+
+def figures_from(m: Measured) -> list[Figure]:
+    st, fl = stages_ns(m.stack), stages_ns(m.floor)
+    total = summarize(st["total"])
+    floor_total = summarize(fl["total"])
+    zenoh = summarize(zenoh_ns(m.floor))
+    if total is None or floor_total is None or zenoh is None:
+        raise RuntimeError(f"no complete chain measured (stack {len(m.stack)}, floor "
+                           f"{len(m.floor)} of {m.cycles} cycles)")
+    load = (f"load {m.load_before[0]:.2f} -> {m.load_after[0]:.2f} (1 min); "
+            f"{len(m.stack)}/{m.cycles} stack and {len(m.floor)}/{m.floor_cycles} floor "
+            f"cycles paired")
+    same = "same-transport floor: slcan pty -> 3 relays, 2 hops -> serial pty"
+    bare = "Zenoh-only floor: the same 2 hops, no work"
+    figs = [
+        Figure("latency", "radar-to-brake p50", total.p50_ms, "ms", baseline=same,
+               baseline_value=floor_total.p50_ms,
+               target=f"<= {P50_TARGET_RATIO:g}x floor",
+               target_met=total.p50_ms <= P50_TARGET_RATIO * floor_total.p50_ms,
+               note=load),
+        Figure("latency", "radar-to-brake p50 vs 2 bare hops", total.p50_ms, "ms",
+               baseline=bare, baseline_value=zenoh.p50_ms,
+               target=f"<= {P50_TARGET_RATIO:g}x floor",
+               target_met=total.p50_ms <= P50_TARGET_RATIO * zenoh.p50_ms),
+        Figure("latency", "radar-to-brake p95", total.p95_ms, "ms", baseline=same,
+               baseline_value=floor_total.p95_ms),
+        Figure("latency", "radar-to-brake p99", total.p99_ms, "ms", baseline=same,
+               baseline_value=floor_total.p99_ms, target=f"< {P99_TARGET_MS:g} ms",
+               target_met=total.p99_ms < P99_TARGET_MS,
+               extra={"max_ms": total.max_ms, "floor_max_ms": floor_total.max_ms,
+                      "zenoh_floor_p99_ms": zenoh.p99_ms}),
+    ]
+    for name in STAGES:
+        s, f = summarize(st[name]), summarize(fl[name])
+        figs.append(Figure(
+            "latency", f"stage p50: {STAGE_TITLES[name]}", _ms(s, "p50_ms"), "ms",
+            baseline="floor's same stage", baseline_value=_ms(f, "p50_ms"),
+            extra={"stack": s.as_dict() if s else None, "floor": f.as_dict() if f else None}))
+    return figs
+
+
+def table(m: Measured) -> str:
+    st, fl = stages_ns(m.stack), stages_ns(m.floor)
+    rows = [(STAGE_TITLES[n], summarize(st[n]), summarize(fl[n])) for n in STAGES]
+    rows.append(("TOTAL: last CAN frame -> brake bytes", summarize(st["total"]),
+                 summarize(fl["total"])))
+    zen = summarize(zenoh_ns(m.floor))
+    stack_hops = summarize([a + b for a, b in zip(st["hop_radar_fusion"],
+                                                  st["hop_fusion_brake"], strict=True)])
+    rows.append(("the 2 Zenoh hops only", stack_hops, zen))
+    out = [f"radar-to-brake latency: {len(m.stack)} stack cycles, {len(m.floor)} floor "
+           f"cycles in {m.seconds:.0f} s; load avg {m.load_before[0]:.2f} -> "
+           f"{m.load_after[0]:.2f}; times in ms",
+           f"{'stage':<38}{'stack p50':>10}{'p95':>8}{'p99':>8}{'max':>8}   "
+           f"{'floor p50':>10}{'p95':>8}{'p99':>8}{'max':>8}"]
+    for title, s, f in rows:
+        cells = []
+        for x in (s, f):
+            if x is None:
+                cells.append(f"{'-':>10}{'-':>8}{'-':>8}{'-':>8}")
+            else:
+                cells.append(f"{x.p50_ms:>10.3f}{x.p95_ms:>8.3f}{x.p99_ms:>8.3f}"
+                             f"{x.max_ms:>8.2f}")
+        out.append(f"{title:<38}{cells[0]}   {cells[1]}")
+    total, ft = summarize(st["total"]), summarize(fl["total"])
+    if total and ft and zen:
+        out.append(f"p50 ratio: {total.p50_ms / ft.p50_ms:.2f}x the same-transport floor, "
+                   f"{total.p50_ms / zen.p50_ms:.2f}x the 2 bare hops (target <= "
+                   f"{P50_TARGET_RATIO:g}x); p99 {total.p99_ms:.2f} ms (target < "
+                   f"{P99_TARGET_MS:g} ms)")
+    return "\n".join(out)
+
+
+def plot(m: Measured, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    st, fl = stages_ns(m.stack), stages_ns(m.floor)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.8))
+    series = (("stack: last CAN frame -> brake bytes", st["total"], "tab:red"),
+              ("floor: same transports, 3 relays", fl["total"], "tab:gray"),
+              ("floor: 2 bare Zenoh hops", zenoh_ns(m.floor), "tab:blue"))
+    for label, values, line_colour in series:
+        if values:
+            v = np.sort(np.asarray(values, dtype=float) / 1e6)
+            a.plot(v, np.arange(1, len(v) + 1) / len(v), label=label, color=line_colour)
+    a.axvline(P99_TARGET_MS, color="k", ls="--", lw=0.8, label=f"p99 target {P99_TARGET_MS} ms")
+    a.axhline(0.99, color="k", ls=":", lw=0.6)
+    a.set_xscale("log")
+    a.set_xlabel("latency (ms, log)")
+    a.set_ylabel("fraction of cycles")
+    a.set_title(f"CDF over {len(m.stack)} cycles (load {m.load_before[0]:.1f})")
+    a.legend(fontsize=8, loc="lower right")
+    a.grid(alpha=0.3)
+    left = {"stack": 0.0, "floor": 0.0}
+    for i, name in enumerate(STAGES):
+        colour = plt.get_cmap("tab10")(i)
+        for row, (who, data) in enumerate((("stack", st), ("floor", fl))):
+            s = summarize(data[name])
+            w = s.p50_ms if s else 0.0
+            b.barh(row, w, left=left[who], color=colour,
+                   label=STAGE_TITLES[name] if row == 0 else None)
+            left[who] += w
+    b.set_yticks([0, 1], ["stack", "floor"])
+    b.invert_yaxis()
+    b.set_xlabel("sum of stage medians (ms)")
+    b.set_title("where the time goes (p50 per stage)")
+    b.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
+    st, fl = stages_ns(m.stack), stages_ns(m.floor)
+    def summ(values: Sequence[int]) -> dict[str, float] | None:
+        s = summarize(values)
+        return s.as_dict() if s else None
+    path.write_text(json.dumps({
+        "machine": machine_info(), "seconds": round(m.seconds, 1), "cycles": m.cycles,
+        "floor_cycles": m.floor_cycles, "verdicts": m.verdicts,
+        "load_avg_before": m.load_before, "load_avg_after": m.load_after,
+        "stack": {n: summ(v) for n, v in st.items()},
+        "floor": {n: summ(v) for n, v in fl.items()},
+        "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),
+        "figures": [f.to_json() for f in figs]}, indent=1))
+    return path
+
+
+def run(quick: bool, out_dir: Path, seconds: float | None = None) -> list[Figure]:
+    """The suite's entry point: measure, write JSON and PNG under `out_dir`, return the
+    figures. Raises RuntimeError when the stack or the floor does not come up."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    m = measure(quick, out_dir, seconds=seconds)
+    figs = figures_from(m)
+    print(table(m), flush=True)
+    write_json(m, figs, out_dir / "bench_latency.json")
+    plot(m, out_dir / "bench_latency.png")
+    return figs
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_latency",
+                                     description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help=f"{QUICK_MEASURE_S:g} s of cycles instead of {FULL_MEASURE_S:g}")
+    parser.add_argument("--seconds", type=float, help="measuring time (overrides the mode)")
+    parser.add_argument("--out", default="out/bench")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    t0 = time.monotonic()
+    figs = run(args.quick, out, args.seconds)
+    from benchmarks.report import print_table
+
+    print()
+    print_table(figs, sys.stdout)
+    print(f"({time.monotonic() - t0:.0f} s; {out / 'bench_latency.json'}, "
+          f"{out / 'bench_latency.png'})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,72 @@
+"""The latency benchmark runs end to end on a short measurement (figures not asserted:
+benchmarks report, tests do not time), and its floor relays forward a cycle."""
+
+import json
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from benchmarks import bench_latency
+from benchmarks.bench_brake import LineTimes
+from benchmarks.latency_chain import floor_chains
+from services.brake.pty_pair import PtyPair
+from services.radar.ars408 import ObjectGeneral, object_cycle_frames
+from services.radar.can_links import SlcanPtyLink
+from tests.support import wait_for
+from tools.sim.radar_feed import RadarFeed
+from tools.sim.scenario import RadarLook
+
+pytestmark = pytest.mark.slow
+
+
+def test_the_floor_relays_carry_a_cycle_from_the_can_pty_to_the_serial_pty(router, tmp_path):
+    link, pty = SlcanPtyLink(), PtyPair(tmp_path / "serial")
+    base = [sys.executable, "-m", "benchmarks.floor_relay"]
+    args = ["--connect", router, "--frames-per-object", "1", "--direct"]
+    procs: list[subprocess.Popen[str]] = [
+        subprocess.Popen([*base, "serial", *args, "--port", str(pty.path)],
+                         stdout=subprocess.PIPE, text=True),
+        subprocess.Popen([*base, "hop", *args], text=True),
+        subprocess.Popen([*base, "can", *args, "--channel", link.path], text=True)]
+    reports: list[tuple[int, ...]] = []
+    out = procs[0].stdout
+    assert out is not None
+    threading.Thread(target=bench_latency.read_reports, args=(out, reports),
+                     daemon=True).start()
+    lines = LineTimes(pty.master_fd)
+    try:
+        link.wait_open(60)
+        feed = RadarFeed(link, RadarLook())
+        written: dict[int, int] = {}
+
+        def through() -> bool:     # until the relays' subscriptions have propagated
+            counter = len(written)
+            frames = object_cycle_frames([ObjectGeneral(1, 9.0, 0.0, -2.0, 0.0, 0, 5.0)],
+                                         counter)
+            written[counter] = feed.send_paced(frames)[1]
+            return bool(floor_chains(written, list(reports), sorted(lines.times)))
+
+        wait_for(through, 60, 0.2, "a cycle through the floor relays")
+        chain = floor_chains(written, list(reports), sorted(lines.times))[-1]
+        # written, read, published, received, published, received, written: in order;
+        # the line is read after its relay got the payload (maybe before its write stamp)
+        assert list(chain[:7]) == sorted(chain[:7]) and chain[7] >= chain[5]
+    finally:
+        lines.stop()
+        for p in procs:
+            p.terminate()
+            p.wait(10)
+        link.close()
+        pty.remove()
+
+
+def test_benchmark_runs_and_writes_its_table_plot_and_json(tmp_path, capsys):
+    assert bench_latency.main(["--seconds", "4", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "TOTAL: last CAN frame -> brake bytes" in out and "radar-to-brake p99" in out
+    assert (tmp_path / "bench_latency.png").stat().st_size > 0
+    result = json.loads((tmp_path / "bench_latency.json").read_text())
+    assert result["stack"]["total"]["n"] >= 20 and result["floor"]["total"]["n"] >= 20
+    assert result["floor_zenoh_2_hops"]["p50_ms"] > 0
