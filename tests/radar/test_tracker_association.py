@@ -60,7 +60,7 @@ def test_pair_searches_keep_pairs_exactly_on_the_radius(radius):
     # Points on a 0.2 m grid (positions as the radar quantises them): for these radii
     # one pair lies exactly on the radius, where a window bound x + r rounds below the
     # other point although the distance test keeps it.
-    x = np.arange(200) * 0.2
+    x = np.arange(200, dtype=np.float64) * 0.2
     y = np.zeros(200)
     dx = x[:, None] - x[None, :]
     near = dx * dx <= radius * radius          # the searches' own distance test
