@@ -6,6 +6,7 @@ are two matrices (floats and integers): selecting rows is two calls, not ten.
 Radar frame: x forward, y left, origin at the radar; velocities are relative to the radar.
 """
 
+from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any
 
@@ -292,26 +293,33 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
         return det
     # Sparse neighbour lists and the seed walk in plain Python: numpy per-row calls
     # would cost more than the few pairs a scene has.
-    neighbours: dict[int, list[int]] = {}
+    neighbours: defaultdict[int, list[int]] = defaultdict(list)
     for i, j in zip(ii[similar].tolist(), jj[similar].tolist(), strict=True):
-        neighbours.setdefault(i, []).append(j)
-        neighbours.setdefault(j, []).append(i)
-    group = [-1] * n
+        neighbours[i].append(j)
+        neighbours[j].append(i)
+    adjacent = neighbours.get
+    taken = [False] * n
     seeds: list[int] = []
+    groups: list[list[int]] = []          # groups of two or more: [seed, members...]
+    positions: list[int] = []             # their seed's position in `seeds`
     for i in np.argsort(-fl[RCS], kind="stable").tolist():
-        if group[i] >= 0:
+        if taken[i]:
             continue
-        g = len(seeds)
+        taken[i] = True
+        mates = [j for j in adjacent(i, ()) if not taken[j]]
+        if mates:
+            for j in mates:
+                taken[j] = True
+            groups.append([i, *mates])
+            positions.append(len(seeds))
         seeds.append(i)
-        group[i] = g
-        for j in neighbours.get(i, ()):
-            if group[j] < 0:
-                group[j] = g
-    k = len(seeds)
     out = det.take(np.asarray(seeds, dtype=np.int64))
-    # Each group's mean: one weighted bincount over all four rows (row r of group g at
-    # bin r * k + g).
-    bins = (np.asarray(group, dtype=np.int64) + _ROW_BINS[:, None] * k).ravel()
-    sums = np.bincount(bins, weights=fl[X:VY + 1].ravel(), minlength=4 * k).reshape(4, k)
-    out.floats[X:VY + 1] = sums / np.bincount(group, minlength=k)
+    # Each group's mean: one weighted bincount over the four rows of its members (row r
+    # of group g at bin r * G + g).
+    members = [j for g in groups for j in g]
+    group_of = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
+    bins = (group_of + _ROW_BINS[:, None] * len(groups)).ravel()
+    sums = np.bincount(bins, weights=np.take(fl[X:VY + 1], members, axis=1).ravel(),
+                       minlength=4 * len(groups)).reshape(4, len(groups))
+    out.floats[X:VY + 1, positions] = sums / np.bincount(group_of)
     return out

@@ -102,9 +102,10 @@ def candidates_in_boxes(ax: F, ay: F, half_x: float, half_y: F | float, bx: F, b
         return _empty()
     width = half_x + _EPS        # a point exactly half_x away lands in a strip beside
     reach = float(np.max(half_y)) + _EPS
-    y0 = min(float(ay.min()), float(by.min())) - reach
+    ys = np.concatenate([ay, by])
+    y0 = float(ys.min()) - reach
     # Keys of one strip span [0, span); every window stays inside its strip's span.
-    span = max(float(ay.max()), float(by.max())) + reach - y0 + 1.0
+    span = float(ys.max()) + reach - y0 + 1.0
     keys = np.floor(bx / width) * span + (by - y0)
     order = np.argsort(keys)
     keys = keys[order]
@@ -114,5 +115,5 @@ def candidates_in_boxes(ax: F, ay: F, half_x: float, half_y: F | float, bx: F, b
     total = int(counts.sum())
     if total == 0:
         return _empty()
-    i, p = _expand(lo, counts, np.tile(np.arange(len(ax)), 3), total)
+    i, p = _expand(lo, counts, np.arange(3 * len(ax)) % len(ax), total)
     return i, order[p]

@@ -66,6 +66,7 @@ _COEF_ROWS = [4, 5, 2, 3, 0, 1]              # S rows v, b, a -> alpha, beta, ga
 _AXES = [0, 1, 0, 1, 0, 1]
 _C1_ROWS = [0, 1, 4, 5, 0, 1, 0, 1, 4, 5]    # alpha, gamma, alpha, alpha, gamma
 _U2_ROWS = [2, 3, 0, 1, 6, 7, 8, 9, 6, 7]    # dv, dp, cov, var_v, cov
+_MESSAGE_ROWS = [0, 1, 2, 3, TRACK_RCS, VAR_P.start, VAR_P.start + 1]
 
 
 def covariance_step(dt: float, accel_std: float) -> tuple[F, F]:
@@ -330,15 +331,14 @@ class KalmanTracker:
         if not len(self):
             return []
         st = self.state
-        x, y, vx, vy = st[0], st[1], st[2], st[3]
-        r = np.hypot(x, y)
-        rr = np.divide(x * vx + y * vy, r, out=np.zeros_like(r), where=r > 0)
-        # One tolist() per matrix: per-element conversions would dominate.
-        f = st.tolist()
+        r = np.hypot(st[0], st[1])
+        rr = np.divide(st[0] * st[2] + st[1] * st[3], r, out=np.zeros_like(r), where=r > 0)
+        # One tolist() per matrix (of the rows a message carries): per-element
+        # conversions would dominate.
+        x, y, vx, vy, rcs, x_var, y_var = st[_MESSAGE_ROWS].tolist()
         m = self.meta.tolist()
         return list(starmap(RadarTrack, zip(
-            m[ID], f[0], f[1], f[2], f[3], r.tolist(), rr.tolist(), f[TRACK_RCS],
-            (self.meta[CONFIRMED] > 0).tolist(), m[HITS], m[MISSES], f[VAR_P.start],
-            f[VAR_P.start + 1], m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS],
-            strict=True,
+            m[ID], x, y, vx, vy, r.tolist(), rr.tolist(), rcs,
+            (self.meta[CONFIRMED] > 0).tolist(), m[HITS], m[MISSES], x_var, y_var,
+            m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS], strict=True,
         )))
