@@ -1,43 +1,58 @@
-"""Fusion benchmark: time from a radar cycle received to its BrakeCommand published.
+"""Fusion benchmark: time from a radar cycle received to its BrakeCommand published,
+with 0-128 confirmed tracks, and with 1, 2 or 4 cameras streaming into fusion.
 
     python -m benchmarks.bench_fusion [--quick] [--out out/bench]
 
-Runs the real shell (services/fusion/node.py) in this process on a Zenoh session (peer,
-no endpoints: puts go nowhere, but through the whole publish path): the raw RadarTracks
-payload goes into the same callback Zenoh would call, with a rendered frame (SIMULATION)
-already decoded in the ring, and the clock stops when the BrakeCommand's put returns.
+Tracks: runs the real shell (services/fusion/node.py) in this process on a Zenoh session
+(peer, no endpoints: puts go nowhere, but through the whole publish path): the raw
+RadarTracks payload goes into the same callback Zenoh would call, with a rendered frame
+(SIMULATION) already decoded in the ring, and the clock stops when the BrakeCommand's put
+returns. Two scenarios, confirmed tracks over 3.5-25 m: `worst`, every track in the
+corridor and closing, so every one is projected and gated (64 such ROIs cover about one
+full frame); `traffic`, tracks spread over the field of view with mixed velocities, so
+the default gate scope gates only the threats. Fusion publishes the command as soon as
+it is decided (threats gated most urgent first) and the targets once every track is
+done: both times are printed, with the number of gate runs before the command. For each
+count (0 = the heartbeat, the fixed cost; 1, 8, 64, 128): mean, p50, p95 and max;
+baselines from the same run: the paper's naive gate (colour crop, cvtColor, Canny,
+count) summed over the same ROIs, and one full-frame gate (how fast this machine is
+right now). Target: < 3 ms for 64 tracks.
 
-Two scenarios, confirmed tracks over 3.5-25 m: `worst`, every track in the corridor and
-closing, so every one is projected and gated (64 such ROIs cover about one full frame);
-`traffic`, tracks spread over the field of view with mixed velocities, so the default
-gate scope gates only the threats. Fusion publishes the command as soon as it is decided
-(threats gated most urgent first) and the targets once every track is done: both times
-are printed, with the number of gate runs before the command. For each count (0 = the
-heartbeat, the fixed cost; 1, 8, 64, 128): mean, p50, p95 and max; baselines from the
-same run: the paper's naive gate (colour crop, cvtColor, Canny, count) summed over the
-same ROIs, and one full-frame gate (how fast this machine is right now).
-Target: < 3 ms for 64 tracks.
-Writes bench_fusion.json and bench_fusion.png under --out.
+Cameras: fusion with 1, 2 or 4 cameras (a SIMULATED rig: front, left, right, narrow)
+behind a Zenoh router, a separate process publishing each camera's 848x480 JPEG at
+30 fps with fresh stamps, and a radar cycle of 8 worst-case tracks every 74 ms, with
+both decode policies (`every_frame`, `before_radar`). Per run: tracks received ->
+BrakeCommand (mean, p95), the decoder threads' CPU time and the whole process's, as a
+share of one core, and frames decoded per second. Baselines from the same run: the same
+cycles with no camera traffic (frames decoded between cycles, off the clock), and for
+the decode CPU, N x 30 fps x one decode measured now.
+
+Writes bench_fusion.json, bench_fusion.png and bench_fusion_cameras.png under --out;
+`run(quick, out_dir)` returns the figures for the suite (`python -m benchmarks`).
 """
 
 import argparse
 import json
 import logging
+import subprocess
+import sys
 import time
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from benchmarks.figures import Figure
 from common.bus import Bus
-from common.calibration import Calibration
+from common.calibration import Calibration, CalibrationFile
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
-from common.config.fusion import FusionConfig
+from common.config.fusion import FusionConfig, FusionSettings
 from common.config.loader import parse_config
-from common.imaging import encode_jpeg
-from common.keys import RADAR_TRACKS
+from common.imaging import decode_gray, encode_jpeg
+from common.keys import CAMERA_JPEG, RADAR_TRACKS
 from common.messages import (
     CompressedFrame,
     Decision,
@@ -50,12 +65,20 @@ from common.messages import (
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.node import FusionNode
+from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.synthetic import Obstacle, Scene, render
+from services.fusion.synthetic import Obstacle, Scene, render, rig_calibration_toml
 from services.fusion.verifiers import GateResult, ParamValue, Verifier, create
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"
 COUNTS = (0, 1, 8, 64, 128)
+CAMERA_COUNTS = (1, 2, 4)
+RIG_ORDER = ("front", "left", "right", "narrow")
+CAMERA_FPS = 30.0
+RADAR_PERIOD_S = 0.074
+CAMERA_TRACKS = 8
+POLICIES = ("every_frame", "before_radar")
+OBSTACLES = tuple(Obstacle(x, y, "box") for x, y in ((6, 0.5), (12, -0.6), (20, 0.2)))
 
 
 def tracks_payload(n: int, seq: int, rng: np.random.Generator, scenario: str) -> bytes:
@@ -123,8 +146,7 @@ def build_node(bus: Bus, cal: Calibration) -> tuple[FusionNode, TimedPublisher, 
     log = logging.getLogger("bench")
     decoder = FrameDecoder(cal.width, cal.height, 4, 2, log)
     node = FusionNode(bus, settings, core, decoder, log)
-    obstacles = tuple(Obstacle(x, y, "box") for x, y in ((6, 0.5), (12, -0.6), (20, 0.2)))
-    bgr = render(cal, Scene(obstacles=obstacles, seed=3))
+    bgr = render(cal, Scene(obstacles=OBSTACLES, seed=3))
     timed = TimedPublisher(node._cmd_pub, verifier)
     node._cmd_pub = timed  # type: ignore[assignment]
     return node, timed, bgr
@@ -156,7 +178,8 @@ def full_frame_canny_us(gray: np.ndarray, reps: int) -> float:
     return float(np.median(samples))
 
 
-def run(reps: int) -> dict[str, Any]:
+def measure_tracks(reps: int) -> dict[str, Any]:
+    """The tracks scale: `reps` cycles per scenario and count."""
     cal = Calibration.load(CALIBRATION)
     settings = ZenohSettings(mode=ZenohMode.PEER, connect=(), listen=())
     results: dict[str, Any] = {}
@@ -230,7 +253,7 @@ def print_table(results: dict[str, Any]) -> None:
 
 
 def rows(results: dict[str, Any]) -> list[dict[str, Any]]:
-    return [r for r in results.values() if isinstance(r, dict)]
+    return [r for r in results.values() if isinstance(r, dict) and "scenario" in r]
 
 
 def plot(results: dict[str, Any], path: Path) -> None:
@@ -265,19 +288,328 @@ def plot(results: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+# -- cameras --------------------------------------------------------------------------
+
+def rig(names: tuple[str, ...]) -> dict[str, Calibration]:
+    """The SIMULATED rig's calibrations (services/fusion/synthetic.py)."""
+    return {n: Calibration(parse_config(tomllib.loads(rig_calibration_toml(n)),
+                                        CalibrationFile, n), n) for n in names}
+
+
+def client(endpoint: str) -> ZenohSettings:
+    return ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))
+
+
+def publish_cameras(endpoint: str, names: tuple[str, ...], seconds: float) -> int:
+    """The camera process: each camera's rendered JPEG at 30 fps with fresh capture
+    stamps, the cameras out of phase (they are not synchronised)."""
+    cals = rig(names)
+    jpegs = {n: encode_jpeg(render(cals[n], Scene(obstacles=OBSTACLES, seed=5)), 80)
+             for n in names}
+    period = 1.0 / CAMERA_FPS
+    with Bus.open(client(endpoint), "ego", "camera/bench") as bus:
+        pubs = {n: bus.publisher(CAMERA_JPEG, camera=n) for n in names}
+        start = time.monotonic()
+        due = {n: start + i * period / len(names) for i, n in enumerate(names)}
+        seq = dict.fromkeys(names, 0)
+        while time.monotonic() < start + seconds:
+            name = min(due, key=due.__getitem__)
+            time.sleep(max(0.0, due[name] - time.monotonic()))
+            pubs[name].put(CompressedFrame(
+                header=Header(seq=seq[name], source=f"camera/{name}", stamp_ns=wall_ns(),
+                              pub_mono_ns=mono_ns()),
+                camera=name, width=848, height=480, jpeg=jpegs[name]))
+            seq[name] += 1
+            due[name] += period
+    return 0
+
+
+def camera_settings(names: tuple[str, ...], policy: str, keys: tuple[str, ...]
+                    ) -> FusionSettings:
+    """Cameras `names` (the rig's calibrations) subscribed to as `keys`."""
+    return parse_config({"fusion": {
+        "instance": "bench", "cameras": [{"name": k, "calibration": f"rig/{n}.toml"}
+                                         for n, k in zip(names, keys, strict=True)],
+        "frames": {"max_skew_s": 1.0, "decode": policy},
+        "decision": {"radar_max_age_s": 1.0}}}, FusionConfig).fusion
+
+
+def thread_cpu_s(ident: int | None) -> float:
+    return 0.0 if ident is None else time.clock_gettime(time.pthread_getcpuclockid(ident))
+
+
+def camera_case(bus: Bus, names: tuple[str, ...], policy: str, seconds: float,
+                traffic: bool) -> dict[str, Any]:
+    """One run: radar cycles of CAMERA_TRACKS worst-case tracks every 74 ms into a
+    fusion node with these cameras. With `traffic` it subscribes to the camera process's
+    streams; without, to keys nobody publishes, and its frames are decoded between
+    cycles, off the clock (the camera process keeps running: the same machine load)."""
+    cals = rig(names)
+    keys = names if traffic else tuple(f"idle-{n}" for n in names)
+    settings = camera_settings(names, policy, keys)
+    verifier = CountingVerifier(create("edge_density"))
+    core = FusionCore(settings, {k: ColumnProjector(cals[n], ColumnGeometry())
+                                 for n, k in zip(names, keys, strict=True)}, verifier)
+    log = logging.getLogger("bench")
+    rhythm = RadarRhythm()
+    decoders = [FrameDecoder.for_policy(848, 480, settings.frames, log, k, rhythm)
+                for k in keys]
+    node = FusionNode(bus, settings, core, decoders, log, None, rhythm)
+    timed = TimedPublisher(node._cmd_pub, verifier)
+    node._cmd_pub = timed  # type: ignore[assignment]
+    jpegs = [encode_jpeg(render(cals[n], Scene(obstacles=OBSTACLES, seed=5)), 80)
+             for n in names]
+    node.start()
+    try:
+        if traffic:
+            deadline = time.monotonic() + 60
+            while any(d.snapshot().received < 5 for d in decoders):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the camera process's frames did not arrive")
+                time.sleep(0.05)
+        key = RADAR_TRACKS.key("ego", sensor="front")
+        rng = np.random.default_rng(9)
+        warmup = 14                   # about 1 s: the radar rhythm settles
+        n_cycles = warmup + max(10, round(seconds / RADAR_PERIOD_S))
+        latencies: list[float] = []
+        start = None
+        next_t = time.monotonic()
+        for i in range(n_cycles):
+            if i == warmup:
+                start = (time.monotonic(), time.process_time(),
+                         [thread_cpu_s(d.thread_ident) for d in decoders],
+                         [d.snapshot() for d in decoders])
+            if not traffic:
+                for d, jpeg in zip(decoders, jpegs, strict=True):
+                    d.decode_now(encode(CompressedFrame(
+                        header=Header(seq=i, source="camera", stamp_ns=wall_ns(),
+                                      pub_mono_ns=0), camera=d.camera, width=848,
+                        height=480, jpeg=jpeg)), mono_ns())
+            next_t += RADAR_PERIOD_S
+            time.sleep(max(0.0, next_t - time.monotonic()))
+            payload = tracks_payload(CAMERA_TRACKS, i, rng, "worst")
+            t0 = time.perf_counter_ns()
+            last = node.on_tracks_payload(payload, key, mono_ns())
+            if i >= warmup:
+                assert last is not None and last.command.decision is Decision.BRAKE, (
+                    None if last is None else last.command.reason)
+                latencies.append((timed.done_ns - t0) / 1e3)
+        assert start is not None
+        wall0, proc0, threads0, feeds0 = start
+        wall = time.monotonic() - wall0
+        decode_cpu = sum(thread_cpu_s(d.thread_ident) for d in decoders) - sum(threads0)
+        feeds1 = [d.snapshot() for d in decoders]
+        received = sum(f.received for f in feeds1) - sum(f.received for f in feeds0)
+        skipped = sum(f.skipped for f in feeds1) - sum(f.skipped for f in feeds0)
+        dropped = sum(f.dropped for f in feeds1) - sum(f.dropped for f in feeds0)
+        proc_cpu = time.process_time() - proc0
+        lat = np.array(latencies)
+        return {"cameras": len(names), "policy": policy, "traffic": traffic,
+                "mean_us": float(lat.mean()), "p50_us": float(np.median(lat)),
+                "p95_us": float(np.percentile(lat, 95)), "max_us": float(lat.max()),
+                "n": len(lat), "seconds": wall,
+                "decode_cpu_pct": 100.0 * decode_cpu / wall,
+                "process_cpu_pct": 100.0 * proc_cpu / wall,
+                "frames_received_per_s": received / wall,
+                "frames_decoded_per_s": (received - skipped - dropped) / wall if traffic
+                else 0.0,
+                "frames_skipped_per_s": skipped / wall, "frames_dropped_per_s": dropped / wall,
+                "jpeg_kb": float(np.mean([len(j) for j in jpegs]) / 1024)}
+    finally:
+        node.stop()
+
+
+def one_decode_us(reps: int = 40) -> float:
+    jpeg = encode_jpeg(render(rig(("front",))["front"], Scene(obstacles=OBSTACLES, seed=5)), 80)
+    samples = []
+    for _ in range(reps):
+        t = time.perf_counter_ns()
+        decode_gray(jpeg)
+        samples.append((time.perf_counter_ns() - t) / 1e3)
+    return float(np.median(samples))
+
+
+def _free_endpoint() -> str:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+
+
+def _wait_listening(endpoint: str, timeout_s: float) -> None:
+    import socket
+
+    host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            with socket.create_connection((host, int(port)), timeout=0.5):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
+def measure_cameras(seconds: float) -> dict[str, Any]:
+    """The cameras scale: every camera count, with and without traffic, both policies."""
+    endpoint = _free_endpoint()
+    router = subprocess.Popen([sys.executable, "-m", "common.router", "--listen", endpoint],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    results: dict[str, Any] = {"one_decode_us": one_decode_us()}
+    cameras = None
+    try:
+        _wait_listening(endpoint, 30)
+        # One camera process streams every rig camera for the whole measurement; each
+        # case subscribes to the cameras it uses (the router forwards only those).
+        cameras = subprocess.Popen(
+            [sys.executable, "-m", "benchmarks.bench_fusion", "--publish-cameras",
+             ",".join(RIG_ORDER), "--connect", endpoint, "--seconds", "3600"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        with Bus.open(client(endpoint), "ego", "fusion/bench") as bus:
+            for n in CAMERA_COUNTS:
+                names = RIG_ORDER[:n]
+                results[f"{n} idle"] = camera_case(bus, names, "every_frame", seconds,
+                                                   traffic=False)
+                for policy in POLICIES:
+                    if cameras.poll() is not None:
+                        raise RuntimeError("the camera process ended")
+                    results[f"{n} {policy}"] = camera_case(bus, names, policy, seconds,
+                                                           traffic=True)
+    finally:
+        for proc in (cameras, router):
+            if proc is not None:
+                proc.terminate()
+                proc.wait(10)
+    return results
+
+
+def print_cameras(cams: dict[str, Any]) -> None:
+    print(f"\n{CAMERA_TRACKS} worst-case tracks every {RADAR_PERIOD_S * 1e3:.0f} ms, cameras at "
+          f"{CAMERA_FPS:g} fps through a router (us; CPU in % of one core)")
+    print(f"{'cameras':>7} {'decode':<13} {'mean':>8} {'p95':>8} {'max':>8} {'decode CPU':>10} "
+          f"{'process CPU':>11} {'rx/s':>6} {'decoded/s':>9} {'skipped/s':>9}")
+    for n in CAMERA_COUNTS:
+        for case in ("idle", *POLICIES):
+            r = cams[f"{n} {case}"]
+            label = "no traffic" if case == "idle" else case
+            print(f"{n:>7} {label:<13} {r['mean_us']:8.1f} {r['p95_us']:8.1f} {r['max_us']:8.1f} "
+                  f"{r['decode_cpu_pct']:10.1f} {r['process_cpu_pct']:11.1f} "
+                  f"{r['frames_received_per_s']:6.1f} {r['frames_decoded_per_s']:9.1f} "
+                  f"{r['frames_skipped_per_s']:9.1f}")
+    print(f"One decode_gray of a rig frame ({cams['1 idle']['jpeg_kb']:.0f} KB): "
+          f"{cams['one_decode_us']:.0f} us (median, now)")
+
+
+def figures(tracks: dict[str, Any], cams: dict[str, Any]) -> list[Figure]:
+    """The suite's "scale" figures: each beside its same-run baseline."""
+    out = []
+    for scenario in ("worst", "traffic"):
+        for n in COUNTS[1:]:
+            r = tracks[f"{scenario} {n}"]
+            target = n == 64
+            out.append(Figure(
+                "scale", f"fusion tracks->command, {n} tracks ({scenario})",
+                r["mean_us"] / 1e3, "ms", baseline="paper's naive gate, same ROIs",
+                baseline_value=r["naive_gate_sum_mean_us"] / 1e3,
+                target="< 3 ms" if target else "",
+                target_met=r["mean_us"] < 3000 if target else None,
+                extra={k: r[k] for k in ("p95_us", "max_us", "gated_mean",
+                                         "gated_before_command_mean",
+                                         "targets_published_mean_us")}))
+    decode_ms = cams["one_decode_us"] / 1e3
+    for n in CAMERA_COUNTS:
+        idle = cams[f"{n} idle"]
+        for policy in POLICIES:
+            r = cams[f"{n} {policy}"]
+            out.append(Figure(
+                "scale", f"fusion tracks->command, {n} camera(s) at 30 fps, {policy}",
+                r["mean_us"] / 1e3, "ms", baseline="same cycles, no camera traffic",
+                baseline_value=idle["mean_us"] / 1e3,
+                extra={"p95_us": r["p95_us"], "idle_p95_us": idle["p95_us"]}))
+        lazy, every = cams[f"{n} before_radar"], cams[f"{n} every_frame"]
+        out.append(Figure(
+            "scale", f"decode CPU, {n} camera(s) at 30 fps, every_frame",
+            every["decode_cpu_pct"], "%", baseline="N x 30 fps x one decode (now)",
+            baseline_value=n * CAMERA_FPS * decode_ms / 10.0,
+            extra={"process_cpu_pct": every["process_cpu_pct"],
+                   "decoded_per_s": every["frames_decoded_per_s"]}))
+        out.append(Figure(
+            "scale", f"decode CPU, {n} camera(s) at 30 fps, before_radar",
+            lazy["decode_cpu_pct"], "%", baseline="every_frame, same run",
+            baseline_value=every["decode_cpu_pct"],
+            extra={"process_cpu_pct": lazy["process_cpu_pct"],
+                   "decoded_per_s": lazy["frames_decoded_per_s"],
+                   "skipped_per_s": lazy["frames_skipped_per_s"]}))
+    return out
+
+
+def plot_cameras(cams: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
+    xs = np.arange(len(CAMERA_COUNTS))
+    cases = ("idle", *POLICIES)
+    for j, case in enumerate(cases):
+        sel = [cams[f"{n} {case}"] for n in CAMERA_COUNTS]
+        label = "no camera traffic" if case == "idle" else case
+        a.bar(xs + (j - 1) * 0.27, [r["mean_us"] / 1e3 for r in sel], 0.27, label=label)
+        a.scatter(xs + (j - 1) * 0.27, [r["p95_us"] / 1e3 for r in sel], marker="_", s=150,
+                  color="black", zorder=3)
+        if case != "idle":
+            b.bar(xs + (j - 1.5) * 0.35, [r["decode_cpu_pct"] for r in sel], 0.35,
+                  label=f"{case}: decoder threads")
+            b.scatter(xs + (j - 1.5) * 0.35, [r["process_cpu_pct"] for r in sel], marker="_",
+                      s=200, color="black", zorder=3)
+    b.plot(xs, [n * CAMERA_FPS * cams["one_decode_us"] / 1e4 for n in CAMERA_COUNTS], "k:",
+           label="N x 30 fps x one decode")
+    for ax in (a, b):
+        ax.set_xticks(xs, [f"{n} camera(s)" for n in CAMERA_COUNTS])
+        ax.legend(fontsize=8)
+    a.set_ylabel(f"tracks -> BrakeCommand, ms ({CAMERA_TRACKS} tracks; dash: p95)")
+    b.set_ylabel("% of one core (dash: whole fusion process)")
+    a.set_title("fusion cycle with cameras streaming at 30 fps")
+    b.set_title("decoding cost")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(quick: bool, out_dir: Path) -> list[Figure]:
+    """Both scales; prints the tables, writes JSON and PNGs under `out_dir`, returns the
+    suite's figures."""
+    tracks = measure_tracks(20 if quick else 300)
+    print_table(tracks)
+    cams = measure_cameras(0.8 if quick else 10.0)
+    print_cameras(cams)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "bench_fusion.json").write_text(json.dumps({**tracks, "cameras": cams},
+                                                          indent=2))
+    plot(tracks, out_dir / "bench_fusion.png")
+    plot_cameras(cams, out_dir / "bench_fusion_cameras.png")
+    print(f"wrote {out_dir / 'bench_fusion.json'}, {out_dir / 'bench_fusion.png'} and "
+          f"{out_dir / 'bench_fusion_cameras.png'}")
+    return figures(tracks, cams)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bench_fusion", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
+    # The camera process of the cameras scale (started by the benchmark itself).
+    parser.add_argument("--publish-cameras", help=argparse.SUPPRESS)
+    parser.add_argument("--connect", help=argparse.SUPPRESS)
+    parser.add_argument("--seconds", type=float, default=60.0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    results = run(20 if args.quick else 300)
-    print_table(results)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_fusion.json").write_text(json.dumps(results, indent=2))
-    plot(results, out / "bench_fusion.png")
-    print(f"wrote {out / 'bench_fusion.json'} and {out / 'bench_fusion.png'}")
+    if args.publish_cameras:
+        return publish_cameras(args.connect, tuple(args.publish_cameras.split(",")),
+                               args.seconds)
+    run(args.quick, Path(args.out))
     return 0
 
 

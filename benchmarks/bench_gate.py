@@ -17,7 +17,8 @@ real colour decode + cvtColor differs from decode_gray by a few grey levels, rep
 separately. Then, on labelled synthetic frames (a held-out seed), precision and recall of
 both verifiers by day and by night.
 
-Writes bench_gate.json and bench_gate.png under --out.
+Writes bench_gate.json and bench_gate.png under --out; `run(quick, out_dir)` returns the
+figures for the suite (`python -m benchmarks`) and raises if any density differs.
 """
 
 import argparse
@@ -31,6 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from benchmarks.figures import Figure
 from common.calibration import Calibration
 from common.imaging import decode_bgr, decode_gray, encode_jpeg
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
@@ -108,7 +110,7 @@ def time_gates(cal: Calibration, frames: list[tuple[np.ndarray, list[Obstacle]]]
     ours, adaptive = create("edge_density"), create("adaptive_edge_density")
     rng = np.random.default_rng(1)
     timings: dict[str, dict[str, list[float]]] = {}
-    identical = True
+    identical = 0
     colour_dd: list[float] = []
     colour_flips = 0
     checked = 0
@@ -121,7 +123,7 @@ def time_gates(cal: Calibration, frames: list[tuple[np.ndarray, list[Obstacle]]]
             for roi in rois_of_size(cal, obstacles, size, rng):
                 d_ours = ours.verify(gray, roi).density
                 d_naive = naive_density(same_pixels, roi)
-                identical &= d_ours == d_naive
+                identical += int(d_ours == d_naive)
                 d_colour = naive_density(real_colour, roi)
                 colour_dd.append(abs(d_colour - d_ours))
                 colour_flips += (d_colour >= 0.025) != (d_ours >= 0.025)
@@ -143,7 +145,8 @@ def time_gates(cal: Calibration, frames: list[tuple[np.ndarray, list[Obstacle]]]
     cv2.setNumThreads(1)
     summary = {label: {name: stats(s) for name, s in per.items()}
                for label, per in timings.items()}
-    check = {"rois_checked": checked, "identical_densities": bool(identical),
+    check = {"rois_checked": checked, "rois_identical": identical,
+             "identical_densities": identical == checked,
              "colour_decode_max_abs_density_diff": float(max(colour_dd)),
              "colour_decode_verdict_flips": int(colour_flips)}
     return summary, check
@@ -247,27 +250,86 @@ def plot(summary: dict[str, dict[str, dict[str, float]]], night: dict[str, dict[
     plt.close(fig)
 
 
+NAIVE = "naive (default threads)"
+OURS = "ours: edge_density"
+PAPER = "paper: 0.121 ms per ROI, 0.706 ms full frame, 5.8x"
+
+
+def figures(summary: dict[str, dict[str, dict[str, float]]], check: dict[str, Any],
+            night: dict[str, dict[str, Any]]) -> list[Figure]:
+    """The suite's "gate" figures, each beside the paper's naive code in the same run."""
+    out = []
+    for label in SIZES:
+        per = summary[label]
+        roi = label != "full frame (848x480)"
+        for stat in ("mean", "p95"):
+            ours, naive = per[OURS][f"{stat}_us"], per[NAIVE][f"{stat}_us"]
+            out.append(Figure(
+                "gate", f"edge_density {stat}, {label}", ours, "us",
+                baseline="paper's naive code, same ROIs", baseline_value=naive,
+                target=">= 1.5x faster" if roi else "",
+                target_met=naive >= 1.5 * ours if roi else None,
+                note=PAPER if roi and stat == "mean" and "4.3" in label else "",
+                extra={"naive_1_thread_us": per["naive (1 thread)"][f"{stat}_us"],
+                       "adaptive_us": per["adaptive_edge_density"][f"{stat}_us"]}))
+    full = summary["full frame (848x480)"]
+    for label in list(SIZES)[:2]:
+        ratio = full[OURS]["mean_us"] / summary[label][OURS]["mean_us"]
+        naive = full[NAIVE]["mean_us"] / summary[label][NAIVE]["mean_us"]
+        out.append(Figure("gate", f"full frame / {label}, mean", ratio, "x",
+                          baseline="the same ratio, paper's naive code", baseline_value=naive,
+                          note="paper: 5.8x over its mix of ROI sizes"))
+    out.append(Figure("gate", "ROIs with densities identical to the naive code",
+                      check["rois_identical"], "ROIs", baseline="ROIs checked",
+                      baseline_value=check["rois_checked"], target="all",
+                      target_met=check["identical_densities"]))
+    for key in ("night", "day"):
+        adaptive, base = night[f"adaptive_edge_density {key}"], night[f"edge_density {key}"]
+        out.append(Figure("gate", f"adaptive_edge_density precision, {key} (simulated)",
+                          100 * adaptive["precision"], "%",
+                          baseline="edge_density, same frames",
+                          baseline_value=100 * base["precision"],
+                          extra={"recall": adaptive["recall"],
+                                 "baseline_recall": base["recall"]}))
+    return out
+
+
+def run(quick: bool, out_dir: Path) -> list[Figure]:
+    """Time the gates, evaluate the verifiers, print the report, write JSON and PNG under
+    `out_dir`; the suite's figures. Raises RuntimeError when a density differs from the
+    naive code's on the same pixels (the speed figures would then compare different work)."""
+    cal = Calibration.load(CALIBRATION)
+    n_frames, reps, n_labelled = (2, 30, 16) if quick else (8, 200, 160)
+    frames = scenes(cal, n_frames, seed=100)
+    summary, check = time_gates(cal, frames, reps)
+    night = night_evaluation(cal, n_labelled, seed=11)
+    derived = print_report(summary, check, night)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = {"opencv": cv2.__version__, "default_threads": _DEFAULT_THREADS,
+              "frames": n_frames, "reps_per_roi": reps, "timing": summary, **derived,
+              "densities": check, "labelled_eval": night}
+    (out_dir / "bench_gate.json").write_text(json.dumps(result, indent=2))
+    plot(summary, night, out_dir / "bench_gate.png")
+    print(f"\nwrote {out_dir / 'bench_gate.json'} and {out_dir / 'bench_gate.png'}")
+    if not check["identical_densities"]:
+        raise RuntimeError(f"densities differ from the naive code's on "
+                           f"{check['rois_checked'] - check['rois_identical']} of "
+                           f"{check['rois_checked']} ROIs")
+    return figures(summary, check, night)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bench_gate", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="few frames and repetitions")
     parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
     args = parser.parse_args(argv)
-    cal = Calibration.load(CALIBRATION)
-    n_frames, reps, n_labelled = (2, 30, 16) if args.quick else (8, 200, 160)
-    frames = scenes(cal, n_frames, seed=100)
-    summary, check = time_gates(cal, frames, reps)
-    night = night_evaluation(cal, n_labelled, seed=11)
-    derived = print_report(summary, check, night)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    result = {"opencv": cv2.__version__, "default_threads": _DEFAULT_THREADS,
-              "frames": n_frames, "reps_per_roi": reps, "timing": summary, **derived,
-              "densities": check, "labelled_eval": night}
-    (out / "bench_gate.json").write_text(json.dumps(result, indent=2))
-    plot(summary, night, out / "bench_gate.png")
-    print(f"\nwrote {out / 'bench_gate.json'} and {out / 'bench_gate.png'}")
-    return 0 if check["identical_densities"] else 1
+    try:
+        run(args.quick, Path(args.out))
+    except RuntimeError as exc:
+        print(f"error: {exc}")
+        return 1
+    return 0
 
 
 if __name__ == "__main__":

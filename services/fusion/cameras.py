@@ -6,7 +6,8 @@ capture time and projects it into its image. A track is then checked in the came
 see it, in configured order:
 
 - **verified** if any camera verifies it; the first that does decides, and the cameras
-  after it are not gated (their verdict could not change the outcome);
+  after it are neither projected nor gated (their verdict could not change the outcome;
+  they are reported `not_checked`);
 - **rejected** if at least one camera with a usable frame sees it and every such camera
   rejects it; the deciding camera is the one with the highest density (the closest call);
 - **not checked** (no threat, gate_scope = candidates) when a camera with a usable frame
@@ -36,38 +37,54 @@ class Camera:
     projector: ColumnProjector
 
 
-@dataclass(frozen=True, slots=True)
 class CameraView:
     """One camera in one radar cycle: its frame (None: unavailable, `reason` says why),
-    each confirmed track predicted to that frame's capture time (x, y), and its ROI."""
+    each confirmed track predicted to that frame's capture time (`xy`), and its ROI.
 
-    name: str
-    frame: DecodedFrame | None
-    reason: str
-    xy: list[list[float]]
-    rois: list[Roi | None]
+    The ROIs are projected on first use: when the first camera verifies every threat,
+    the others are not projected before the command is out."""
+
+    __slots__ = ("_project", "_rois", "_xy", "_xy_list", "frame", "name", "reason")
+
+    def __init__(self, name: str, frame: DecodedFrame | None, reason: str, xy: np.ndarray,
+                 project: Callable[[np.ndarray], list[Roi | None]]) -> None:
+        self.name = name
+        self.frame = frame
+        self.reason = reason
+        self._xy = xy
+        self._xy_list: list[list[float]] | None = None
+        self._project = project
+        self._rois: list[Roi | None] | None = None
+
+    @property
+    def rois(self) -> list[Roi | None]:
+        if self._rois is None:
+            self._rois = self._project(self._xy) if len(self._xy) else []
+        return self._rois
+
+    @property
+    def xy(self) -> list[list[float]]:
+        if self._xy_list is None:
+            self._xy_list = self._xy.tolist()
+        return self._xy_list
 
 
 def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
                  tracks: Sequence[RadarTrack], radar_stamp_ns: int, max_skew_ns: int,
                  align: bool) -> list[CameraView]:
-    """Every camera's frame and projections for one cycle. Tracks are predicted to the
-    frame's time only with `align`; a camera without a usable frame projects them as
+    """Every camera's frame and (lazy) projections for one cycle. Tracks are predicted to
+    the frame's time only with `align`; a camera without a usable frame projects them as
     they are (to tell "would see it" from "not visible")."""
     views = []
-    if tracks:
-        pos = np.array([(t.x_m, t.y_m) for t in tracks])
-        vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks])
+    pos = np.array([(t.x_m, t.y_m) for t in tracks]).reshape(-1, 2)
+    vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks]).reshape(-1, 2)
     for cam, feed in zip(cameras, feeds, strict=True):
         frame = select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align)
         reason = "" if frame is not None else unavailable_reason(feed, radar_stamp_ns,
                                                                  max_skew_ns)
-        if not tracks:
-            views.append(CameraView(cam.name, frame, reason, [], []))
-            continue
         dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
         xy = pos + vel * dt_s if dt_s else pos
-        views.append(CameraView(cam.name, frame, reason, xy.tolist(), cam.projector.rois(xy)))
+        views.append(CameraView(cam.name, frame, reason, xy, cam.projector.rois))
     return views
 
 
@@ -94,16 +111,20 @@ def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -
     unavailable: CameraView | None = None
     per_camera: list[CameraCheck] = []
     for v in views:
+        if verified is not None:
+            # Its verdict could not change the outcome: neither gated nor projected.
+            if several:
+                per_camera.append(CameraCheck(v.name, Verification.NOT_CHECKED))
+            continue
         roi = v.rois[i]
         if roi is None:
             state, density = Verification.NOT_VISIBLE, None
         elif v.frame is None:
             state, density = Verification.UNAVAILABLE, None
             unavailable = unavailable or v
-        elif not gate or verified is not None:
+        elif not gate:
             state, density = Verification.NOT_CHECKED, None
-            if verified is None and unchecked is None:
-                unchecked = (v, roi)
+            unchecked = unchecked or (v, roi)
         else:
             result = verify(v.frame.gray, roi)
             density = result.density

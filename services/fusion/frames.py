@@ -148,6 +148,11 @@ class FrameDecoder:
     def start(self) -> None:
         self._thread.start()
 
+    @property
+    def thread_ident(self) -> int | None:
+        """The worker thread's ident once started (for per-thread CPU accounting)."""
+        return self._thread.ident
+
     def stop(self, timeout_s: float = 2.0) -> None:
         with self._cond:
             self._stop = True

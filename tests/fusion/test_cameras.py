@@ -36,7 +36,7 @@ def view(name: str, sees: bool = True, has_frame: bool = True) -> CameraView:
     gray = np.zeros((480, 848), np.uint8)
     return CameraView(name, frame(gray=gray) if has_frame else None,
                       "" if has_frame else "no camera frame received",
-                      [[10.0, 0.0]], [ROI if sees else None])
+                      np.array([[10.0, 0.0]]), lambda xy: [ROI if sees else None])
 
 
 class ByCamera:

@@ -53,8 +53,37 @@ def test_benchmarks_run_quick_and_write_their_results(tmp_path, capsys):
     gate = json.loads((tmp_path / "bench_gate.json").read_text())
     assert gate["densities"]["identical_densities"] is True
     assert (tmp_path / "bench_gate.png").stat().st_size > 0
-    assert bench_fusion.main(["--quick", "--out", str(tmp_path)]) == 0
+    figures = bench_fusion.run(True, tmp_path)
     fusion = json.loads((tmp_path / "bench_fusion.json").read_text())
     assert fusion["worst 64"]["gated_mean"] == 64
     assert (tmp_path / "bench_fusion.png").stat().st_size > 0
+    assert (tmp_path / "bench_fusion_cameras.png").stat().st_size > 0
     assert "64 tracks, worst" in capsys.readouterr().out
+    # The cameras scale: every camera count streamed into fusion, frames decoded, and the
+    # before_radar policy skipping some.
+    cams = fusion["cameras"]
+    for n in (1, 2, 4):
+        assert cams[f"{n} every_frame"]["frames_decoded_per_s"] > 10 * n
+        assert cams[f"{n} before_radar"]["frames_skipped_per_s"] > 0
+    names = {f.name for f in figures}
+    assert {f"fusion tracks->command, {n} tracks (worst)" for n in (1, 8, 64, 128)} <= names
+    assert {f"decode CPU, {n} camera(s) at 30 fps, before_radar" for n in (1, 2, 4)} <= names
+    assert all(f.group == "scale" and f.baseline_value is not None for f in figures)
+
+
+def test_the_gate_benchmark_refuses_to_compare_different_densities(tmp_path, monkeypatch):
+    monkeypatch.setattr(bench_gate, "naive_density", lambda bgr, roi: -1.0)
+    with pytest.raises(RuntimeError, match="densities differ"):
+        bench_gate.run(True, tmp_path)
+    assert bench_gate.main(["--quick", "--out", str(tmp_path)]) == 1
+
+
+def test_the_gate_benchmark_reports_its_figures(tmp_path):
+    figures = bench_gate.run(True, tmp_path)
+    names = [f.name for f in figures]
+    assert "edge_density mean, roi 4.3% (134x130)" in names
+    assert "edge_density p95, full frame (848x480)" in names
+    assert any(n.startswith("full frame / roi 1.3%") for n in names)
+    same = next(f for f in figures if f.name.startswith("ROIs with densities identical"))
+    assert same.target_met is True and same.value == same.baseline_value
+    assert all(f.group == "gate" and f.baseline_value is not None for f in figures)
