@@ -11,6 +11,7 @@ from typing import Annotated
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.realtime import RealtimeSettings
 from common.keys import RADAR_TRACKS
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -153,6 +154,8 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # `calibration` (leave those out). A track is verified if any camera that sees it
     # verifies it (docs/fusion.md). `frames` settings apply to every camera.
     cameras: Annotated[tuple[CameraInput, ...], msgspec.Meta(max_length=8)] = ()
+    # SCHED_FIFO for the radar callback (decide, publish) and the Zenoh I/O threads
+    realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
 
     def __post_init__(self) -> None:
         names = [c.name for c in self.cameras]

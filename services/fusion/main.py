@@ -17,6 +17,7 @@ from common.calibration import Calibration
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError
 from common.log import kv, setup_logging
+from common.realtime import apply_process
 from common.service import load_service_config, service_argparser, stop_event_on_signals
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
@@ -83,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                     for name, cal in cals.items()]
         node = FusionNode(bus, s, core, decoders, log, cals, rhythm)
         node.start()
+        apply_process(s.realtime, log)
         token = bus.declare_health("fusion", s.instance)
         log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,
                     params=core.verifier_params, radar=s.radar_sensor,

@@ -28,6 +28,7 @@ from common.messages import (
     VerifierStatus,
     decode,
 )
+from common.realtime import ThreadRealtime
 from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, FusionCore
 from services.fusion.frames import FrameDecoder
@@ -65,6 +66,7 @@ class FusionNode:
         self.calibrations: dict[str, Calibration] = dict(calibrations or {})
         self._cmd_pub = bus.publisher(FUSION_BRAKE_CMD, instance=settings.instance)
         self._tgt_pub = bus.publisher(FUSION_TARGETS, instance=settings.instance)
+        self._rt = ThreadRealtime(settings.realtime, log, "fusion radar callback")
 
     @property
     def decoder(self) -> FrameDecoder:
@@ -102,6 +104,7 @@ class FusionNode:
                              differences="; ".join(diff))
 
     def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        self._rt.ensure()
         self.on_tracks_payload(payload, key, rx_mono_ns)
 
     def on_tracks_payload(self, payload: bytes, key: str, rx_mono_ns: int) -> CycleResult | None:
