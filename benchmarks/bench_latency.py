@@ -62,6 +62,7 @@ from common.bus import Bus
 from common.clock import mono_ns
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
+from common.realtime import set_fifo
 from services.brake.pty_pair import PtyPair
 from services.radar.ars408 import Frame
 from services.radar.can_links import SlcanPtyLink
@@ -79,6 +80,7 @@ QUICK_MEASURE_S = 12.0
 FULL_MEASURE_S = 75.0
 FLOOR_OFFSET_S = 0.037        # half a radar period after the stack's cycle
 RELAY_START_S = 60.0
+REALTIME_PRIORITY = 0          # the deploy configs' [*.realtime] priority
 
 
 @dataclass
@@ -185,9 +187,9 @@ def read_reports(stream: Any, into: list[tuple[int, ...]]) -> None:
 
 
 @contextmanager
-def floor_chain(loop: ClosedLoop, work: Path) -> Iterator[Floor]:
-    """The three relays on the stack's router, their ptys, the interleaved feed.
-    Raises RuntimeError when a relay does not come up."""
+def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Iterator[Floor]:
+    """The three relays on the stack's router (scheduled as the stack), their ptys, the
+    interleaved feed. Raises RuntimeError when a relay does not come up."""
     link = SlcanPtyLink()
     pty = PtyPair(work / "floor-serial")
     procs: list[subprocess.Popen[str]] = []
@@ -205,7 +207,8 @@ def floor_chain(loop: ClosedLoop, work: Path) -> Iterator[Floor]:
     sub = floor_bus.subscribe_health(on_health)
     try:
         base = [sys.executable, "-m", "benchmarks.floor_relay"]
-        common_args = ["--connect", loop.endpoint, "--vehicle", FLOOR_VEHICLE]
+        common_args = ["--connect", loop.endpoint, "--vehicle", FLOOR_VEHICLE,
+                       "--realtime-priority", str(realtime_priority)]
         for role, extra in (("serial", ["--port", str(pty.path)]), ("hop", []),
                             ("can", ["--channel", link.path])):
             procs.append(subprocess.Popen(
@@ -221,6 +224,7 @@ def floor_chain(loop: ClosedLoop, work: Path) -> Iterator[Floor]:
                                    f"{(work / 'floor-relays.log').read_text()[-2000:]}")
         link.wait_open(RELAY_START_S)
         lines = LineTimes(pty.master_fd)
+        _instrument_realtime(lines, realtime_priority)
         feed = FloorFeed(link, FLOOR_OFFSET_S)
         yield Floor(link, feed, lines, reports)
     finally:
@@ -241,6 +245,25 @@ def floor_chain(loop: ClosedLoop, work: Path) -> Iterator[Floor]:
         pty.remove()
 
 
+def _instrument_realtime(lines: LineTimes, priority: int) -> None:
+    """The threads that stamp lines as they arrive (the simulated actuator's, the floor's
+    reader) run at the stack's priority, so that a stamp is the line's arrival and not
+    this process's scheduling. Refused, the figures say so in the log."""
+    if priority <= 0:
+        return
+    tids = [t.native_id for t in threading.enumerate() if t.name == "sim-actuator"]
+    tids.append(lines._thread.native_id)
+    for tid in tids:
+        if tid is None:
+            continue
+        try:
+            set_fifo(priority, tid)
+        except (OSError, AttributeError) as exc:
+            print(f"warning: the instrument threads keep normal scheduling: {exc}",
+                  file=sys.stderr)
+            return
+
+
 @dataclass
 class Measured:
     stack: list[Chain]
@@ -251,19 +274,22 @@ class Measured:
     verdicts: list[str]
     load_before: tuple[float, float, float]
     load_after: tuple[float, float, float]
+    realtime_priority: int = 0
 
 
-def measure(quick: bool, out_dir: Path, log: bool = True,
-            seconds: float | None = None) -> Measured:
+def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None = None,
+            realtime_priority: int = 0) -> Measured:
     """Run the stack and its floor together for `seconds` of cycles (default by mode);
-    every chain seen at every stage."""
+    every chain seen at every stage. `realtime_priority` > 0: the stack, the floor's
+    relays and the line readers with SCHED_FIFO (as deployed on a vehicle)."""
     measure_s = seconds or (QUICK_MEASURE_S if quick else FULL_MEASURE_S)
     load_before = os.getloadavg()
     collected = Collected()
     verdicts: list[str] = []
     run_dir = out_dir / "latency-run"
-    with closed_loop(run_dir, log=sys.stdout if log else None) as loop, \
-            floor_chain(loop, run_dir / "run") as floor:
+    with closed_loop(run_dir, log=sys.stdout if log else None,
+                     realtime_priority=realtime_priority) as loop, \
+            floor_chain(loop, run_dir / "run", realtime_priority) as floor:
         subs = collected.subscribe(loop.bus)
         t0 = mono_ns()
         first_cycle = len(loop.feed.cycles())
@@ -295,7 +321,7 @@ def measure(quick: bool, out_dir: Path, log: bool = True,
         seconds = (mono_ns() - t0) / 1e9
         floor_cycles = len(floor.feed.written)
     return Measured(stack, fl, len(cycles), floor_cycles, seconds, verdicts, load_before,
-                    os.getloadavg())
+                    os.getloadavg(), realtime_priority)
 
 
 def _ms(s: Summary | None, attr: str) -> float:
@@ -311,6 +337,7 @@ def figures_from(m: Measured) -> list[Figure]:
         raise RuntimeError(f"no complete chain measured (stack {len(m.stack)}, floor "
                            f"{len(m.floor)} of {m.cycles} cycles)")
     load = (f"load {m.load_before[0]:.2f} -> {m.load_after[0]:.2f} (1 min); "
+            f"SCHED_FIFO {m.realtime_priority or 'off'}; "
             f"{len(m.stack)}/{m.cycles} stack and {len(m.floor)}/{m.floor_cycles} floor "
             f"cycles paired")
     same = "same-transport floor: slcan pty -> 3 relays, 2 hops -> serial pty"
@@ -353,7 +380,7 @@ def table(m: Measured) -> str:
     rows.append(("the 2 Zenoh hops only", stack_hops, zen))
     out = [f"radar-to-brake latency: {len(m.stack)} stack cycles, {len(m.floor)} floor "
            f"cycles in {m.seconds:.0f} s; load avg {m.load_before[0]:.2f} -> "
-           f"{m.load_after[0]:.2f}; times in ms",
+           f"{m.load_after[0]:.2f}; SCHED_FIFO {m.realtime_priority or 'off'}; times in ms",
            f"{'stage':<38}{'stack p50':>10}{'p95':>8}{'p99':>8}{'max':>8}   "
            f"{'floor p50':>10}{'p95':>8}{'p99':>8}{'max':>8}"]
     for title, s, f in rows:
@@ -428,6 +455,7 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
         "machine": machine_info(), "seconds": round(m.seconds, 1), "cycles": m.cycles,
         "floor_cycles": m.floor_cycles, "verdicts": m.verdicts,
         "load_avg_before": m.load_before, "load_avg_after": m.load_after,
+        "realtime_priority": m.realtime_priority,
         "stack": {n: summ(v) for n, v in st.items()},
         "floor": {n: summ(v) for n, v in fl.items()},
         "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),
@@ -435,11 +463,12 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
     return path
 
 
-def run(quick: bool, out_dir: Path, seconds: float | None = None) -> list[Figure]:
+def run(quick: bool, out_dir: Path, seconds: float | None = None,
+        realtime_priority: int = REALTIME_PRIORITY) -> list[Figure]:
     """The suite's entry point: measure, write JSON and PNG under `out_dir`, return the
     figures. Raises RuntimeError when the stack or the floor does not come up."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    m = measure(quick, out_dir, seconds=seconds)
+    m = measure(quick, out_dir, seconds=seconds, realtime_priority=realtime_priority)
     figs = figures_from(m)
     print(table(m), flush=True)
     write_json(m, figs, out_dir / "bench_latency.json")
@@ -454,11 +483,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true",
                         help=f"{QUICK_MEASURE_S:g} s of cycles instead of {FULL_MEASURE_S:g}")
     parser.add_argument("--seconds", type=float, help="measuring time (overrides the mode)")
+    parser.add_argument("--realtime-priority", type=int, default=REALTIME_PRIORITY,
+                        choices=range(100), metavar="0..99",
+                        help="SCHED_FIFO priority of the stack, its floor and the line "
+                             f"readers (default {REALTIME_PRIORITY}, as deployed; 0: off)")
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)
     out = Path(args.out)
     t0 = time.monotonic()
-    figs = run(args.quick, out, args.seconds)
+    figs = run(args.quick, out, args.seconds, args.realtime_priority)
     from benchmarks.report import print_table
 
     print()

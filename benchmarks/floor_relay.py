@@ -34,7 +34,9 @@ from typing import Any
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
+from common.config.realtime import RealtimeSettings
 from common.keys import FUSION_BRAKE_CMD, RADAR_TRACKS
+from common.log import setup_logging
 from common.messages import (
     BrakeCommand,
     Decision,
@@ -45,6 +47,7 @@ from common.messages import (
     VerifierStatus,
     encode,
 )
+from common.realtime import ThreadRealtime
 from common.service import stop_event_on_signals
 from services.brake.protocol import HostMode, command_line
 
@@ -211,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames-per-object", type=int, default=FRAMES_PER_OBJECT)
     parser.add_argument("--direct", action="store_true",
                         help="callbacks on Zenoh's receive thread (Bus.subscribe_raw direct)")
+    parser.add_argument("--realtime-priority", type=int, default=0, choices=range(100),
+                        metavar="0..99", help="SCHED_FIFO for every thread (as the stack's)")
     parser.add_argument("--zenoh", action="append", default=[], metavar="KEY=JSON",
                         help="a raw Zenoh config override, as the services get (repeatable)")
     args = parser.parse_args(argv)
@@ -223,6 +228,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.role == "serial" and not args.port:
         parser.error("serial needs --port")
     stop = stop_event_on_signals()
+    # as the router: every thread of a relay is on its path, and inherits the policy
+    ThreadRealtime(RealtimeSettings(priority=args.realtime_priority),
+                   setup_logging("floor_relay"), f"floor relay {args.role}").ensure()
     with Bus.open(settings(args.connect, overrides), args.vehicle, f"floor/{args.role}") as bus:
         if args.role == "can":
             run_can(bus, args.channel, stop, args.frames_per_object)

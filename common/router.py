@@ -6,7 +6,9 @@ import sys
 
 from common.bus import BusError, open_session, zenoh_config
 from common.config.base import ZenohMode, ZenohSettings
+from common.config.realtime import RealtimeSettings
 from common.log import kv, setup_logging
+from common.realtime import ThreadRealtime
 from common.service import stop_event_on_signals
 
 
@@ -24,6 +26,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--connect", action="append", default=[],
                         help="another router to connect to (repeatable)")
     parser.add_argument("--config-file", default="", help="zenoh JSON5 router config")
+    parser.add_argument("--realtime-priority", type=int, default=0, choices=range(100),
+                        metavar="0..99",
+                        help="SCHED_FIFO priority for the router's Zenoh I/O threads (0: "
+                             "normal scheduling; needs CAP_SYS_NICE; see docs/deploy.md)")
     args = parser.parse_args(argv)
     log = setup_logging("router")
     listen = args.listen or ([] if args.config_file else ["tcp/127.0.0.1:7447"])
@@ -32,6 +38,10 @@ def main(argv: list[str] | None = None) -> int:
         settings = router_settings(listen, args.connect, args.config_file)
         # What the router really listens on: the config file's endpoints when none are given.
         listening = json.loads(zenoh_config(settings).get_json("listen/endpoints"))
+        # Every thread of a router is Zenoh's, and each inherits the policy of the thread
+        # that created it: real-time before the session exists, they all are.
+        ThreadRealtime(RealtimeSettings(priority=args.realtime_priority), log,
+                       "router").ensure()
         session = open_session(settings)
     except (BusError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -7,6 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.realtime import RealtimeSettings
 from common.keys import FUSION_BRAKE_CMD
 from common.messages.brake import FailsafePolicy
 
@@ -71,6 +72,9 @@ class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     status_period_ms: Annotated[float, msgspec.Meta(gt=0, le=100)] = 100.0   # >= 10 Hz
     serial: SerialSettings = msgspec.field(default_factory=SerialSettings)
     actuator: ActuatorSettings = msgspec.field(default_factory=ActuatorSettings)
+    # SCHED_FIFO for the command callback (validate, decide, write) and the Zenoh I/O
+    # threads; the timer has its own `timer_realtime_priority`
+    realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
 
     def __post_init__(self) -> None:
         if self.deadline_ms <= self.timer_period_ms:

@@ -12,6 +12,7 @@ from typing import Annotated, Any
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.realtime import RealtimeSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
 
@@ -169,6 +170,8 @@ class RadarSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     tracker: TrackerSettings = msgspec.field(default_factory=TrackerSettings)
     ego_motion: EgoMotionSettings = msgspec.field(default_factory=EgoMotionSettings)
     status_period_s: PositiveFloat = 1.0
+    # SCHED_FIFO for the CAN loop (decode, track, publish) and the Zenoh I/O threads
+    realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
 
     def __post_init__(self) -> None:
         if not self.sensors:

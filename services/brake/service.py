@@ -5,7 +5,8 @@
 - the timer thread (`brake-timer`): wakes at the core's next due time (deadline expiry,
   hold end, heartbeat, acknowledgement timeout) and at least every `timer_period_ms`,
   so that silence is detected without any message arriving; it also publishes
-  BrakeStatus (on every change and every `status_period_ms`);
+  BrakeStatus (at once on a change of state, at its next tick after anything else that
+  changed, e.g. a command, and every `status_period_ms`);
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
   actuator, port loss and reopening.
 
@@ -26,6 +27,7 @@ from common.config.brake import AgeClock, BrakeConfig
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
+from common.realtime import ThreadRealtime, apply_process
 from services.brake.core import BrakeCore, Outgoing
 from services.brake.protocol import BadLine
 from services.brake.serial_link import SerialLink
@@ -59,6 +61,7 @@ class BrakeService:
         self.cmd_to_serial_us: float | None = None
         self.radar_to_serial_us: float | None = None
         self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
+        self._rt = ThreadRealtime(s.realtime, log, "brake command callback")
 
     # ---- life cycle ---------------------------------------------------------------
 
@@ -75,6 +78,7 @@ class BrakeService:
             self._status_pub = publisher
             self._cond.notify()
         self._subscriber = bus.subscribe_raw(FUSION_BRAKE_CMD, self.on_command)
+        apply_process(self.cfg.brake.realtime, self._log)
         self._token = bus.declare_health(SERVICE, INSTANCE)
         self._log.info(kv("brake_ready", instance=self.cfg.brake.instance,
                           port=self.cfg.brake.serial.port,
@@ -95,12 +99,16 @@ class BrakeService:
 
     def on_command(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
         """Zenoh's thread: validate, decide and write to the serial line at once."""
+        self._rt.ensure()
         with self._lock:
             before = (self.core.state, self.core.command_state)
             out = self.core.on_command(payload, key, rx_mono_ns, wall_ns())
             if out is not None:
                 self._write(out, rx_mono_ns)
-            self._cond.notify()
+            if (self.core.state, self.core.command_state) != before:
+                # a plain command waits for the timer's next tick (timer_period_ms at most):
+                # publishing status at once would take a CPU from the line being delivered
+                self._cond.notify()
             rejection = self.core.last_rejection
             self._log_transition(before)
         if rejection is not None:

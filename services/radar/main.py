@@ -13,6 +13,7 @@ from common.config.radar import RadarConfig
 from common.keys import EGO_MOTION, RADAR_STATUS, RADAR_TRACKS
 from common.log import kv, setup_logging
 from common.messages.radar import RadarStatus, RadarTracks
+from common.realtime import ThreadRealtime, apply_process
 from common.service import load_service_config, service_argparser, stop_event_on_signals
 from services.radar.can_io import ConfigurationError, check_settings
 from services.radar.service import RadarService
@@ -63,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
             bus.subscribe(EGO_MOTION, lambda msg, key: service.on_ego_motion(msg))
         log.info(kv("radar_start", sensors=",".join(sensors),
                     interface=service.interface, channel=service.channel))
+        apply_process(cfg.radar.realtime, log)
+        ThreadRealtime(cfg.radar.realtime, log, "radar CAN loop").ensure()
         code = service.run(stop)
     log.info(kv("radar_stopped", code=code))
     return code

@@ -33,6 +33,7 @@ class RouterEntry(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     listen: tuple[str, ...] = ()    # empty: the config's, else tcp/127.0.0.1:7447
     connect: tuple[str, ...] = ()   # other routers (another ECU's); added to the config's
     config: str = ""                # Zenoh JSON5 router config
+    realtime_priority: Annotated[int, msgspec.Meta(ge=0, le=99)] = 0   # SCHED_FIFO, 0: off
 
     def __post_init__(self) -> None:
         for ep in (*self.listen, *self.connect):
@@ -171,6 +172,8 @@ def resolve_launches(
             if not cfg.is_file():
                 raise ConfigError(f"{origin}: router.config: file {cfg} not found")
             argv += ["--config-file", str(cfg)]
+        if table.router.realtime_priority:
+            argv += ["--realtime-priority", str(table.router.realtime_priority)]
         launches.append(Launch(ROUTER_NAME, tuple(argv), {}, workdir, RestartMode.ALWAYS,
                                table.restart.backoff, table.stop_grace_s))
     for svc in table.service:

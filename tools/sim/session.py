@@ -20,7 +20,7 @@ from tools.launch.table import load_table, resolve_launches
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.runner import SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook
-from tools.sim.stack import REPO, SERVICES, TOKENS, StackConfigs, write_configs
+from tools.sim.stack import FUSION_CONFIG, REPO, SERVICES, TOKENS, StackConfigs, write_configs
 
 CANDIDATE_CONFIG = REPO / "deploy" / "fusion-candidate.toml"
 START_TIMEOUT_S = 120.0
@@ -40,12 +40,12 @@ def free_port() -> int:
 
 
 def write_table(folder: Path, endpoint: str, configs: StackConfigs,
-                candidate: bool = False) -> Path:
+                candidate: bool = False, realtime_priority: int = 0) -> Path:
     """The session's process table (the same launcher as `aeb up`)."""
     lines = [
         "# Written by the closed-loop session: the stack under simulation.",
         f'workdir = "{REPO}"', "stop_grace_s = 5.0", "",
-        "[router]", f'listen = ["{endpoint}"]', "",
+        "[router]", f'listen = ["{endpoint}"]', f"realtime_priority = {realtime_priority}", "",
         "[zenoh]", f'connect = ["{endpoint}"]', "",
         "[restart]", 'mode = "never"', "",
     ]
@@ -112,8 +112,12 @@ class ClosedLoop:
 
 @contextmanager
 def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: bool = False,
-                log: IO[str] | None = None) -> Iterator[ClosedLoop]:
+                log: IO[str] | None = None, realtime_priority: int = 0,
+                fusion_config: Path = FUSION_CONFIG) -> Iterator[ClosedLoop]:
     """Start the stack and the simulator; stop everything on exit.
+
+    `realtime_priority` > 0: SCHED_FIFO for the router and the radar's and brake's
+    latency path (tools/sim/stack.py write_configs); fusion's comes from `fusion_config`.
 
     Service output goes to `out/stack.log`. Raises StackStartError when the stack does
     not come up or never arms, ConfigError for a bad table, BusError / OSError when the
@@ -134,8 +138,10 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     poller_stop = threading.Event()
     try:
         configs = write_configs(run_dir, endpoint, str(run_dir / "actuator"), link.path,
-                                camera_fps=camera_fps)
-        table, workdir = load_table(write_table(run_dir, endpoint, configs, candidate))
+                                camera_fps=camera_fps, fusion_config=fusion_config,
+                                realtime_priority=realtime_priority)
+        table, workdir = load_table(write_table(run_dir, endpoint, configs, candidate,
+                                                realtime_priority))
         launches = resolve_launches(table, workdir, "demo")
         supervisor = Supervisor(launches, LinePrinter(
             log_file, ["up", *(launch.name for launch in launches)], colour=False))

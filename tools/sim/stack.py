@@ -41,13 +41,17 @@ def _toml_list(values: list[str]) -> str:
 def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: str,
                   can_interface: str = "slcan", camera_fps: float = 30.0,
                   fusion_config: Path = FUSION_CONFIG,
-                  heartbeat_ms: float | None = None) -> StackConfigs:
+                  heartbeat_ms: float | None = None,
+                  realtime_priority: int = 0) -> StackConfigs:
     """Write radar, camera and brake TOMLs into `folder`; fusion's is the shipped one
     (its endpoint comes from `--connect`). Returns every config's path.
 
     `heartbeat_ms` overrides the brake's actuator heartbeat: above one radar cycle, every
     line on the actuator while commands flow is a command line (one per radar cycle),
-    which lets a test pair cycles and lines exactly (tools/sim/latency.py)."""
+    which lets a test pair cycles and lines exactly (tools/sim/latency.py).
+    `realtime_priority` > 0: SCHED_FIFO for the radar's and the brake's latency path
+    (`[radar.realtime]`, `[brake.realtime]`, the brake's timer), as on a vehicle."""
+    rt = f"\n[{{}}.realtime]\npriority = {realtime_priority}\n" if realtime_priority else ""
     folder.mkdir(parents=True, exist_ok=True)
     zenoh = f"[zenoh]\nconnect = {_toml_list([endpoint])}\n"
     options = "{ sleep_after_open = 0 }" if can_interface == "slcan" else "{}"
@@ -57,7 +61,7 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
         "# SIMULATION: the radar service on the simulated ARS408's CAN link.\n"
         f'vehicle = "ego"\n{zenoh}\n[radar.can]\ninterface = "{can_interface}"\n'
         f'channel = "{can_channel}"\nbitrate = {bitrate}\noptions = {options}\n\n'
-        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n')
+        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n' + rt.format("radar"))
     camera = folder / "camera.toml"
     camera.write_text(
         "# SIMULATION: the camera service rendering the simulated world (synthetic plugin).\n"
@@ -67,9 +71,11 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     brake = folder / "brake.toml"
     brake.write_text(
         "# The brake service on the simulated actuator's pty (a SIMULATION of the actuator).\n"
-        f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "primary"\n\n'
-        f'[brake.serial]\nport = "{actuator_port}"\n'
+        f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "primary"\n'
+        + (f"timer_realtime_priority = {realtime_priority}\n" if realtime_priority else "")
+        + f'\n[brake.serial]\nport = "{actuator_port}"\n'
         + ("" if heartbeat_ms is None else
            f"\n[brake.actuator]\nheartbeat_ms = {heartbeat_ms}\nttl_ms = "
-           f"{max(250, int(2 * heartbeat_ms) + 10)}\n"))
+           f"{max(250, int(2 * heartbeat_ms) + 10)}\n")
+        + rt.format("brake"))
     return StackConfigs(radar, camera, fusion_config, brake)

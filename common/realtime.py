@@ -1,0 +1,125 @@
+"""Real-time scheduling for the threads on the radar-to-brake path, and a garbage
+collector that leaves start-up objects alone.
+
+On a loaded machine the latency of the chain is mostly waiting: a woken thread waits for
+a CPU that runs something else (a camera encoding, another job). SCHED_FIFO makes the few
+threads that carry a radar cycle run the moment they are woken, ahead of every normal
+thread. What gets it (settings: common/config/realtime.py, `priority` > 0):
+
+- the thread that runs a service's latency path, set by the thread itself the first time
+  it runs it (`ThreadRealtime.ensure`): the radar's CAN loop, the Zenoh callback that
+  carries a radar cycle in fusion and a command in the brake;
+- with `zenoh_threads`, the process's Zenoh receive and transmit threads (zenoh's `rx-N`
+  and `tx-N` runtimes, found by thread name), which carry every sample in and out.
+
+Each of these threads blocks (select, epoll, condition variables) between samples and
+does bounded work per sample; none polls. Linux caps real-time threads at 95% of each CPU
+(kernel.sched_rt_runtime_us), so a bug cannot freeze the machine. Threads that a
+real-time thread creates inherit its policy (pthread's default); the services create
+their other threads (decoders, timers, serial readers) from the main thread before.
+Refused (no root or CAP_SYS_NICE, not Linux), a warning is logged once and the thread
+keeps normal scheduling.
+
+`freeze_gc` (gc.freeze once started): the objects of start-up (modules, configuration,
+Zenoh and numpy state) leave the collector's generations, so that a full collection,
+which Python runs now and then on whatever thread allocates, does not walk them.
+"""
+
+import gc
+import logging
+import os
+import threading
+
+from common.config.realtime import RealtimeSettings
+from common.log import kv
+
+ZENOH_IO_PREFIXES = ("rx-", "tx-")
+
+
+def set_fifo(priority: int, tid: int = 0) -> None:
+    """SCHED_FIFO at `priority` for thread `tid` (0: the calling thread). Raises OSError
+    (EPERM without the capability) or AttributeError (not Linux)."""
+    os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+
+
+def thread_names() -> dict[int, str]:
+    """This process's threads: native id -> name (Linux /proc; empty elsewhere)."""
+    out: dict[int, str] = {}
+    try:
+        tids = os.listdir("/proc/self/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            with open(f"/proc/self/task/{tid}/comm", encoding="utf-8") as f:
+                out[int(tid)] = f.read().strip()
+        except (OSError, ValueError):
+            continue     # the thread ended meanwhile
+    return out
+
+
+def zenoh_io_threads() -> dict[int, str]:
+    """The Zenoh receive and transmit threads of this process (by their names)."""
+    return {tid: name for tid, name in thread_names().items()
+            if name.startswith(ZENOH_IO_PREFIXES)}
+
+
+def apply_process(settings: RealtimeSettings, log: logging.Logger) -> list[str]:
+    """Once the service is set up (Zenoh session open, subscriptions declared): freeze
+    the collector and, with a priority, make the Zenoh I/O threads real-time. Returns the
+    names of the threads made real-time (empty when refused or off)."""
+    if settings.freeze_gc:
+        gc.collect()
+        gc.freeze()
+    if settings.priority <= 0 or not settings.zenoh_threads:
+        return []
+    done: list[str] = []
+    found = zenoh_io_threads()
+    for tid, name in sorted(found.items()):
+        try:
+            set_fifo(settings.priority, tid)
+        except (OSError, AttributeError) as exc:
+            log.warning(kv("realtime_refused", thread=name, priority=settings.priority,
+                           error=exc))
+            return done
+        done.append(name)
+    if not found:
+        log.warning(kv("realtime_zenoh_threads_not_found", expected="rx-N,tx-N"))
+    else:
+        log.info(kv("realtime_zenoh_threads", threads=",".join(done),
+                    priority=settings.priority))
+    return done
+
+
+class ThreadRealtime:
+    """Makes each thread that calls `ensure()` real-time, once per thread; thread-safe.
+    Call it at the top of a latency-path callback or loop (a set lookup when done)."""
+
+    def __init__(self, settings: RealtimeSettings, log: logging.Logger, what: str) -> None:
+        self.priority = settings.priority
+        self._log = log
+        self._what = what
+        self._seen: set[int] = set()
+        self._lock = threading.Lock()
+        self.refused = False
+
+    def ensure(self) -> None:
+        if self.priority <= 0:
+            return
+        tid = threading.get_native_id()
+        if tid in self._seen:
+            return
+        with self._lock:
+            if tid in self._seen:
+                return
+            self._seen.add(tid)
+            try:
+                set_fifo(self.priority)
+            except (OSError, AttributeError) as exc:
+                if not self.refused:
+                    self._log.warning(kv("realtime_refused", thread=self._what,
+                                         priority=self.priority, error=exc))
+                self.refused = True
+                return
+            self._log.info(kv("realtime_thread", thread=self._what, tid=tid,
+                              priority=self.priority))
