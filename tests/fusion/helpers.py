@@ -9,7 +9,7 @@ import numpy as np
 from common.calibration import Calibration
 from common.config.fusion import FusionConfig, FusionSettings
 from common.config.loader import parse_config
-from common.messages import Header, OutputMode, RadarTrack, RadarTracks
+from common.messages import Decision, Header, OutputMode, RadarTrack, RadarTracks, VerifiedTarget
 from services.fusion.core import FusionCore
 from services.fusion.frames import DecodedFrame, FrameFeed
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
@@ -91,3 +91,17 @@ def run(core: FusionCore, *tracks: RadarTrack, frames: FrameFeed | None = None,
     f = feed(frame(stamp_ns)) if frames is None else frames
     now = stamp_ns + 5 * MS if now_ns is None else now_ns
     return core.process(cycle(*tracks, seq=seq, stamp_ns=stamp_ns), f, now, 1)
+
+
+def most_severe(targets: tuple[VerifiedTarget, ...]) -> tuple[Decision, int]:
+    """(decision, track) the command must carry, by the plain definition: the most severe
+    target decision, ties to the smallest TTC_eff, first in order; (NONE, -1) if none."""
+    rank = {Decision.NONE: 0, Decision.WARNING: 1, Decision.BRAKE: 2}
+    best = None
+    for tgt in targets:
+        if tgt.decision is Decision.NONE:
+            continue
+        key = (rank[tgt.decision], -(tgt.ttc_eff_s or 0.0))
+        if best is None or key > best[0]:
+            best = (key, tgt)
+    return (Decision.NONE, -1) if best is None else (best[1].decision, best[1].track_id)

@@ -5,7 +5,18 @@ import pytest
 from common.messages import Decision, Verification, VerifierStatus
 from services.fusion.frames import FrameDecoder
 from services.fusion.verifiers import GateResult
-from tests.fusion.helpers import MS, T0, FixedVerifier, cycle, feed, frame, make_core, run, track
+from tests.fusion.helpers import (
+    MS,
+    T0,
+    FixedVerifier,
+    cycle,
+    feed,
+    frame,
+    make_core,
+    most_severe,
+    run,
+    track,
+)
 
 
 def only(result):
@@ -330,17 +341,8 @@ def test_the_early_command_equals_the_most_severe_of_all_targets():
                             vx=rng.uniform(-12.0, 3.0)) for i in range(rng.randint(0, 8))]
             frames = feed(frame()) if n % 5 else feed()
             res = core.process(cycle(*tracks, seq=n), frames, T0 + MS, 1)
-            rank = {Decision.NONE: 0, Decision.WARNING: 1, Decision.BRAKE: 2}
-            best = None
-            for tgt in res.targets.targets:          # the plain definition, in order
-                if tgt.decision is Decision.NONE:
-                    continue
-                key = (rank[tgt.decision], -(tgt.ttc_eff_s or 0.0))
-                if best is None or key > best[0]:
-                    best = (key, tgt)
-            expected = (Decision.NONE, -1) if best is None else (best[1].decision,
-                                                                 best[1].track_id)
-            assert (res.command.decision, res.command.track_id) == expected
+            assert (res.command.decision, res.command.track_id) == most_severe(
+                res.targets.targets)
 
 
 def test_tracks_with_non_finite_numbers_are_reported_and_never_decided_on():

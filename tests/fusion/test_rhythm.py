@@ -94,14 +94,20 @@ def simulate(before_radar: bool, align: bool, seconds: float = 20.0, seed: int =
         k, capture, arrival = item
         done.append((at + int(decode_ms * MS), DecodedFrame("front", k, capture, arrival, pixel)))
 
+    def wake_up(now: int) -> None:
+        """The worker's step: decode the waiting frame if it is time, else sleep on."""
+        nonlocal pending, wake
+        at = rhythm.decode_at(now, LEAD)
+        if at is None:
+            assert pending is not None
+            decode(pending, now)
+            pending, wake = None, None
+        else:
+            wake = at
+
     for t, kind, index, stamp in events:
         while pending is not None and wake is not None and wake <= t:
-            at = rhythm.decode_at(wake, LEAD)
-            if at is None:
-                decode(pending, wake)
-                pending, wake = None, None
-            else:
-                wake = at
+            wake_up(wake)
         for fin, f in sorted(done, key=lambda d: d[0]):
             if fin <= t:
                 ring.append(f)
@@ -112,12 +118,7 @@ def simulate(before_radar: bool, align: bool, seconds: float = 20.0, seed: int =
                 decode(item, t)
                 continue
             pending = item              # a newer frame overtakes the one waiting
-            at = rhythm.decode_at(t, LEAD)
-            if at is None:
-                decode(item, t)
-                pending, wake = None, None
-            else:
-                wake = at
+            wake_up(t)
         else:
             rhythm.on_cycle(t)
             best = select_frame(tuple(ring), stamp, 100 * MS, align)
