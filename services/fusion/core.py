@@ -100,8 +100,11 @@ class FusionCore:
         feeds = (feeds,) if isinstance(feeds, FrameFeed) else tuple(feeds)
         if len(feeds) != len(self.cameras):
             raise ValueError(f"{len(feeds)} frame feeds for {len(self.cameras)} cameras")
-        confirmed = [t for t in tracks.tracks if t.confirmed and _finite(t)]
-        invalid = [t for t in tracks.tracks if t.confirmed and not _finite(t)]
+        confirmed: list[RadarTrack] = []
+        invalid: list[RadarTrack] = []
+        for t in tracks.tracks:
+            if t.confirmed:
+                (confirmed if _finite(t) else invalid).append(t)
         self.invalid_tracks += len(invalid)
         self._moving = self.lateral.update(confirmed) if self.lateral is not None else set()
         age_ns = now_wall_ns - tracks.header.stamp_ns
@@ -304,8 +307,9 @@ def _reasons(views: list[CameraView], track: int | None = None) -> str:
 
 
 def _finite(t: RadarTrack) -> bool:
-    return all(math.isfinite(v) for v in (t.x_m, t.y_m, t.vx_mps, t.vy_mps, t.range_m,
-                                          t.range_rate_mps))
+    # One sum instead of six checks (per track, on the critical path): a NaN or an
+    # infinity in any term makes it non-finite (inf - inf is NaN).
+    return math.isfinite(t.x_m + t.y_m + t.vx_mps + t.vy_mps + t.range_m + t.range_rate_mps)
 
 
 def _invalid_target(t: RadarTrack) -> VerifiedTarget:
