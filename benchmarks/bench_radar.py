@@ -424,6 +424,15 @@ def _pyplot():  # type: ignore[no-untyped-def]
     return plt
 
 
+def _save(fig, out_dir: Path, name: str) -> Path:  # type: ignore[no-untyped-def]
+    fig.tight_layout()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / name
+    fig.savefig(path, dpi=100)
+    _pyplot().close(fig)
+    return path
+
+
 def plot(results: list[Result], out_dir: Path) -> Path:
     plt = _pyplot()
     scenes = [s.name for s in SCENES]
@@ -442,12 +451,7 @@ def plot(results: list[Result], out_dir: Path) -> Path:
     ax.set_ylabel("CPU time per cycle (ms, thread time)\nbar: median, whisker: p95")
     ax.set_title("ARS408 decode + tracking per radar cycle")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "radar_cycle_time.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, out_dir, "radar_cycle_time.png")
 
 
 def plot_scale(results: list[Result], out_dir: Path) -> Path:
@@ -468,12 +472,7 @@ def plot_scale(results: list[Result], out_dir: Path) -> Path:
     ax.set_title("Radar decode + tracking vs clusters per cycle")
     ax.set_xticks(list(CLUSTER_COUNTS))
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "radar_cluster_scale.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, out_dir, "radar_cluster_scale.png")
 
 
 def run(quick: bool, out_dir: Path) -> list[Figure]:

@@ -3,9 +3,11 @@ baseline (`bench_radar` runs it beside the current code in the same run) and as 
 oracle of the tests that check the current code gives the same tracks.
 
 This is the code as it was before the tracker, merge and decoded detections were laid
-out as contiguous rows per quantity (commit 5fcb531): detections one row per detection,
+out as contiguous rows per quantity (commit e29bc93): detections one row per detection,
 per-pair gathers of strided columns, a 3 m window search before the gate, the greedy
-loop over every gated pair. Not used by the service.
+loop over every gated pair, the merge's dense membership matrix. The near-pair searches
+are the current ones (`services.radar.neighbours`: the same sorted-window algorithm, now
+also keeping pairs exactly on the radius). Not used by the service.
 """
 
 from dataclasses import dataclass
@@ -15,8 +17,7 @@ import numpy.typing as npt
 
 from common.config.radar import MergeSettings, RadarSettings, SensorSettings, TrackerSettings
 from common.messages.radar import RadarTrack
-from services.radar.core import SensorCore, _Tracked
-from services.radar.cycle import RawCycle
+from services.radar.core import SensorCore
 from services.radar.detections import (
     DYN_PROP,
     OBJ_CLASS,
@@ -26,10 +27,8 @@ from services.radar.detections import (
     VY,
     Detections,
     X,
-    attach_extras,
-    decode_general,
-    prefilter,
 )
+from services.radar.neighbours import pairs_within, pairs_within_self
 
 F = npt.NDArray[np.float64]
 I = npt.NDArray[np.int64]  # noqa: E741
@@ -74,65 +73,6 @@ class RowDetections:
         return RowDetections(np.ascontiguousarray(det.f), np.ascontiguousarray(det.i))
 
 
-# Up to this many candidate pairs a dense matrix is cheaper: fewer numpy calls, and a
-# call costs more than a few thousand elements.
-_DENSE_MAX = 4096
-
-
-def _pairs_within(ax: F, ay: F, bx: F, by: F, radius: float) -> tuple[I, I]:
-    """Index pairs (i into a, j into b) whose Euclidean distance is at most `radius`.
-
-    Candidates come from a window on b sorted by x, so the cost grows with the number
-    of near pairs, not with n * m (a dense 250 x 250 distance matrix costs milliseconds
-    on a small CPU; this costs tens of microseconds).
-    """
-    if len(ax) == 0 or len(bx) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    if len(ax) * len(bx) <= _DENSE_MAX:
-        dx = ax[:, None] - bx[None, :]
-        dy = ay[:, None] - by[None, :]
-        i, j = np.nonzero(dx * dx + dy * dy <= radius * radius)
-        return i, j
-    order = np.argsort(bx, kind="stable")
-    xs = bx[order]
-    lo = np.searchsorted(xs, ax - radius, "left")
-    counts = np.searchsorted(xs, ax + radius, "right") - lo
-    total = int(counts.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    i = np.repeat(np.arange(len(ax)), counts)
-    first = np.repeat(lo - (np.cumsum(counts) - counts), counts)
-    j = order[first + np.arange(total)]
-    dx = ax[i] - bx[j]
-    dy = ay[i] - by[j]
-    keep = dx * dx + dy * dy <= radius * radius
-    return i[keep], j[keep]
-
-
-def _pairs_within_self(x: F, y: F, radius: float) -> tuple[I, I]:
-    """Index pairs (i, j) of one point set, each unordered pair once, whose distance is
-    at most `radius` (half the candidates of `pairs_within(x, y, x, y, r)`)."""
-    n = len(x)
-    if n < 2:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    if n * n <= _DENSE_MAX:
-        i, j = _pairs_within(x, y, x, y, radius)
-        upper = i < j
-        return i[upper], j[upper]
-    order = np.argsort(x, kind="stable")
-    xs, ys = x[order], y[order]
-    counts = np.searchsorted(xs, xs + radius, "right") - np.arange(1, n + 1)
-    total = int(counts.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    p = np.repeat(np.arange(n), counts)
-    q = p + 1 + np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-    dx = xs[q] - xs[p]
-    dy = ys[q] - ys[p]
-    keep = dx * dx + dy * dy <= radius * radius
-    return order[p[keep]], order[q[keep]]
-
-
 def reference_merge(det: "RowDetections", s: MergeSettings) -> "RowDetections":
     """Centroid merge: the strongest unmerged detection seeds a group of every unmerged
     detection within `distance_m` whose velocity differs by at most `velocity_mps`; the
@@ -145,7 +85,7 @@ def reference_merge(det: "RowDetections", s: MergeSettings) -> "RowDetections":
     n = len(det)
     if not s.enabled or n < 2:
         return det
-    ii, jj = _pairs_within_self(det.x, det.y, s.distance_m)
+    ii, jj = pairs_within_self(det.x, det.y, s.distance_m)
     dv = det.f[ii, VX:VY + 1] - det.f[jj, VX:VY + 1]
     similar = (dv * dv).sum(axis=1) <= s.velocity_mps**2
     if not similar.any():
@@ -262,7 +202,7 @@ class ReferenceTracker:
         Mahalanobis cost."""
         # Euclidean pre-gate on position first, the Mahalanobis distance only for the
         # candidate pairs.
-        ti, di = _pairs_within(self.x[:, 0], self.x[:, 1], det.x, det.y,
+        ti, di = pairs_within(self.x[:, 0], self.x[:, 1], det.x, det.y,
                               self.s.gate_max_distance_m)
         if len(ti) == 0:
             return _EMPTY, _EMPTY
@@ -392,12 +332,6 @@ class ReferenceCore(SensorCore):
         super().__init__(sensor, settings)
         self.tracker = ReferenceTracker(settings.tracker)  # type: ignore[assignment]
 
-    def _track(self, cycle: RawCycle) -> _Tracked:
-        g = decode_general(cycle)
-        attached = self._filter_needs_extras
-        if attached:
-            attach_extras(cycle, g)
-        kept = prefilter(g.det, self.settings.prefilter)
+    def _merge_and_step(self, kept: Detections, t_s: float) -> None:
         self.tracker.step(reference_merge(RowDetections.of(kept), self.settings.merge),  # type: ignore[arg-type]
-                          cycle.t_s)
-        return _Tracked(cycle, g, len(kept), attached)
+                          t_s)

@@ -23,6 +23,7 @@ from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
 from services.radar.configure import ConfigWriter
 from services.radar.cycle import CycleAssembler, ListRole, RawCycle
 from services.radar.detections import (
+    Detections,
     GeneralFrames,
     attach_extras,
     decode_general,
@@ -225,8 +226,11 @@ class SensorCore:
         if attached:
             attach_extras(cycle, g)
         kept = prefilter(g.det, self.settings.prefilter)
-        self.tracker.step(merge(kept, self.settings.merge), cycle.t_s)
+        self._merge_and_step(kept, cycle.t_s)
         return _Tracked(cycle, g, len(kept), attached)
+
+    def _merge_and_step(self, kept: Detections, t_s: float) -> None:
+        self.tracker.step(merge(kept, self.settings.merge), t_s)
 
     def process(self, cycle: RawCycle) -> CycleResult:
         """A finished cycle: tracked (now, or earlier when its general frames were in),
