@@ -80,7 +80,7 @@ QUICK_MEASURE_S = 12.0
 FULL_MEASURE_S = 75.0
 FLOOR_OFFSET_S = 0.037        # half a radar period after the stack's cycle
 RELAY_START_S = 60.0
-REALTIME_PRIORITY = 0          # the deploy configs' [*.realtime] priority
+REALTIME_PRIORITY = 20         # as deploy/*.toml [*.realtime] (0: normal scheduling)
 
 
 @dataclass

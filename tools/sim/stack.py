@@ -5,7 +5,8 @@ at the simulated sensors and actuator, written into a run folder.
   with a USB-CAN adapter;
 - camera: the synthetic-source plugin `tools.sim.camera_source:make_source` (renders
   `sim/world`), with the example D435 calibration that fusion also uses;
-- fusion: deploy/fusion.toml (the shipped `primary`), unchanged;
+- fusion: deploy/fusion.toml (the shipped `primary`), its real-time priority set to the
+  stack's (off unless asked);
 - brake: deploy defaults, with the serial port on the simulated actuator's pty.
 """
 
@@ -43,14 +44,15 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
                   fusion_config: Path = FUSION_CONFIG,
                   heartbeat_ms: float | None = None,
                   realtime_priority: int = 0) -> StackConfigs:
-    """Write radar, camera and brake TOMLs into `folder`; fusion's is the shipped one
-    (its endpoint comes from `--connect`). Returns every config's path.
+    """Write radar, camera, fusion and brake TOMLs into `folder`; fusion's is the shipped
+    one with `[fusion.realtime]` set (its endpoint comes from `--connect`). Returns every
+    config's path.
 
     `heartbeat_ms` overrides the brake's actuator heartbeat: above one radar cycle, every
     line on the actuator while commands flow is a command line (one per radar cycle),
     which lets a test pair cycles and lines exactly (tools/sim/latency.py).
-    `realtime_priority` > 0: SCHED_FIFO for the radar's and the brake's latency path
-    (`[radar.realtime]`, `[brake.realtime]`, the brake's timer), as on a vehicle."""
+    `realtime_priority` > 0: SCHED_FIFO for the latency path of radar, fusion and brake
+    (`[*.realtime]`, the brake's timer), as on a vehicle."""
     rt = f"\n[{{}}.realtime]\npriority = {realtime_priority}\n" if realtime_priority else ""
     folder.mkdir(parents=True, exist_ok=True)
     zenoh = f"[zenoh]\nconnect = {_toml_list([endpoint])}\n"
@@ -78,4 +80,21 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
            f"\n[brake.actuator]\nheartbeat_ms = {heartbeat_ms}\nttl_ms = "
            f"{max(250, int(2 * heartbeat_ms) + 10)}\n")
         + rt.format("brake"))
-    return StackConfigs(radar, camera, fusion_config, brake)
+    fusion = folder / "fusion.toml"
+    fusion.write_text(with_realtime(fusion_config.read_text(), "fusion", realtime_priority))
+    return StackConfigs(radar, camera, fusion, brake)
+
+
+def with_realtime(toml_text: str, table: str, priority: int) -> str:
+    """A service config with its `[<table>.realtime]` replaced by one at `priority` (0:
+    normal scheduling), whatever the shipped file says."""
+    header = f"[{table}.realtime]"
+    kept: list[str] = []
+    skipping = False
+    for line in toml_text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("["):
+            skipping = stripped.split("#", 1)[0].strip() == header
+        if not skipping:
+            kept.append(line)
+    return "\n".join(kept).rstrip("\n") + f"\n\n{header}\npriority = {priority}\n"
