@@ -119,6 +119,11 @@ def _signal_index(spec: MessageSpec, *attrs: str) -> list[int]:
     return [fields.index(a) for a in attrs]
 
 
+def _rows(indices: list[int]) -> npt.NDArray[np.intp]:
+    """An index array (numpy converts a list index on every call)."""
+    return np.array(indices, dtype=np.intp)
+
+
 # General frames: the float rows x, y, vx, vy, rcs and the integer id, dyn_prop, at the
 # same signal positions for objects (0x60B) and clusters (0x701).
 _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_lat_m",
@@ -126,6 +131,8 @@ _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_la
 _GENERAL_I = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "id", "dyn_prop")
 assert (_signal_index(BY_KIND[Kind.CLUSTER_GENERAL], "dist_long_m", "dist_lat_m", "vrel_long_mps",
                       "vrel_lat_mps", "rcs_dbsm", "id", "dyn_prop") == _GENERAL_F + _GENERAL_I)
+_GENERAL_F_ROWS = _rows(_GENERAL_F)
+_GENERAL_I_ROWS = _rows(_GENERAL_I)
 # Every list message carries the radar's ID as its first signal.
 assert all(spec.signals[0].attr == "id" for specs in _SPECS.values() for spec in specs if spec)
 
@@ -215,9 +222,9 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         if dupes:
             rejected[f"duplicate_id:{general_spec.dbc_name}"] = dupes
         keep = cols.valid & unique
-    f = cols.phys[_GENERAL_F]
+    f = cols.phys[_GENERAL_F_ROWS]
     i = np.full((5, len(ids)), UNKNOWN, dtype=np.int64)
-    i[RADAR_ID:DYN_PROP + 1] = cols.raw[_GENERAL_I]
+    i[RADAR_ID:DYN_PROP + 1] = cols.raw[_GENERAL_I_ROWS]
     rows: I | None = None
     if keep is not None:
         f, i = np.compress(keep, f, axis=1), np.compress(keep, i, axis=1)

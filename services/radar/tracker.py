@@ -62,11 +62,12 @@ N_META = 7
 _DET_META = slice(RADAR_ID, OBJ_CLASS + 1)
 assert (RADAR_ID, DYN_PROP, OBJ_CLASS) == (0, 1, 2)
 # Index helpers of KalmanTracker._innovation and _update (rows of S and of the stacks).
-_COEF_ROWS = [4, 5, 2, 3, 0, 1]              # S rows v, b, a -> alpha, beta, gamma
-_AXES = [0, 1, 0, 1, 0, 1]
-_C1_ROWS = [0, 1, 4, 5, 0, 1, 0, 1, 4, 5]    # alpha, gamma, alpha, alpha, gamma
-_U2_ROWS = [2, 3, 0, 1, 6, 7, 8, 9, 6, 7]    # dv, dp, cov, var_v, cov
-_MESSAGE_ROWS = [0, 1, 2, 3, TRACK_RCS, VAR_P.start, VAR_P.start + 1]
+# Index arrays, not lists: numpy converts a list on every call.
+_COEF_ROWS = np.array([4, 5, 2, 3, 0, 1])            # S rows v, b, a -> alpha, beta, gamma
+_AXES = np.array([0, 1, 0, 1, 0, 1])
+_C1_ROWS = np.array([0, 1, 4, 5, 0, 1, 0, 1, 4, 5])  # alpha, gamma, alpha, alpha, gamma
+_U2_ROWS = np.array([2, 3, 0, 1, 6, 7, 8, 9, 6, 7])  # dv, dp, cov, var_v, cov
+_MESSAGE_ROWS = np.array([0, 1, 2, 3, TRACK_RCS, VAR_P.start, VAR_P.start + 1])
 
 
 def covariance_step(dt: float, accel_std: float) -> tuple[F, F]:
