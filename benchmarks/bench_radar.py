@@ -390,7 +390,8 @@ def figures(results: list[Result], replay: Replay | None = None) -> list[Figure]
                 "radar", f"{name}: {stat} per cycle", round(value, 3), "ms",
                 baseline="previous merge + tracker", baseline_value=round(base, 3),
                 target=f"< {TARGET_MS:g} ms", target_met=value < TARGET_MS,
-                note="CPU time of decode, prefilter, merge, tracking and messages",
+                note="" if figs else ("CPU time per cycle of assembly, decode, prefilter, "
+                                      "merge, tracking and messages (thread time)"),
                 extra=extra))
     if replay is not None:
         figs.append(Figure(
@@ -409,7 +410,8 @@ def figures(results: list[Result], replay: Replay | None = None) -> list[Figure]
         figs.append(Figure(
             "scale", f"radar: {n} clusters per cycle, median", round(cur.median_ms, 3), "ms",
             baseline="previous merge + tracker", baseline_value=round(ref.median_ms, 3),
-            note="clusters spread over the field, 5 returns per target, quality frames",
+            note="" if n != CLUSTER_COUNTS[0] else (
+                "clusters spread over the field, 5 returns per target, quality frames"),
             extra={"p95_ms": round(cur.p95_ms, 3), "baseline_p95_ms": round(ref.p95_ms, 3),
                    "cycles": len(cur.per_cycle_ms), "load_avg_1_5_15": load}))
     return figs
