@@ -1,8 +1,10 @@
 """A cycle's detections as numpy matrices: decoding a `RawCycle`, the prefilter and the
 centroid merge. Pure and vectorised.
 
-numpy calls cost microseconds each on a small CPU, whatever their size, so detections
-are two matrices (floats and integers): selecting rows is two calls, not ten.
+numpy calls cost microseconds each on a small CPU, whatever their size, and several
+times more on strided data, so detections are two matrices (floats and integers) with a
+row per attribute: selecting detections is two calls, not ten, and every attribute is a
+contiguous row.
 Radar frame: x forward, y left, origin at the radar; velocities are relative to the radar.
 """
 
@@ -27,7 +29,7 @@ UNKNOWN = -1
 _NO_IDS = np.zeros(0, dtype=np.int64)
 _ROW_BINS = np.arange(4, dtype=np.int64)
 
-# Column order of Detections.f and Detections.i.
+# Rows of Detections.floats and Detections.ints (columns of the (m, 5) views f and i).
 X, Y, VX, VY, RCS = range(5)
 RADAR_ID, DYN_PROP, OBJ_CLASS, PROB_OF_EXIST, INVALID_STATE = range(5)
 
