@@ -62,7 +62,7 @@ from common.bus import Bus
 from common.clock import mono_ns
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
-from common.realtime import set_fifo
+from common.realtime import GIL_SWITCH_INTERVAL_S, set_fifo
 from services.brake.pty_pair import PtyPair
 from services.radar.ars408 import Frame
 from services.radar.can_links import SlcanPtyLink
@@ -283,6 +283,17 @@ def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None 
     every chain seen at every stage. `realtime_priority` > 0: the stack, the floor's
     relays and the line readers with SCHED_FIFO (as deployed on a vehicle)."""
     measure_s = seconds or (QUICK_MEASURE_S if quick else FULL_MEASURE_S)
+    switch_interval = sys.getswitchinterval()
+    if realtime_priority > 0:
+        # the line readers stamp a line once they hold the GIL: as in the services
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    try:
+        return _measure(measure_s, out_dir, log, realtime_priority)
+    finally:
+        sys.setswitchinterval(switch_interval)
+
+
+def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int) -> Measured:
     load_before = os.getloadavg()
     collected = Collected()
     verdicts: list[str] = []

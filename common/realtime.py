@@ -10,7 +10,11 @@ thread. What gets it (settings: common/config/realtime.py, `priority` > 0):
   it runs it (`ThreadRealtime.ensure`): the radar's CAN loop, the Zenoh callback that
   carries a radar cycle in fusion and a command in the brake;
 - with `zenoh_threads`, the process's Zenoh receive and transmit threads (zenoh's `rx-N`
-  and `tx-N` runtimes, found by thread name), which carry every sample in and out.
+  and `tx-N` runtimes, found by thread name), which carry every sample in and out;
+- with `other_threads`, every other thread of the process still on normal scheduling, one
+  priority lower: a frame decoder or a serial reader that holds the GIL when a radar cycle
+  arrives is then never preempted by the rest of the machine while the latency path waits
+  for it (Python's GIL has no priority inheritance).
 
 Each of these threads blocks (select, epoll, condition variables) between samples and
 does bounded work per sample; none polls. With a priority, the GIL's switch interval is
@@ -62,17 +66,17 @@ def thread_names() -> dict[int, str]:
     return out
 
 
-def zenoh_io_threads() -> dict[int, str]:
+def zenoh_io_threads(names: dict[int, str] | None = None) -> dict[int, str]:
     """The Zenoh receive and transmit threads of this process (by their names)."""
-    return {tid: name for tid, name in thread_names().items()
+    return {tid: name for tid, name in (thread_names() if names is None else names).items()
             if name.startswith(ZENOH_IO_PREFIXES)}
 
 
 def apply_process(settings: RealtimeSettings, log: logging.Logger) -> list[str]:
-    """Once the service is set up (Zenoh session open, subscriptions declared): freeze
-    the collector and, with a priority, shorten the GIL's switch interval and make the
-    Zenoh I/O threads real-time. Returns the names of the threads made real-time (empty
-    when refused or off)."""
+    """Once the service is set up (Zenoh session open, subscriptions declared, its own
+    threads started): freeze the collector and, with a priority, shorten the GIL's switch
+    interval and make the Zenoh I/O threads and the other threads real-time. Returns
+    `name:priority` of each thread changed (empty when refused or off)."""
     if settings.freeze_gc:
         gc.collect()
         gc.freeze()
@@ -81,24 +85,38 @@ def apply_process(settings: RealtimeSettings, log: logging.Logger) -> list[str]:
     # A real-time thread that wants the GIL from a normal one waits up to this interval
     # before Python asks the holder to let go (5 ms by default).
     sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
-    if not settings.zenoh_threads:
-        return []
     done: list[str] = []
-    found = zenoh_io_threads()
-    for tid, name in sorted(found.items()):
+    names = thread_names()
+    zenoh = zenoh_io_threads(names)
+    plan: list[tuple[int, str, int]] = []
+    if settings.zenoh_threads:
+        plan += [(tid, name, settings.priority) for tid, name in sorted(zenoh.items())]
+        if not zenoh:
+            log.warning(kv("realtime_zenoh_threads_not_found", expected="rx-N,tx-N"))
+    if settings.other_threads:
+        other = max(1, settings.priority - 1)
+        plan += [(tid, name, other) for tid, name in sorted(names.items())
+                 if tid not in zenoh and _normal(tid)]
+    for tid, name, priority in plan:
         try:
-            set_fifo(settings.priority, tid)
+            set_fifo(priority, tid)
+        except ProcessLookupError:
+            continue              # the thread ended meanwhile
         except (OSError, AttributeError) as exc:
-            log.warning(kv("realtime_refused", thread=name, priority=settings.priority,
-                           error=exc))
+            log.warning(kv("realtime_refused", thread=name, priority=priority, error=exc))
             return done
-        done.append(name)
-    if not found:
-        log.warning(kv("realtime_zenoh_threads_not_found", expected="rx-N,tx-N"))
-    else:
-        log.info(kv("realtime_zenoh_threads", threads=",".join(done),
-                    priority=settings.priority))
+        done.append(f"{name}:{priority}")
+    if done:
+        log.info(kv("realtime_threads", threads=",".join(done)))
     return done
+
+
+def _normal(tid: int) -> bool:
+    """Still on normal scheduling (a thread made real-time on purpose keeps its own)."""
+    try:
+        return os.sched_getscheduler(tid) == os.SCHED_OTHER
+    except OSError:
+        return False
 
 
 class ThreadRealtime:

@@ -2,6 +2,7 @@
 once, the Zenoh I/O threads found by name, a refusal logged once and survived, the
 collector frozen; the router's flag. Every policy changed here is put back."""
 
+import contextlib
 import gc
 import logging
 import os
@@ -84,26 +85,55 @@ def test_a_refusal_is_logged_once_and_the_thread_keeps_running(monkeypatch, capl
 
 @pytest.fixture
 def restore() -> Iterator[None]:
+    """Every thread of this process back to normal scheduling afterwards."""
     interval = sys.getswitchinterval()
-    yield
-    sys.setswitchinterval(interval)
-    gc.unfreeze()
-    for tid in zenoh_io_threads():
-        normal(tid)
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(interval)
+        gc.unfreeze()
+        for tid in realtime.thread_names():
+            with contextlib.suppress(OSError):
+                normal(tid)
 
 
 def test_apply_process_makes_zenoh_io_threads_fifo_and_freezes_the_collector(router, restore):
     with open_bus(router) as bus:
         bus.subscribe_raw(BRAKE_STATUS, lambda *a: None)
         found = wait_for(zenoh_io_threads, 30, what="Zenoh's rx/tx threads")
-        done = apply_process(RealtimeSettings(priority=3), LOG)
-        assert sorted(done) == sorted(found.values())
-        assert all(n.startswith(("rx-", "tx-")) for n in done)
+        done = apply_process(RealtimeSettings(priority=3, other_threads=False), LOG)
+        assert sorted(done) == sorted(f"{name}:3" for name in found.values())
         assert all(policy(tid) == os.SCHED_FIFO for tid in found)
         assert gc.get_freeze_count() > 0
         assert sys.getswitchinterval() <= realtime.GIL_SWITCH_INTERVAL_S
-        for tid in found:
-            normal(tid)
+
+
+def test_other_threads_go_one_below_and_real_time_ones_keep_their_priority(restore):
+    release = threading.Event()
+    ready = threading.Barrier(3)
+    tids: dict[str, int] = {}
+
+    def worker(name: str, fifo: int) -> None:
+        tids[name] = threading.get_native_id()
+        if fifo:
+            realtime.set_fifo(fifo)
+        ready.wait()
+        release.wait(10)
+
+    threads = [threading.Thread(target=worker, args=("decoder", 0)),
+               threading.Thread(target=worker, args=("timer", 21))]
+    for t in threads:
+        t.start()
+    ready.wait()
+    try:
+        apply_process(RealtimeSettings(priority=20, zenoh_threads=False), LOG)
+        assert os.sched_getparam(tids["decoder"]).sched_priority == 19
+        assert policy(tids["decoder"]) == os.SCHED_FIFO
+        assert os.sched_getparam(tids["timer"]).sched_priority == 21
+    finally:
+        release.set()
+        for t in threads:
+            t.join(10)
 
 
 def test_router_flag_makes_every_router_thread_fifo(tmp_path):
