@@ -3,13 +3,21 @@
 import subprocess
 import sys
 
+import msgspec
+
 from common.config.brake import BrakeConfig
 from common.config.loader import load_config, parse_config
 from tests.support import REPO
 
 
 def test_shipped_example_is_valid_and_documents_the_defaults():
-    assert load_config(REPO / "deploy/brake.toml", BrakeConfig) == parse_config({}, BrakeConfig)
+    shipped = load_config(REPO / "deploy/brake.toml", BrakeConfig)
+    defaults = parse_config({}, BrakeConfig)
+    # the one deliberate difference: a vehicle runs the brake real-time (docs/deploy.md)
+    assert shipped.brake.realtime.priority > 0 and shipped.brake.timer_realtime_priority > 0
+    as_default = msgspec.structs.replace(shipped.brake, realtime=defaults.brake.realtime,
+                                         timer_realtime_priority=0)
+    assert msgspec.structs.replace(shipped, brake=as_default) == defaults
 
 
 def test_an_invalid_field_stops_the_service_at_start_naming_it(tmp_path):
