@@ -264,6 +264,28 @@ def _instrument_realtime(lines: LineTimes, priority: int) -> None:
             return
 
 
+def cpu_times() -> list[int]:
+    """The machine's CPU time so far (/proc/stat, all CPUs): user, nice, system, idle,
+    iowait, irq, softirq, steal, in clock ticks; empty where there is no /proc/stat."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            return [int(v) for v in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return []
+
+
+def cpu_share(before: list[int], after: list[int]) -> dict[str, float]:
+    """Busy and stolen shares of the machine's CPU time between two `cpu_times()` (%).
+    Steal is time the hypervisor ran something else while this VM wanted to run: no
+    scheduling policy inside the VM can win it back."""
+    if len(before) < 8 or len(after) < 8:
+        return {}
+    d = [b - a for a, b in zip(before, after, strict=True)]
+    total = sum(d) or 1
+    busy = total - d[3] - d[4] - d[7]
+    return {"busy_pct": round(100 * busy / total, 1), "steal_pct": round(100 * d[7] / total, 1)}
+
+
 @dataclass
 class Measured:
     stack: list[Chain]
@@ -275,6 +297,7 @@ class Measured:
     load_before: tuple[float, float, float]
     load_after: tuple[float, float, float]
     realtime_priority: int = 0
+    cpu: dict[str, float] = field(default_factory=dict)
 
 
 def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None = None,
@@ -303,6 +326,7 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
             floor_chain(loop, run_dir / "run", realtime_priority) as floor:
         subs = collected.subscribe(loop.bus)
         t0 = mono_ns()
+        cpu0 = cpu_times()
         first_cycle = len(loop.feed.cycles())
         loop.feed.on_cycle = floor.feed.on_cycle
         deadline = time.monotonic() + measure_s
@@ -331,8 +355,9 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
         fl = floor_chains(dict(floor.feed.written), list(floor.reports), floor_lines)
         seconds = (mono_ns() - t0) / 1e9
         floor_cycles = len(floor.feed.written)
+        cpu = cpu_share(cpu0, cpu_times())
     return Measured(stack, fl, len(cycles), floor_cycles, seconds, verdicts, load_before,
-                    os.getloadavg(), realtime_priority)
+                    os.getloadavg(), realtime_priority, cpu)
 
 
 def _ms(s: Summary | None, attr: str) -> float:
@@ -347,7 +372,7 @@ def figures_from(m: Measured) -> list[Figure]:
     if total is None or floor_total is None or zenoh is None:
         raise RuntimeError(f"no complete chain measured (stack {len(m.stack)}, floor "
                            f"{len(m.floor)} of {m.cycles} cycles)")
-    load = (f"load {m.load_before[0]:.2f} -> {m.load_after[0]:.2f} (1 min); "
+    load = (f"load {m.load_before[0]:.2f} -> {m.load_after[0]:.2f} (1 min), {_cpu(m)}; "
             f"SCHED_FIFO {m.realtime_priority or 'off'}; "
             f"{len(m.stack)}/{m.cycles} stack and {len(m.floor)}/{m.floor_cycles} floor "
             f"cycles paired")
@@ -380,6 +405,12 @@ def figures_from(m: Measured) -> list[Figure]:
     return figs
 
 
+def _cpu(m: Measured) -> str:
+    if not m.cpu:
+        return "CPU share unknown"
+    return f"CPU {m.cpu['busy_pct']:g}% busy, {m.cpu['steal_pct']:g}% stolen by the host"
+
+
 def table(m: Measured) -> str:
     st, fl = stages_ns(m.stack), stages_ns(m.floor)
     rows = [(STAGE_TITLES[n], summarize(st[n]), summarize(fl[n])) for n in STAGES]
@@ -391,7 +422,8 @@ def table(m: Measured) -> str:
     rows.append(("the 2 Zenoh hops only", stack_hops, zen))
     out = [f"radar-to-brake latency: {len(m.stack)} stack cycles, {len(m.floor)} floor "
            f"cycles in {m.seconds:.0f} s; load avg {m.load_before[0]:.2f} -> "
-           f"{m.load_after[0]:.2f}; SCHED_FIFO {m.realtime_priority or 'off'}; times in ms",
+           f"{m.load_after[0]:.2f}, {_cpu(m)}; SCHED_FIFO {m.realtime_priority or 'off'}; "
+           "times in ms",
            f"{'stage':<38}{'stack p50':>10}{'p95':>8}{'p99':>8}{'max':>8}   "
            f"{'floor p50':>10}{'p95':>8}{'p99':>8}{'max':>8}"]
     for title, s, f in rows:
@@ -466,7 +498,7 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
         "machine": machine_info(), "seconds": round(m.seconds, 1), "cycles": m.cycles,
         "floor_cycles": m.floor_cycles, "verdicts": m.verdicts,
         "load_avg_before": m.load_before, "load_avg_after": m.load_after,
-        "realtime_priority": m.realtime_priority,
+        "realtime_priority": m.realtime_priority, "cpu": m.cpu,
         "stack": {n: summ(v) for n, v in st.items()},
         "floor": {n: summ(v) for n, v in fl.items()},
         "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),

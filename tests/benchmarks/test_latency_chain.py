@@ -85,3 +85,12 @@ def test_relay_payloads_are_as_large_as_the_messages_they_stand_for():
     assert tracks_size(0) < tracks_size(1) < tracks_size(10)
     assert 100 < command_size() < 400
     assert len(pad(b"abc", 10)) == 10 and pad(b"abcdef", 3) == b"abcdef"
+
+
+def test_cpu_share_of_a_run_counts_busy_and_stolen_time():
+    from benchmarks.bench_latency import cpu_share
+
+    before = [100, 0, 50, 800, 10, 0, 0, 40]
+    after = [150, 0, 75, 850, 10, 0, 0, 90]       # +50 user +25 sys +50 idle +50 steal
+    assert cpu_share(before, after) == {"busy_pct": 42.9, "steal_pct": 28.6}
+    assert cpu_share([], after) == {}
