@@ -10,11 +10,25 @@ from typing import Any
 _FORMAT = "%(asctime)s.%(msecs)03d %(levelname)s %(name)s %(message)s"
 
 
+class _CurrentStderrHandler(logging.StreamHandler):
+    """Writes to whatever `sys.stderr` is at the time of the record, not the stream of the
+    day it was set up: a handler holding an old stream (a test harness's closed capture, a
+    redirected stderr) turns every later record into a "Logging error"."""
+
+    @property
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:
+        pass
+
+
 def setup_logging(service: str, level: str = "INFO") -> logging.Logger:
     """Configure the root handler once (stderr) and return the service's logger."""
     root = logging.getLogger()
     if not any(getattr(h, "_aeb", False) for h in root.handlers):
-        handler = logging.StreamHandler(sys.stderr)
+        handler = _CurrentStderrHandler()
         handler.setFormatter(logging.Formatter(_FORMAT, datefmt="%H:%M:%S"))
         handler._aeb = True  # type: ignore[attr-defined]
         root.addHandler(handler)

@@ -1,10 +1,12 @@
+import io
 import logging
+import sys
 
 import pytest
 
 from common.freshness import Freshness, FreshnessTracker
 from common.keys import RADAR_TRACKS
-from common.log import RateLimitedLog, kv
+from common.log import RateLimitedLog, kv, setup_logging
 
 S = 1_000_000_000
 
@@ -70,3 +72,14 @@ def test_rate_limited_log_holds_back_repeats_and_counts_them(caplog):
 
 def test_kv_quotes_values_with_spaces():
     assert kv("e", a=1, b="two words", c=0.5) == "e a=1 b='two words' c=0.5"
+
+
+def test_log_handler_follows_the_current_stderr(monkeypatch):
+    """A handler that kept the stderr of the day it was set up would write to a closed
+    stream later (a test harness's capture) and print "Logging error" instead."""
+    log = setup_logging("handler-test")
+    for buf in (io.StringIO(), io.StringIO()):
+        monkeypatch.setattr(sys, "stderr", buf)
+        log.warning(kv("first_stream_closed_yet", n=1))
+        assert "first_stream_closed_yet n=1" in buf.getvalue()
+        buf.close()
