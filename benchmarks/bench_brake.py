@@ -37,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from benchmarks.figures import Figure
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
@@ -296,6 +297,35 @@ def plot(rows: list[Row], out: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def figures(rows: list[Row]) -> list[Figure]:
+    """Suite figures: the service's own receipt->write time, and the end-to-end time beside
+    the raw relay measured interleaved in the same run."""
+    service, e2e, baseline = rows
+    out: list[Figure] = []
+    for q, label in ((0.5, "p50"), (0.99, "p99")):
+        if service.values_us:
+            out.append(Figure("brake", f"command receipt -> serial write {label}",
+                              service.pct(q), "us",
+                              note="measured in the service (BrakeStatus.cmd_to_serial_us)"))
+        if e2e.values_us:
+            out.append(Figure(
+                "brake", f"publish -> actuator line read {label}", e2e.pct(q), "us",
+                baseline="bare relay: publish -> pty line, no checks",
+                baseline_value=baseline.pct(q) if baseline.values_us else None,
+                note="SIMULATED actuator on a pty"))
+    return out
+
+
+def run(quick: bool, out_dir: Path, rate_hz: float = 50.0) -> list[Figure]:
+    """The suite's entry: measure, write bench_brake.png under `out_dir`, return figures."""
+    count = 300 if quick else 2000
+    with tempfile.TemporaryDirectory(prefix="bench_brake_") as tmp:
+        rows = measure(count, rate_hz, Path(tmp))
+    print(table(rows, count, rate_hz), flush=True)
+    plot(rows, out_dir)
+    return figures(rows)
 
 
 def main(argv: list[str] | None = None) -> int:
