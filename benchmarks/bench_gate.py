@@ -9,7 +9,8 @@ frame:
 - naive: the paper's code, colour crop -> cvtColor -> Canny(40, 120) -> np.count_nonzero,
   with OpenCV's default thread pool (as the paper's Python would run), and the same with
   one thread (to separate the two effects);
-- ours: `edge_density` (Canny on a grey slice, no copy, cv2.countNonZero, one thread);
+- ours: `edge_density` (on a grey slice, no copy: one fused spatialGradient, Canny on the
+  derivatives, cv2.countNonZero; one thread);
 - `adaptive_edge_density`, the night-robust verifier, for its cost.
 The naive path is fed a colour image whose three channels equal our grey frame, so
 cvtColor returns the same pixels and the densities must be identical (checked); the
