@@ -167,12 +167,13 @@ def relay_main(endpoint: str, port: str) -> int:
     def relay(payload: bytes, key: str, rx_mono_ns: int) -> None:
         os.write(fd, line)
 
-    # the brake service's timer wakes every 10 ms; the same here, so that both processes
-    # run under the same conditions (a process that sleeps longer wakes up slower here)
+    # the brake service's timer wakes at least every timer_period_ms (50 ms); the same
+    # here, so that both processes run under the same conditions (a process that sleeps
+    # longer wakes up slower on this kind of VM)
     stop = threading.Event()
 
     def idle_timer() -> None:
-        while not stop.wait(0.01):
+        while not stop.wait(0.05):
             pass
 
     threading.Thread(target=idle_timer, daemon=True).start()

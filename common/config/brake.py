@@ -59,7 +59,8 @@ class ActuatorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     instance: str = "primary"          # the one fusion instance whose commands count
     deadline_ms: _Ms = 200.0           # no valid command for this long: FAILSAFE
-    timer_period_ms: Annotated[float, msgspec.Meta(gt=0, le=50)] = 10.0
+    # the timer also wakes at every due time (the deadline itself): this is its longest sleep
+    timer_period_ms: Annotated[float, msgspec.Meta(gt=0, le=50)] = 50.0
     timer_realtime_priority: Annotated[int, msgspec.Meta(ge=0, le=99)] = 0  # 0: normal
     recover_count: Annotated[int, msgspec.Meta(ge=1)] = 3   # consecutive commands to arm
     min_brake_hold_ms: Annotated[float, msgspec.Meta(ge=0)] = 1000.0

@@ -5,8 +5,8 @@
 - the timer thread (`brake-timer`): wakes at the core's next due time (deadline expiry,
   hold end, heartbeat, acknowledgement timeout) and at least every `timer_period_ms`,
   so that silence is detected without any message arriving; it also publishes
-  BrakeStatus (at once on a change of state, at its next tick after anything else that
-  changed, e.g. a command, and every `status_period_ms`);
+  BrakeStatus (at once on a change of state, `STATUS_AFTER_COMMAND_MS` after a command
+  that changed nothing else, and every `status_period_ms`);
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
   actuator, port loss and reopening.
 
@@ -36,6 +36,11 @@ SERVICE = "brake"
 INSTANCE = "main"
 SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
+# The status of a plain command waits this long: published at once it took a CPU from the
+# line being delivered (actuator-side "serial out" p50 0.34 -> 0.10 ms when deferred).
+# A wake-up scheduled for it, not a periodic timer: each wake-up of a Python thread costs
+# 0.1-0.2 ms of CPU on a VM like CI's, and a 10 ms tick alone was 1% of a core.
+STATUS_AFTER_COMMAND_MS = 2.0
 
 
 class BrakeService:
@@ -58,6 +63,7 @@ class BrakeService:
         self._status_seq = 0
         self._published_version = -1
         self._last_status_ns = 0
+        self._publish_at_ns: int | None = None   # a status is owed at this time
         self.cmd_to_serial_us: float | None = None
         self.radar_to_serial_us: float | None = None
         self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
@@ -106,9 +112,9 @@ class BrakeService:
             if out is not None:
                 self._write(out, rx_mono_ns)
             if (self.core.state, self.core.command_state) != before:
-                # a plain command waits for the timer's next tick (timer_period_ms at most):
-                # publishing status at once would take a CPU from the line being delivered
-                self._cond.notify()
+                self._status_owed(rx_mono_ns)
+            else:
+                self._status_owed(rx_mono_ns + round(STATUS_AFTER_COMMAND_MS * 1e6))
             rejection = self.core.last_rejection
             self._log_transition(before)
         if rejection is not None:
@@ -128,7 +134,7 @@ class BrakeService:
                     self._rl.warning(f"rx:{self.core.rx_problem}", "actuator_bad_line",
                                      reason=self.core.rx_problem)
             if self.core.version != version:   # a plain acknowledgement changes nothing
-                self._cond.notify()
+                self._status_owed(now)
             self._log_transition(before)
 
     def _on_link_up(self) -> None:
@@ -143,7 +149,7 @@ class BrakeService:
             out = self.core.on_link(up, mono_ns(), reason)
             if out is not None:
                 self._write(out, None)
-            self._cond.notify()
+            self._status_owed(mono_ns())
             self._log_transition(before)
 
     # ---- timer ----------------------------------------------------------------------
@@ -161,6 +167,8 @@ class BrakeService:
                 wake = now + self._period_ns
                 if self._status_pub is not None:
                     wake = min(wake, self._last_status_ns + self._status_period_ns)
+                    if self._publish_at_ns is not None:
+                        wake = min(wake, self._publish_at_ns)
                 due = self.core.next_due_ns(now)
                 if due is not None:
                     wake = min(wake, due)
@@ -174,13 +182,17 @@ class BrakeService:
         if out is not None:
             self._write(out, None)
         self._log_transition(before)
+        if self.core.version != self._published_version and self._publish_at_ns is None:
+            self._publish_at_ns = now   # changed by this tick (deadline, hold, timeout)
         publisher = self._status_pub
-        if publisher is None or (self.core.version == self._published_version
-                                 and now - self._last_status_ns < self._status_period_ns):
+        owed = self._publish_at_ns is not None and now >= self._publish_at_ns
+        if publisher is None or not (owed or now - self._last_status_ns
+                                     >= self._status_period_ns):
             return
         status = self._status(now)
         self._published_version = self.core.version
         self._last_status_ns = now
+        self._publish_at_ns = None
         # publish without the lock: the command path must not wait for Zenoh
         self._lock.release()
         try:
@@ -202,6 +214,13 @@ class BrakeService:
             self._log.warning(kv("timer_realtime_refused", priority=prio, error=exc))
 
     # ---- helpers (lock held) --------------------------------------------------------
+
+    def _status_owed(self, at_ns: int) -> None:
+        """Publish BrakeStatus at `at_ns` at the latest; wakes the timer if that is sooner
+        than it planned."""
+        if self._publish_at_ns is None or at_ns < self._publish_at_ns:
+            self._publish_at_ns = at_ns
+            self._cond.notify()
 
     def _write(self, out: Outgoing, rx_mono_ns: int | None) -> None:
         if not self.link.write(out.line):

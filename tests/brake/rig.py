@@ -152,7 +152,7 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
             raise AssertionError(f"brake did not start:\n{proc.output()}") from None
         yield BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
                        float(brake.get("deadline_ms", 200.0)),
-                       float(brake.get("timer_period_ms", 10.0)))
+                       float(brake.get("timer_period_ms", 50.0)))
         assert proc.alive(), f"brake process died:\n{proc.output()}"
 
 

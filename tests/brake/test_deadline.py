@@ -28,6 +28,7 @@ BRAKE_LEVEL = 60.0
 HOLD_S = 0.4
 STOP_LEVEL = 30.0
 MS = 1_000_000
+WAKE_ALLOWANCE_MS = 10.0   # the timer thread's wake-up on a loaded 2-core machine
 
 
 @dataclass
@@ -74,7 +75,9 @@ def _trial(rig: BrakeRig, pub: ServiceProcess, how: str, level: float, live_at: 
 
 
 def _check_timing(rig: BrakeRig, t: Trial) -> None:
-    bound = rig.deadline_ms + rig.period_ms
+    # The timer sleeps until the deadline itself (a due time, not a tick): the bound is the
+    # deadline plus a wake-up allowance, tighter than the "one timer period" of issue 4.
+    bound = rig.deadline_ms + min(rig.period_ms, WAKE_ALLOWANCE_MS)
     assert rig.deadline_ms <= t.detect_ms <= bound, (
         f"{t.how}: FAILSAFE {t.detect_ms:.1f} ms after the last command (bound {bound} ms)")
     assert t.last_rx_ns >= t.last_pub_ns

@@ -12,6 +12,7 @@ import pytest
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeState, encode
 from services.brake.protocol import HostMode
+from services.brake.service import STATUS_AFTER_COMMAND_MS
 from services.brake.sim_actuator import SimActuator
 from tests.brake.helpers import command
 from tests.brake.rig import BrakeRig, Stream, brake_rig
@@ -212,3 +213,26 @@ def test_silence_from_the_start_is_failsafe_even_without_a_router(tmp_path: Path
         proc.stop()
         pair.remove()
     assert "since start" in proc.log_path.read_text()
+
+
+def test_every_accepted_command_gets_its_own_status_soon_after(rig):
+    """Issue 4: BrakeStatus on every change of the last sequence, not only at 10 Hz. A
+    plain command's status is deferred by STATUS_AFTER_COMMAND_MS (not to a tick): each
+    sequence of a 75 ms stream (the radar's rhythm) is published, within a few ms."""
+    start = len(rig.status)
+    with Stream(rig.bus, period_ms=75.0) as stream:
+        rig.wait_live(start)
+        wait_for(lambda: len(stream.sent) >= 30, 30, what="30 commands")
+    statuses = [s for _, s in rig.status.items[start:]]
+    sent = {m.header.seq for m in stream.sent}
+    seen = {s.last_cmd_seq for s in statuses}
+    settled = sorted(sent)[3:-2]   # the stream's first and last commands race the window
+    missing = [q for q in settled if q not in seen]
+    assert not missing, f"sequences without their own status: {missing}"
+    delays_ms = sorted(
+        (s.header.pub_mono_ns - s.last_cmd_rx_mono_ns) / 1e6 for s in statuses
+        if s.last_cmd_seq in settled and s.last_cmd_rx_mono_ns > 0)
+    median = delays_ms[len(delays_ms) // 2]
+    # deferred by STATUS_AFTER_COMMAND_MS, then the timer's wake-up: far below a 50 ms tick
+    assert STATUS_AFTER_COMMAND_MS <= median < 25.0, delays_ms
+    print(f"\nstatus after a command: median {median:.1f} ms, max {delays_ms[-1]:.1f} ms")
