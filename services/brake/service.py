@@ -5,10 +5,11 @@
 - the timer thread (`brake-timer`): wakes at the core's next due time (deadline expiry,
   hold end, heartbeat, acknowledgement timeout) and at least every `timer_period_ms`,
   so that silence is detected without any message arriving; it also publishes
-  BrakeStatus (at once on a change of state, `STATUS_AFTER_COMMAND_MS` after a command
-  that changed nothing else, and every `status_period_ms`);
+  BrakeStatus (at once on a change of state, and every `status_period_ms`);
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
-  actuator, port loss and reopening.
+  actuator, port loss and reopening; it publishes the status owed for a command when the
+  actuator acknowledges its line (the timer does, `STATUS_AFTER_COMMAND_MS` after the
+  command, if no acknowledgement comes first and the timer is awake by then).
 
 The timer and the serial link start before the Zenoh session exists (`attach` comes
 later, from whatever thread opened the session), so that a silent bus from the very
@@ -18,6 +19,7 @@ start already leads to FAILSAFE.
 import logging
 import os
 import threading
+from collections.abc import Callable
 
 import zenoh
 
@@ -64,6 +66,7 @@ class BrakeService:
         self._published_version = -1
         self._last_status_ns = 0
         self._publish_at_ns: int | None = None   # a status is owed at this time
+        self._publish_lock = threading.Lock()    # taken before _lock, never inside it
         self.cmd_to_serial_us: float | None = None
         self.radar_to_serial_us: float | None = None
         self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
@@ -114,7 +117,10 @@ class BrakeService:
             if (self.core.state, self.core.command_state) != before:
                 self._status_owed(rx_mono_ns)
             else:
-                self._status_owed(rx_mono_ns + round(STATUS_AFTER_COMMAND_MS * 1e6))
+                # no wake-up for it: the acknowledgement of the line publishes it (serial
+                # reader), or the timer's next wake-up if the actuator does not answer
+                self._status_owed(rx_mono_ns + round(STATUS_AFTER_COMMAND_MS * 1e6),
+                                  wake_timer=False)
             rejection = self.core.last_rejection
             self._log_transition(before)
         if rejection is not None:
@@ -136,6 +142,11 @@ class BrakeService:
             if self.core.version != version:   # a plain acknowledgement changes nothing
                 self._status_owed(now)
             self._log_transition(before)
+            owed = self._publish_at_ns is not None
+        if owed:
+            # the actuator answered: the line is delivered, the status no longer competes
+            # with it, and this thread is awake anyway (one wake-up of the timer less)
+            self._publish_status(lambda now: self._publish_at_ns is not None)
 
     def _on_link_up(self) -> None:
         self._on_link(True, "")
@@ -184,23 +195,37 @@ class BrakeService:
         self._log_transition(before)
         if self.core.version != self._published_version and self._publish_at_ns is None:
             self._publish_at_ns = now   # changed by this tick (deadline, hold, timeout)
-        publisher = self._status_pub
-        owed = self._publish_at_ns is not None and now >= self._publish_at_ns
-        if publisher is None or not (owed or now - self._last_status_ns
-                                     >= self._status_period_ns):
+        if self._status_pub is None or not self._status_due(now):
             return
-        status = self._status(now)
-        self._published_version = self.core.version
-        self._last_status_ns = now
-        self._publish_at_ns = None
         # publish without the lock: the command path must not wait for Zenoh
         self._lock.release()
         try:
-            publisher.put(status)
-        except Exception as exc:
-            self._rl.error("status", "status_publish_failed", error=repr(exc))
+            self._publish_status(self._status_due)
         finally:
             self._lock.acquire()
+
+    def _status_due(self, now: int) -> bool:
+        owed = self._publish_at_ns is not None and now >= self._publish_at_ns
+        return owed or now - self._last_status_ns >= self._status_period_ns
+
+    def _publish_status(self, due: Callable[[int], bool]) -> None:
+        """Publish BrakeStatus if `due(now)` still holds. Called without the lock, from the
+        timer or the serial reader: `_publish_lock` keeps their statuses in sequence order
+        on the bus, and the command path never waits for it."""
+        with self._publish_lock:
+            with self._lock:
+                now = mono_ns()
+                publisher = self._status_pub
+                if publisher is None or not due(now):
+                    return
+                status = self._status(now)
+                self._published_version = self.core.version
+                self._last_status_ns = now
+                self._publish_at_ns = None
+            try:
+                publisher.put(status)
+            except Exception as exc:
+                self._rl.error("status", "status_publish_failed", error=repr(exc))
 
     def _set_realtime_priority(self) -> None:
         prio = self.cfg.brake.timer_realtime_priority
@@ -215,12 +240,13 @@ class BrakeService:
 
     # ---- helpers (lock held) --------------------------------------------------------
 
-    def _status_owed(self, at_ns: int) -> None:
+    def _status_owed(self, at_ns: int, wake_timer: bool = True) -> None:
         """Publish BrakeStatus at `at_ns` at the latest; wakes the timer if that is sooner
-        than it planned."""
+        than it planned (unless another thread will publish it)."""
         if self._publish_at_ns is None or at_ns < self._publish_at_ns:
             self._publish_at_ns = at_ns
-            self._cond.notify()
+            if wake_timer:
+                self._cond.notify()
 
     def _write(self, out: Outgoing, rx_mono_ns: int | None) -> None:
         if not self.link.write(out.line):

@@ -217,8 +217,8 @@ def test_silence_from_the_start_is_failsafe_even_without_a_router(tmp_path: Path
 
 def test_every_accepted_command_gets_its_own_status_soon_after(rig):
     """Issue 4: BrakeStatus on every change of the last sequence, not only at 10 Hz. A
-    plain command's status is deferred by STATUS_AFTER_COMMAND_MS (not to a tick): each
-    sequence of a 75 ms stream (the radar's rhythm) is published, within a few ms."""
+    plain command's status goes out when the actuator acknowledges its line (not at a
+    tick): each sequence of a 75 ms stream (the radar's rhythm), within a few ms."""
     start = len(rig.status)
     with Stream(rig.bus, period_ms=75.0) as stream:
         rig.wait_live(start)
@@ -233,6 +233,7 @@ def test_every_accepted_command_gets_its_own_status_soon_after(rig):
         (s.header.pub_mono_ns - s.last_cmd_rx_mono_ns) / 1e6 for s in statuses
         if s.last_cmd_seq in settled and s.last_cmd_rx_mono_ns > 0)
     median = delays_ms[len(delays_ms) // 2]
-    # deferred by STATUS_AFTER_COMMAND_MS, then the timer's wake-up: far below a 50 ms tick
-    assert STATUS_AFTER_COMMAND_MS <= median < 25.0, delays_ms
+    # the actuator's acknowledgement (or at worst STATUS_AFTER_COMMAND_MS and the timer's
+    # wake-up): far below the timer's 50 ms period
+    assert 0 < median < max(25.0, 2 * STATUS_AFTER_COMMAND_MS), delays_ms
     print(f"\nstatus after a command: median {median:.1f} ms, max {delays_ms[-1]:.1f} ms")
