@@ -186,9 +186,9 @@ def test_fused_gradient_canny_is_cv2_canny_edge_for_edge():
     rng = np.random.default_rng(7)
     for trial in range(400):
         h, w = int(rng.integers(1, 160)), int(rng.integers(1, 160))
-        img = rng.integers(0, 256, (h + 6, w + 6), dtype=np.uint8)
-        if trial % 2:
-            img = cv2.GaussianBlur(img, (5, 5), float(rng.uniform(0.5, 3.0)))
+        noise = rng.integers(0, 256, (h + 6, w + 6), dtype=np.uint8)
+        img = cv2.GaussianBlur(noise, (5, 5), float(rng.uniform(0.5, 3.0))) if trial % 2 \
+            else noise
         y, x = int(rng.integers(0, 6)), int(rng.integers(0, 6))
         patch = img[y:y + h, x:x + w]
         low = float(rng.uniform(5, 100))
