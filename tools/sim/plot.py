@@ -32,7 +32,8 @@ def plot_timeline(samples: list[Sample], verdict: Verdict, path: str | Path,
     ax.plot(t, [s.ttc_s if s.ttc_s is not None and s.ttc_s < 20 else float("nan")
                 for s in samples], "m-", label="TTC (ground truth)")
     ax.axhline(ttc_eff_offset_s + ttc_eff_brake_s, color="r", ls="--", lw=0.8,
-               label=f"BRAKE bound (TTC_eff < {ttc_eff_brake_s:g} s)")
+               label=f"BRAKE bound: TTC < {ttc_eff_offset_s + ttc_eff_brake_s:g} s "
+                     f"(TTC_eff < {ttc_eff_brake_s:g} s)")
     ax.set_ylim(0, 10)
     ax.set_ylabel("TTC (s)")
     ax.legend(loc="upper right", fontsize=8)
