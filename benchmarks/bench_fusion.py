@@ -584,7 +584,7 @@ def run(quick: bool, out_dir: Path) -> list[Figure]:
     suite's figures."""
     tracks = measure_tracks(20 if quick else 300)
     print_table(tracks)
-    cams = measure_cameras(0.8 if quick else 10.0)
+    cams = measure_cameras(0.6 if quick else 10.0)
     print_cameras(cams)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "bench_fusion.json").write_text(json.dumps({**tracks, "cameras": cams},

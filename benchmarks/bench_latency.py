@@ -76,7 +76,7 @@ P50_TARGET_RATIO = 1.5        # times the floor
 SCENARIOS = ("pedestrian_standing_20kph", "no_threat_parked_cars_30kph",
              "multi_object_25kph", "pedestrian_crossing_20kph", "stationary_car_30kph",
              "no_threat_pedestrian_walking_beside_20kph")
-QUICK_MEASURE_S = 12.0
+QUICK_MEASURE_S = 10.0
 FULL_MEASURE_S = 75.0
 FLOOR_OFFSET_S = 0.037        # half a radar period after the stack's cycle
 RELAY_START_S = 60.0

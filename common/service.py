@@ -2,6 +2,7 @@
 logging set-up, and a stop event wired to SIGINT/SIGTERM."""
 
 import argparse
+import os
 import signal
 import threading
 from typing import TypeVar
@@ -44,12 +45,29 @@ def load_service_config(args: argparse.Namespace, config_type: type[C]) -> C:
     return cfg
 
 
-def stop_event_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM (main thread only)."""
+# How long a clean stop may take after SIGINT/SIGTERM before the process exits anyway.
+STOP_GRACE_S = 15.0
+
+
+def stop_event_on_signals(grace_s: float | None = STOP_GRACE_S) -> threading.Event:
+    """An event set by SIGINT or SIGTERM (main thread only).
+
+    The first signal also starts a watchdog: a process still alive `grace_s` later exits
+    with 128 + the signal's number. A service whose launcher died (PR_SET_PDEATHSIG) has
+    nobody left to escalate to SIGKILL, and one that lingers keeps its serial port or
+    CAN channel; a stop path that hangs (a blocked join, a library's close) must not do
+    that. `grace_s=None`: no watchdog.
+    """
     stop = threading.Event()
+    watchdog: list[threading.Timer] = []
 
     def handler(signum: int, frame: object) -> None:
         stop.set()
+        if grace_s is not None and not watchdog:
+            timer = threading.Timer(grace_s, os._exit, args=(128 + signum,))
+            timer.daemon = True
+            timer.start()
+            watchdog.append(timer)
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)

@@ -118,7 +118,8 @@ def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> 
           "frames on a pty),\nthe camera (rendered frames) and the brake actuator (on a pty). "
           "Real: the router and the\nradar, camera, fusion and brake services, each in its "
           f"own process. Logs: {out / 'stack.log'}\n", flush=True)
-    stop = stop_event_on_signals()
+    # no watchdog: the stack's teardown waits for its processes and must not be cut off
+    stop = stop_event_on_signals(grace_s=None)
     results: list[RunResult] = []
     ab: Feeder | None = None
     feed: RadarFeed | None = None

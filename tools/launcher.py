@@ -58,7 +58,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     colour = {"auto": None, "always": True, "never": False}[args.colour]
     printer = LinePrinter(sys.stdout, ["up", *(launch.name for launch in launches)], colour)
-    stop = stop_event_on_signals()
+    # no watchdog: the supervisor escalates to SIGKILL itself (each child's stop_grace_s)
+    stop = stop_event_on_signals(grace_s=None)
     supervisor = Supervisor(launches, printer)
     supervisor.say(f"table {args.table}: {', '.join(launch.name for launch in launches)}")
     return supervisor.run(stop)
