@@ -164,8 +164,10 @@ class Simulator:
         with self._lock:
             self._run = None
             end = mono_ns()
-        if not finished:
+        if not finished and timeout_s is None:
             _log.warning("run %s did not end within %.0f s", scenario.name, limit)
+        elif not finished:   # the caller's time limit (e.g. a benchmark's measuring time)
+            _log.info("run %s cut at the caller's limit of %.1f s", scenario.name, limit)
         verdict = judge(scenario.name, scenario.kind, run.samples, run.world.collision)
         return RunResult(scenario, verdict, run.samples, start, end)
 
