@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from benchmarks.figures import Figure
+from benchmarks.processes import stop_processes
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
@@ -243,13 +244,7 @@ def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
             brake_e2e = _match(brake_pub, read_ns)[WARMUP:]
             baseline = _match(relay_pub, [t for t in reader.times if t >= t0])[WARMUP:]
     finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
+        stop_processes(reversed(procs))
         log.close()
         sim.stop()
         pair.remove()

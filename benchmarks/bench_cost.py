@@ -17,6 +17,7 @@ from pathlib import Path
 
 from benchmarks.figures import Figure, machine_info
 from benchmarks.proc_sampler import ProcSampler, Usage
+from benchmarks.processes import stop_processes
 from tools.sim.scenario import find_scenario, load_scenario
 from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 
@@ -68,8 +69,7 @@ def measure(scenarios: tuple[str, ...], out_dir: Path, log: bool = True
                 loop.sim.wait_settled(SETTLE_TIMEOUT_S)
             usage = sampler.stop()
         finally:
-            null.terminate()
-            null.wait(10)
+            stop_processes([null])
     return usage, verdicts
 
 

@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 
 from benchmarks.figures import Figure
+from benchmarks.processes import stop_processes
 from common.bus import Bus
 from common.calibration import Calibration, CalibrationFile
 from common.clock import mono_ns, wall_ns
@@ -480,10 +481,7 @@ def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
                     results[f"{n} {policy}"] = camera_case(bus, names, policy, seconds,
                                                            traffic=True)
     finally:
-        for proc in (cameras, router):
-            if proc is not None:
-                proc.terminate()
-                proc.wait(10)
+        stop_processes((cameras, router))
     return results
 
 

@@ -58,6 +58,7 @@ from benchmarks.latency_chain import (
     summarize,
     zenoh_ns,
 )
+from benchmarks.processes import stop_processes
 from common.bus import Bus
 from common.clock import mono_ns
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
@@ -233,13 +234,7 @@ def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Ite
         if lines is not None:
             lines.stop()
         sub.undeclare()
-        for p in procs:
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_processes(procs)
         log.close()
         link.close()
         pty.remove()

@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks.processes import stop_processes
 from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import wall_ns
@@ -164,8 +165,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:<28} {rate:>8.2f} {p50:>11.2f} {p95:>11.2f} {published:>10} "
                   f"{dropped:>8}")
     finally:
-        router.terminate()
-        router.wait(10)
+        stop_processes([router])
     print(f"\nplot: {plot(Path(args.out), encode_rows, runs)}")
     return 0
 
