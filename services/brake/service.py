@@ -8,8 +8,8 @@
   BrakeStatus (at once on a change of state, and every `status_period_ms`);
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
   actuator, port loss and reopening; it publishes the status owed for a command when the
-  actuator acknowledges its line (the timer does, `STATUS_AFTER_COMMAND_MS` after the
-  command, if no acknowledgement comes first and the timer is awake by then).
+  actuator acknowledges its line (the timer does at its next wake-up, at most
+  `timer_period_ms` later, if no acknowledgement comes first).
 
 The timer and the serial link start before the Zenoh session exists (`attach` comes
 later, from whatever thread opened the session), so that a silent bus from the very
@@ -38,11 +38,6 @@ SERVICE = "brake"
 INSTANCE = "main"
 SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
-# The status of a plain command waits this long: published at once it took a CPU from the
-# line being delivered (actuator-side "serial out" p50 0.34 -> 0.10 ms when deferred).
-# A wake-up scheduled for it, not a periodic timer: each wake-up of a Python thread costs
-# 0.1-0.2 ms of CPU on a VM like CI's, and a 10 ms tick alone was 1% of a core.
-STATUS_AFTER_COMMAND_MS = 2.0
 
 
 class BrakeService:
@@ -117,10 +112,12 @@ class BrakeService:
             if (self.core.state, self.core.command_state) != before:
                 self._status_owed(rx_mono_ns)
             else:
-                # no wake-up for it: the acknowledgement of the line publishes it (serial
-                # reader), or the timer's next wake-up if the actuator does not answer
-                self._status_owed(rx_mono_ns + round(STATUS_AFTER_COMMAND_MS * 1e6),
-                                  wake_timer=False)
+                # Not from here: published at once it took a CPU from the line being
+                # delivered ("serial out" p50 0.34 -> 0.10 ms deferred). Nor a wake-up of
+                # its own (each costs 0.1-0.2 ms of CPU on a VM like CI's): the line's
+                # acknowledgement publishes it (serial reader), or the timer's next wake-up
+                # if the actuator does not answer.
+                self._status_owed(rx_mono_ns, wake_timer=False)
             rejection = self.core.last_rejection
             self._log_transition(before)
         if rejection is not None:
