@@ -6,7 +6,6 @@ not through a queue, so that a command reaches the line with the least delay."""
 import contextlib
 import logging
 import os
-import select
 import threading
 from collections.abc import Callable
 
@@ -14,10 +13,10 @@ import serial
 
 from common.config.brake import SerialSettings
 from common.log import RateLimitedLog, kv
+from common.serial_read import read_available
 from services.brake.protocol import BadLine, LineReader
 
 READ_TIMEOUT_S = 0.05   # how often the reader looks at the stop flag and write failures
-READ_CHUNK = 4096
 
 
 class SerialLink:
@@ -113,25 +112,17 @@ class SerialLink:
             self._stop.wait(delay)
 
     def _read_until_failure(self, port: serial.Serial) -> str:
-        """Whatever the port holds, in one read per wake-up: pyserial's
-        `read(in_waiting or 1)` took a select, an ioctl and two reads per acknowledgement,
-        a third of the service's CPU at nominal rates."""
+        """Whatever the port holds, in one read per wake-up (common/serial_read.py):
+        pyserial's `read(in_waiting or 1)` was a third of the service's CPU at nominal
+        rates."""
         reader = LineReader()
-        fd = port.fd
         while not self._stop.is_set():
             if self._write_error is not None:
                 return f"write failed: {self._write_error}"
             try:
-                ready, _, _ = select.select([fd], [], [], READ_TIMEOUT_S)
-                if not ready:
-                    continue
-                data = os.read(fd, READ_CHUNK)
-            except BlockingIOError:
-                continue
-            except (OSError, ValueError) as exc:
+                data = read_available(port, READ_TIMEOUT_S)
+            except (OSError, ValueError, serial.SerialException) as exc:
                 return f"read failed: {exc}"
-            if not data:   # as pyserial says it: the device went away
-                return ("read failed: device reports readiness to read but returned no "
-                        "data (device disconnected or multiple access on port?)")
-            self._on_data(reader.feed(data))
+            if data:
+                self._on_data(reader.feed(data))
         return "stopped"

@@ -19,9 +19,7 @@ pyserial's `read(in_waiting)` with the port's own timeout instead of `select`.
 """
 
 import logging
-import os
 import re
-import select
 import time
 from collections import deque
 from typing import Any
@@ -31,6 +29,7 @@ from can.interfaces.slcan import slcanBus
 
 from common.counters import ReasonCounter
 from common.log import RateLimitedLog
+from common.serial_read import PortGone, read_available
 
 _log = logging.getLogger("radar.slcan")
 
@@ -40,7 +39,6 @@ _LINE = re.compile(rb"[^\r\x07]*[\r\x07]")
 # python-can's own frame letters, and adapter replies that are not frames (ignored)
 _FRAME = frozenset("tTxrRdDbB")
 _REPLY = frozenset("zZVvNF")
-READ_SIZE = 4096
 
 
 def _kind(line: str) -> str:
@@ -85,27 +83,14 @@ class BulkSlcanBus(slcanBus):
     def _read_available(self, timeout: float | None) -> bytes:
         """What the port has, waiting at most `timeout` for the first byte. Raises
         can.CanOperationError when the port fails or vanished."""
-        port = self.serialPortOrig
-        fd = getattr(port, "fd", None)
         try:
-            if not isinstance(fd, int):
-                return bytes(port.read(port.in_waiting or 1))
-            ready, _, _ = select.select([fd], [], [], timeout)
-            if not ready:
-                return b""
-            try:
-                data = os.read(fd, READ_SIZE)
-            except BlockingIOError:
-                return b""
+            return read_available(self.serialPortOrig, timeout)
+        except PortGone as exc:
+            raise can.CanOperationError(str(exc)) from exc
         except can.CanError:
             raise
         except Exception as exc:   # OSError (EIO: unplugged), SerialException, ValueError
             raise can.CanOperationError(f"could not read from serial device: {exc}") from exc
-        if not data:
-            # readable with nothing to read: the other end is gone (pyserial says the same)
-            raise can.CanOperationError("serial device reports readiness to read but "
-                                        "returned no data (disconnected?)")
-        return data
 
     def _split(self, chunk: bytes) -> None:
         buf = self._buffer
