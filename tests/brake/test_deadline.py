@@ -28,7 +28,6 @@ BRAKE_LEVEL = 60.0
 HOLD_S = 0.4
 STOP_LEVEL = 30.0
 MS = 1_000_000
-WAKE_ALLOWANCE_MS = 10.0   # the timer thread's wake-up on a loaded 2-core machine
 
 
 @dataclass
@@ -75,9 +74,10 @@ def _trial(rig: BrakeRig, pub: ServiceProcess, how: str, level: float, live_at: 
 
 
 def _check_timing(rig: BrakeRig, t: Trial) -> None:
-    # The timer sleeps until the deadline itself (a due time, not a tick): the bound is the
-    # deadline plus a wake-up allowance, tighter than the "one timer period" of issue 4.
-    bound = rig.deadline_ms + min(rig.period_ms, WAKE_ALLOWANCE_MS)
+    # Issue 4's bound: the deadline plus one timer period. The timer sleeps until the
+    # deadline itself, so entry is usually within a millisecond of it (see _report), but a
+    # loaded 2-core CI machine has woken it 29 ms late: the period is the guarantee.
+    bound = rig.deadline_ms + rig.period_ms
     assert rig.deadline_ms <= t.detect_ms <= bound, (
         f"{t.how}: FAILSAFE {t.detect_ms:.1f} ms after the last command (bound {bound} ms)")
     assert t.last_rx_ns >= t.last_pub_ns
@@ -92,11 +92,13 @@ def _failsafe_levels(rig: BrakeRig, t: Trial, until_ns: int) -> list[tuple[int, 
             if r.t_ns < until_ns]
 
 
-def _report(name: str, trials: list[Trial]) -> None:
+def _report(name: str, trials: list[Trial], deadline_ms: float) -> None:
     d = sorted(t.detect_ms for t in trials)
     e2e = sorted((t.line_ns - t.last_pub_ns) / MS for t in trials)
+    late = sum(1 for t in trials if t.detect_ms > deadline_ms + 10)
     print(f"\n{name}: {len(d)} trials; last command -> FAILSAFE (service) "
-          f"min {d[0]:.1f} / median {statistics.median(d):.1f} / max {d[-1]:.1f} ms; "
+          f"min {d[0]:.1f} / median {statistics.median(d):.1f} / max {d[-1]:.1f} ms "
+          f"({late} more than 10 ms after the deadline); "
           f"last publish -> FAILSAFE line read by the actuator: median "
           f"{statistics.median(e2e):.1f} / max {e2e[-1]:.1f} ms")
 
@@ -133,7 +135,7 @@ def test_killed_publisher_leads_to_failsafe_in_every_trial(hold_rig):
         trials.append(trial)
         if i + 1 < TRIALS:
             pub, live_at = _spawn(hold_rig, levels[i + 1])
-    _report("SIGKILL, policy hold", trials)
+    _report("SIGKILL, policy hold", trials, hold_rig.deadline_ms)
     assert len(trials) == TRIALS
 
 
@@ -153,7 +155,7 @@ def test_paused_publisher_leads_to_failsafe_in_every_trial(hold_rig):
         finally:
             pub.signal(signal.SIGCONT)
             pub.stop()
-    _report("SIGSTOP, policy hold", trials)
+    _report("SIGSTOP, policy hold", trials, hold_rig.deadline_ms)
     assert len(trials) == TRIALS
 
 
@@ -186,4 +188,4 @@ def test_other_policies_on_the_line(tmp_path_factory, policy):
                 finally:
                     pub.signal(signal.SIGCONT)
                     pub.stop()
-        _report(f"policy {policy}", trials)
+        _report(f"policy {policy}", trials, rig.deadline_ms)
