@@ -28,6 +28,7 @@ BRAKE_LEVEL = 60.0
 HOLD_S = 0.4
 STOP_LEVEL = 30.0
 MS = 1_000_000
+REPORTED_LATE_MS = 10.0   # printed, not asserted: the timer's wake-up latency
 
 
 @dataclass
@@ -95,10 +96,10 @@ def _failsafe_levels(rig: BrakeRig, t: Trial, until_ns: int) -> list[tuple[int, 
 def _report(name: str, trials: list[Trial], deadline_ms: float) -> None:
     d = sorted(t.detect_ms for t in trials)
     e2e = sorted((t.line_ns - t.last_pub_ns) / MS for t in trials)
-    late = sum(1 for t in trials if t.detect_ms > deadline_ms + 10)
+    late = sum(1 for t in trials if t.detect_ms > deadline_ms + REPORTED_LATE_MS)
     print(f"\n{name}: {len(d)} trials; last command -> FAILSAFE (service) "
           f"min {d[0]:.1f} / median {statistics.median(d):.1f} / max {d[-1]:.1f} ms "
-          f"({late} more than 10 ms after the deadline); "
+          f"({late} more than {REPORTED_LATE_MS:.0f} ms after the deadline); "
           f"last publish -> FAILSAFE line read by the actuator: median "
           f"{statistics.median(e2e):.1f} / max {e2e[-1]:.1f} ms")
 
