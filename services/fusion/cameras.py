@@ -41,12 +41,16 @@ class CameraView:
     """One camera in one radar cycle: its frame (None: unavailable, `reason` says why),
     each confirmed track predicted to that frame's capture time (`xy`), and its ROI.
 
-    The ROIs are projected on first use: when the first camera verifies every threat,
-    the others are not projected before the command is out."""
+    Positions and ROIs are computed on first use: a cycle without a threat sends its
+    command before any of them (numpy's calls, made for many tracks at once, cost tens
+    of microseconds each on a cold cache), and when the first camera verifies every
+    threat, the others are not projected before the command is out. `xy` is the array of
+    positions or a function that computes it."""
 
     __slots__ = ("_project", "_rois", "_xy", "_xy_list", "frame", "name", "reason")
 
-    def __init__(self, name: str, frame: DecodedFrame | None, reason: str, xy: np.ndarray,
+    def __init__(self, name: str, frame: DecodedFrame | None, reason: str,
+                 xy: np.ndarray | Callable[[], np.ndarray],
                  project: Callable[[np.ndarray], list[Roi | None]]) -> None:
         self.name = name
         self.frame = frame
@@ -56,17 +60,43 @@ class CameraView:
         self._project = project
         self._rois: list[Roi | None] | None = None
 
+    def _positions(self) -> np.ndarray:
+        if callable(self._xy):
+            self._xy = self._xy()
+        return self._xy
+
     @property
     def rois(self) -> list[Roi | None]:
         if self._rois is None:
-            self._rois = self._project(self._xy) if len(self._xy) else []
+            xy = self._positions()
+            self._rois = self._project(xy) if len(xy) else []
         return self._rois
 
     @property
     def xy(self) -> list[list[float]]:
         if self._xy_list is None:
-            self._xy_list = self._xy.tolist()
+            self._xy_list = self._positions().tolist()
         return self._xy_list
+
+
+class _Motion:
+    """The tracks' positions and velocities as arrays, built once per cycle on first use
+    and shared by the cameras."""
+
+    def __init__(self, tracks: Sequence[RadarTrack]) -> None:
+        self._tracks = tracks
+        self._pos_vel: tuple[np.ndarray, np.ndarray] | None = None
+
+    def at(self, dt_s: float) -> Callable[[], np.ndarray]:
+        """Positions predicted `dt_s` ahead, as a function computing them."""
+        def positions() -> np.ndarray:
+            if self._pos_vel is None:
+                tracks = self._tracks
+                self._pos_vel = (np.array([(t.x_m, t.y_m) for t in tracks]).reshape(-1, 2),
+                                 np.array([(t.vx_mps, t.vy_mps) for t in tracks]).reshape(-1, 2))
+            pos, vel = self._pos_vel
+            return pos + vel * dt_s if dt_s else pos
+        return positions
 
 
 def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
@@ -76,15 +106,13 @@ def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
     the frame's time only with `align`; a camera without a usable frame projects them as
     they are (to tell "would see it" from "not visible")."""
     views = []
-    pos = np.array([(t.x_m, t.y_m) for t in tracks]).reshape(-1, 2)
-    vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks]).reshape(-1, 2)
+    motion = _Motion(tracks)
     for cam, feed in zip(cameras, feeds, strict=True):
         frame = select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align)
         reason = "" if frame is not None else unavailable_reason(feed, radar_stamp_ns,
                                                                  max_skew_ns)
         dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
-        xy = pos + vel * dt_s if dt_s else pos
-        views.append(CameraView(cam.name, frame, reason, xy, cam.projector.rois))
+        views.append(CameraView(cam.name, frame, reason, motion.at(dt_s), cam.projector.rois))
     return views
 
 

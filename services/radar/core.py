@@ -26,6 +26,7 @@ from services.radar.detections import (
     Detections,
     GeneralFrames,
     attach_extras,
+    attach_list,
     decode_general,
     merge,
     prefilter,
@@ -62,14 +63,15 @@ _BUS_NOT_READY = {
 _PERIODS_KEPT = 32
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Tracked:
     """A cycle whose general frames went through prefilter, merge and tracker."""
 
     cycle: RawCycle
     general: GeneralFrames
     n_prefiltered: int
-    extras_attached: bool
+    extras_attached: bool          # before tracking (the prefilter needs them)
+    quality_attached: bool = False  # after tracking, once the quality list was in
 
 
 @dataclass(frozen=True)
@@ -151,6 +153,9 @@ class SensorCore:
             if asm.generals_in is not None and not self._filter_needs_extras:
                 self._track_early(asm.generals_in)
                 asm.generals_in = None
+            if asm.qualities_in is not None:
+                self._attach_quality_early(asm.qualities_in)
+                asm.qualities_in = None
             return []
         try:
             record = decode(spec, data)
@@ -220,6 +225,15 @@ class SensorCore:
         the work is done, and only their decoding is left after the cycle's last frame."""
         self._early = self._track(cycle)
 
+    def _attach_quality_early(self, cycle: RawCycle) -> None:
+        """Decode a tracked cycle's quality frames once they are all in, while its
+        extended frames are still on the bus: one list less to decode after its last frame."""
+        early = self._early
+        if early is not None and early.cycle is cycle and not early.extras_attached \
+                and not early.quality_attached:
+            attach_list(cycle, early.general, ListRole.QUALITY)
+            early.quality_attached = True
+
     def _track(self, cycle: RawCycle) -> _Tracked:
         g = decode_general(cycle)
         attached = self._filter_needs_extras
@@ -239,8 +253,10 @@ class SensorCore:
         done = early if early is not None and early.cycle is cycle else self._track(cycle)
         g = done.general
         if not done.extras_attached:
-            attach_extras(cycle, g)
+            if not done.quality_attached:
+                attach_list(cycle, g, ListRole.QUALITY)
             if cycle.mode is OutputMode.OBJECTS:
+                attach_list(cycle, g, ListRole.EXTENDED)
                 self.tracker.annotate_class(g.det)
         for reason, n in g.rejected.items():
             self.rejected.add(reason, n)

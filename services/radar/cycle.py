@@ -110,6 +110,9 @@ class CycleAssembler:
         # Set when the open cycle's last general frame arrived and the cycle still waits
         # for other frames; the caller may start tracking it and clears it.
         self.generals_in: RawCycle | None = None
+        # Likewise when the open cycle's last quality frame arrived (the extended frames,
+        # if any, still to come): the caller may decode them and clears it.
+        self.qualities_in: RawCycle | None = None
 
     def _expectation(self, mode: OutputMode, role: int) -> bool | None:
         if role == ListRole.EXTENDED and mode is OutputMode.CLUSTERS:
@@ -147,7 +150,7 @@ class CycleAssembler:
         """A status frame: closes the open cycle (emitted if it was not yet) and opens a
         new one, emitted at once when it announces nothing."""
         out = self._close(ClosedBy.NEXT_STATUS)
-        self.generals_in = None
+        self.generals_in = self.qualities_in = None
         self._current = RawCycle(
             mode=mode, meas_counter=meas_counter, announced=announced, t_s=t_s,
             stamp_wall_ns=wall_ns, start_mono_ns=mono_ns, last_frame_mono_ns=mono_ns,
@@ -187,10 +190,13 @@ class CycleAssembler:
         if cycle.awaited[role]:
             cycle.remaining -= 1
             if cycle.remaining == 0:
-                self.generals_in = None
+                self.generals_in = self.qualities_in = None
                 return self._close(ClosedBy.COMPLETE)
-        if role == ListRole.GENERAL and len(frames) == cycle.announced:
-            self.generals_in = cycle
+        if len(frames) == cycle.announced:
+            if role == ListRole.GENERAL:
+                self.generals_in = cycle
+            elif role == ListRole.QUALITY:
+                self.qualities_in = cycle
         return []
 
     def poll(self, mono_ns: int) -> list[RawCycle]:

@@ -19,7 +19,7 @@ from common.config.radar import MergeSettings, PrefilterSettings
 from common.messages.radar import OutputMode
 from services.radar.ars408.codec import decode_columns
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
-from services.radar.cycle import RawCycle
+from services.radar.cycle import ListRole, RawCycle
 from services.radar.neighbours import pairs_within_self
 
 F = npt.NDArray[np.float64]
@@ -238,16 +238,26 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
 def attach_extras(cycle: RawCycle, g: GeneralFrames) -> None:
     """Decode the cycle's quality / extended frames into the detections' ProbOfExist,
     class (objects) or InvalidState (clusters) rows; rejections go to `g.rejected`."""
+    attach_list(cycle, g, ListRole.QUALITY)
+    if cycle.mode is OutputMode.OBJECTS:
+        attach_list(cycle, g, ListRole.EXTENDED)
+
+
+def attach_list(cycle: RawCycle, g: GeneralFrames, role: int) -> None:
+    """Decode one of the cycle's extra lists (ListRole.QUALITY, or EXTENDED for
+    objects) into its detection row; rejections go to `g.rejected`. A list can be
+    attached as soon as all its frames are in, before the cycle's other frames."""
     if not len(g.det):
         return
     _, quality_spec, extended_spec = _SPECS[cycle.mode]
     i = g.det.ints
-    if cycle.mode is OutputMode.OBJECTS:
-        assert extended_spec is not None
-        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[PROB_OF_EXIST],
-                "prob_of_exist", g.rejected)
+    if role == ListRole.EXTENDED:
+        assert extended_spec is not None and cycle.mode is OutputMode.OBJECTS
         _attach(extended_spec, cycle.extended, g.ids, g.keys, g.rows, i[OBJ_CLASS],
                 "obj_class", g.rejected)
+    elif cycle.mode is OutputMode.OBJECTS:
+        _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[PROB_OF_EXIST],
+                "prob_of_exist", g.rejected)
     else:
         _attach(quality_spec, cycle.quality, g.ids, g.keys, g.rows, i[INVALID_STATE],
                 "invalid_state", g.rejected)

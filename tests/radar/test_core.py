@@ -9,6 +9,7 @@ from services.radar.ars408 import (
     object_cycle_frames,
 )
 from services.radar.core import SensorCore
+from services.radar.detections import PROB_OF_EXIST
 from tests.can_support import feed
 
 KNOWN = CycleSettings(expect_quality=Expect.YES, expect_extended=Expect.YES)
@@ -53,3 +54,30 @@ def test_a_cycle_closed_by_the_next_status_uses_its_early_tracking_once():
     assert not late.complete and late.n_detections == 2
     assert core.tracker.last_t == steps          # not tracked a second time
     assert {t.obj_class for t in late.tracks} == {-1}
+
+
+def test_quality_frames_are_decoded_before_the_extended_frames_arrive():
+    core = SensorCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
+    cycle = frames(0)
+    assert feed(core, cycle[:5]) == []           # status, 2 general, 2 quality
+    early = core._early                          # white box: nothing else shows the timing
+    assert early is not None and early.quality_attached
+    assert sorted(early.general.det.ints[PROB_OF_EXIST].tolist()) == [3, 7]
+    [result] = feed(core, cycle[5:])
+    assert result.complete and {t.obj_class for t in result.tracks} == {1, 3}
+
+
+def test_an_early_decoded_quality_list_counts_its_rejections_once():
+    """One quality frame for an object the general list does not have."""
+    core = SensorCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
+    objs = [ObjectGeneral(4, 12.0, 0.2, -1.0, 0.0, 0, 20.0),
+            ObjectGeneral(6, 18.0, -2.0, 0.0, 0.0, 1, 5.0)]
+    qual = [ObjectQuality(4, 1, 1, 1, 1, 2, 3), ObjectQuality(5, 1, 1, 1, 1, 2, 3)]
+    ext = [ObjectExtended(4, 0.0, 0.0, 1, 0.0, 4.4, 1.8),
+           ObjectExtended(6, 0.0, 0.0, 3, 0.0, 0.6, 0.6)]
+    cycle = [(f, 10.0) for f in object_cycle_frames(objs, 0, qual, ext)]
+    assert feed(core, cycle[:5]) == [] and core._early is not None
+    assert core._early.quality_attached
+    [result] = feed(core, cycle[5:])
+    assert not result.complete
+    assert core.rejected.snapshot() == {"unmatched_id:Obj_2_Quality": 1}
