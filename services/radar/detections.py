@@ -275,6 +275,8 @@ def decode_cycle(cycle: RawCycle) -> tuple[Detections, dict[str, int]]:
 def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     """Paper's prefilter: forward only, min < range <= max, RCS above the threshold; plus
     the optional existence-probability and cluster-validity filters."""
+    if not len(det):
+        return det          # an empty cycle (nothing ahead): no numpy call at all
     x, y = det.x, det.y
     r2 = x * x + y * y
     keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (det.rcs > s.min_rcs_dbsm)
