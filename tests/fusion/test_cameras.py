@@ -15,7 +15,7 @@ from common.clock import wall_ns
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, load_config, parse_config
 from common.messages import Decision, Verification, VerifierStatus, encode
-from services.fusion.cameras import CameraView, check_track
+from services.fusion.cameras import Camera, CameraView, camera_views, check_track
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.main import build_core
@@ -23,7 +23,18 @@ from services.fusion.node import FusionNode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.synthetic import rig_calibration_toml
 from services.fusion.verifiers import GateResult
-from tests.fusion.helpers import MS, T0, FixedVerifier, cycle, feed, frame, settings, track
+from tests.fusion.helpers import (
+    CAL,
+    MS,
+    T0,
+    FixedVerifier,
+    cycle,
+    feed,
+    frame,
+    make_core,
+    settings,
+    track,
+)
 from tests.fusion.test_frames import compressed
 from tests.fusion.test_node import FakeBus
 
@@ -258,3 +269,53 @@ def test_calibration_override_is_refused_for_several_cameras(tmp_path):
                            str(multicam_config(tmp_path)), "--calibration", "x.toml"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "--calibration applies to a single camera" in proc.stderr
+
+
+def test_a_cycle_without_a_threat_sends_its_command_before_any_projection(monkeypatch):
+    projected: list[int] = []
+    rois = ColumnProjector.rois
+
+    def counting(self: ColumnProjector, xy: np.ndarray) -> list[Roi | None]:
+        projected.append(len(xy))
+        return rois(self, xy)
+
+    monkeypatch.setattr(ColumnProjector, "rois", counting)
+    core = make_core()
+    at_command: list[int] = []
+
+    def sink(cmd: Any) -> None:
+        at_command.append(len(projected))
+
+    receding = track(1, x=30.0, vx=4.0)              # moving away: no threat
+    result = core.process(cycle(receding), feed(frame()), T0 + 5 * MS, 1, sink)
+    assert result.command.decision is Decision.NONE
+    assert at_command == [0] and projected == [1]   # projected after, for the targets
+    projected.clear()
+    at_command.clear()
+    closing = track(2, x=8.0, vx=-8.0)               # a threat: gated before the command
+    result = core.process(cycle(receding, closing, seq=1), feed(frame()), T0 + 5 * MS, 1,
+                          sink)
+    assert result.command.decision is Decision.BRAKE and at_command == [1]
+
+
+class _CountingTracks(list):
+    """Tracks that count how often they are read."""
+
+    reads = 0
+
+    def __iter__(self):
+        self.reads += 1
+        return super().__iter__()
+
+
+def test_positions_are_built_on_first_use_once_for_every_camera():
+    geometry = ColumnGeometry(1.8, 1.0, 0)
+    cams = [Camera(n, ColumnProjector(CAL, geometry)) for n in "ab"]
+    tracks = _CountingTracks([track(1, x=12.0, vx=-5.0), track(2, x=20.0, y=1.0)])
+    views = camera_views(cams, [feed(frame(T0 + 10 * MS)), feed()], tracks, T0, 50 * MS,
+                         True)
+    assert tracks.reads == 0 and views[0].frame is not None and views[1].frame is None
+    assert views[0].xy[0] == pytest.approx([12.0 - 5.0 * 0.010, 0.0])   # predicted 10 ms
+    assert views[1].xy[0] == [12.0, 0.0]             # no frame: as they are
+    assert len(views[0].rois) == len(views[1].rois) == 2
+    assert tracks.reads == 2                          # x, y once, vx, vy once: shared
