@@ -228,9 +228,8 @@ class SensorCore:
     def _attach_quality_early(self, cycle: RawCycle) -> None:
         """Decode a tracked cycle's quality frames once they are all in, while its
         extended frames are still on the bus: one list less to decode after its last frame."""
-        early = self._early
-        if early is not None and early.cycle is cycle and not early.extras_attached \
-                and not early.quality_attached:
+        early = self._early       # only ever tracked without its extras (see on_frame)
+        if early is not None and early.cycle is cycle and not early.quality_attached:
             attach_list(cycle, early.general, ListRole.QUALITY)
             early.quality_attached = True
 
