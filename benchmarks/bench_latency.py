@@ -35,7 +35,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,45 +81,61 @@ QUICK_MEASURE_S = 10.0
 FULL_MEASURE_S = 75.0
 FLOOR_OFFSET_S = 0.037        # half a radar period after the stack's cycle
 RELAY_START_S = 60.0
+QUEUED_PER_S = 200             # per key: radar 13.3 Hz, brake status on every acknowledgement
 REALTIME_PRIORITY = 20         # as deploy/*.toml [*.realtime] (0: normal scheduling)
 
 
 @dataclass
 class Collected:
-    """What the stack published, as stamps (filled by Zenoh callbacks)."""
+    """What the stack published, as stamps.
+
+    The benchmark's own process also runs the simulated actuator, whose thread stamps
+    each brake line as it arrives: a Zenoh callback decoding the stack's messages here
+    would hold this process's GIL at that very moment (the targets follow the command the
+    line answers) and delay the stamp. So the messages are queued inside Zenoh with no
+    Python running (`Bus.subscribe_queued`) and decoded after the run (`drain`)."""
 
     tracks: list[TracksStamp] = field(default_factory=list)
     processing_ns: dict[int, int] = field(default_factory=dict)
     commands: dict[int, CommandStamp] = field(default_factory=dict)
     brake: dict[int, BrakeStamp] = field(default_factory=dict)
-    lock: threading.Lock = field(default_factory=threading.Lock)
+    _subs: list[tuple[Any, Any, Callable[[Any, str], None]]] = field(default_factory=list)
 
     def on_tracks(self, msg: RadarTracks, key: str) -> None:
-        with self.lock:
-            self.tracks.append(TracksStamp(msg.meas_counter, msg.header.seq,
-                                           msg.last_frame_mono_ns, msg.header.pub_mono_ns))
+        self.tracks.append(TracksStamp(msg.meas_counter, msg.header.seq,
+                                       msg.last_frame_mono_ns, msg.header.pub_mono_ns))
 
     def on_targets(self, msg: VerifiedTargets, key: str) -> None:
-        with self.lock:
-            self.processing_ns[msg.radar_seq] = msg.processing_ns
+        self.processing_ns[msg.radar_seq] = msg.processing_ns
 
     def on_command(self, msg: BrakeCommand, key: str) -> None:
-        with self.lock:
-            self.commands[msg.radar_seq] = CommandStamp(msg.header.seq, msg.header.pub_mono_ns)
+        self.commands[msg.radar_seq] = CommandStamp(msg.header.seq, msg.header.pub_mono_ns)
 
     def on_status(self, msg: BrakeStatus, key: str) -> None:
         if msg.cmd_to_serial_us is None or msg.last_cmd_rx_mono_ns <= 0:
             return
-        with self.lock:
-            self.brake.setdefault(msg.last_cmd_seq, BrakeStamp(
-                msg.last_cmd_rx_mono_ns,
-                msg.last_cmd_rx_mono_ns + round(msg.cmd_to_serial_us * 1000)))
+        self.brake.setdefault(msg.last_cmd_seq, BrakeStamp(
+            msg.last_cmd_rx_mono_ns,
+            msg.last_cmd_rx_mono_ns + round(msg.cmd_to_serial_us * 1000)))
 
-    def subscribe(self, bus: Bus, instance: str = "primary") -> list[Any]:
-        return [bus.subscribe(RADAR_TRACKS, self.on_tracks, sensor="front"),
-                bus.subscribe(FUSION_TARGETS, self.on_targets, instance=instance),
-                bus.subscribe(FUSION_BRAKE_CMD, self.on_command, instance=instance),
-                bus.subscribe(BRAKE_STATUS, self.on_status)]
+    def subscribe(self, bus: Bus, measure_s: float, instance: str = "primary") -> None:
+        """Queue every message of the four keys for `measure_s` seconds of cycles (and
+        generous margins: a full queue would make Zenoh wait)."""
+        capacity = max(4096, round(measure_s * QUEUED_PER_S))
+        for spec, handler, params in (
+                (RADAR_TRACKS, self.on_tracks, {"sensor": "front"}),
+                (FUSION_TARGETS, self.on_targets, {"instance": instance}),
+                (FUSION_BRAKE_CMD, self.on_command, {"instance": instance}),
+                (BRAKE_STATUS, self.on_status, {})):
+            self._subs.append((spec, bus.subscribe_queued(spec, capacity, **params), handler))
+
+    def drain(self, bus: Bus) -> None:
+        """Stop queueing; every queued message into the stamps."""
+        for spec, sub, handler in self._subs:
+            for msg, key in bus.drain_queued(spec, sub):
+                handler(msg, key)
+            sub.undeclare()
+        self._subs.clear()
 
 
 class FloorFeed:
@@ -175,16 +191,24 @@ class Floor:
     link: SlcanPtyLink
     feed: FloorFeed
     lines: LineTimes
-    reports: list[tuple[int, ...]]
+    reports_path: Path
+
+    def reports(self) -> list[tuple[int, ...]]:
+        """The `serial` relay's stamp lines so far. They go to a file, read only now:
+        a thread here reading them as they come would hold this process's GIL while the
+        line reader stamps the very line they describe."""
+        return read_reports(self.reports_path.read_text().splitlines())
 
 
-def read_reports(stream: Any, into: list[tuple[int, ...]]) -> None:
-    """The `serial` relay's stamp lines (until its stdout closes); other lines skipped."""
-    for raw in stream:
+def read_reports(lines: Iterable[str]) -> list[tuple[int, ...]]:
+    """The `serial` relay's stamp lines; other lines (a partial last one) skipped."""
+    out: list[tuple[int, ...]] = []
+    for raw in lines:
         parts = raw.split()
         if len(parts) == 7:
             with contextlib.suppress(ValueError):
-                into.append(tuple(int(p) for p in parts))
+                out.append(tuple(int(p) for p in parts))
+    return out
 
 
 @contextmanager
@@ -195,6 +219,8 @@ def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Ite
     pty = PtyPair(work / "floor-serial")
     procs: list[subprocess.Popen[str]] = []
     log = open(work / "floor-relays.log", "w")  # noqa: SIM115 (closed below)
+    reports_path = work / "floor-reports.txt"
+    reports_out = open(reports_path, "w")  # noqa: SIM115 (closed below)
     feed: FloorFeed | None = None
     lines: LineTimes | None = None
     up: dict[str, threading.Event] = {r: threading.Event() for r in ("can", "hop", "serial")}
@@ -213,12 +239,9 @@ def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Ite
         for role, extra in (("serial", ["--port", str(pty.path)]), ("hop", []),
                             ("can", ["--channel", link.path])):
             procs.append(subprocess.Popen(
-                [*base, role, *common_args, *extra], stdout=subprocess.PIPE, stderr=log,
+                [*base, role, *common_args, *extra],
+                stdout=reports_out if role == "serial" else subprocess.DEVNULL, stderr=log,
                 text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"}))
-        reports: list[tuple[int, ...]] = []
-        stdout = procs[0].stdout
-        assert stdout is not None
-        threading.Thread(target=read_reports, args=(stdout, reports), daemon=True).start()
         for role, event in up.items():
             if not event.wait(RELAY_START_S):
                 raise RuntimeError(f"floor relay {role!r} did not come up: "
@@ -227,7 +250,7 @@ def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Ite
         lines = LineTimes(pty.master_fd)
         _instrument_realtime(lines, realtime_priority)
         feed = FloorFeed(link, FLOOR_OFFSET_S)
-        yield Floor(link, feed, lines, reports)
+        yield Floor(link, feed, lines, reports_path)
     finally:
         if feed is not None:
             feed.stop()
@@ -236,6 +259,7 @@ def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Ite
         sub.undeclare()
         stop_processes(procs)
         log.close()
+        reports_out.close()
         link.close()
         pty.remove()
 
@@ -319,7 +343,7 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
     with closed_loop(run_dir, log=sys.stdout if log else None,
                      realtime_priority=realtime_priority) as loop, \
             floor_chain(loop, run_dir / "run", realtime_priority) as floor:
-        subs = collected.subscribe(loop.bus)
+        collected.subscribe(loop.bus, measure_s)
         t0 = mono_ns()
         cpu0 = cpu_times()
         first_cycle = len(loop.feed.cycles())
@@ -338,16 +362,14 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
         finally:
             loop.feed.on_cycle = None
         time.sleep(0.3)     # the last chains reach the lines
-        for s in subs:
-            s.undeclare()
+        collected.drain(loop.bus)
         cycles = loop.feed.cycles()[first_cycle:]
         written = {c.meas_counter: c.last_write_mono_ns for c in cycles}
         lines = sorted(r.t_ns for r in loop.actuator.commands_since(t0))
-        with collected.lock:
-            stack = stack_chains(written, list(collected.tracks), dict(collected.processing_ns),
-                                 dict(collected.commands), dict(collected.brake), lines)
+        stack = stack_chains(written, collected.tracks, collected.processing_ns,
+                             collected.commands, collected.brake, lines)
         floor_lines = sorted(t for t in floor.lines.times if t >= t0)
-        fl = floor_chains(dict(floor.feed.written), list(floor.reports), floor_lines)
+        fl = floor_chains(dict(floor.feed.written), floor.reports(), floor_lines)
         seconds = (mono_ns() - t0) / 1e9
         floor_cycles = len(floor.feed.written)
         cpu = cpu_share(cpu0, cpu_times())

@@ -236,6 +236,40 @@ class Bus:
 
         return self.session.declare_subscriber(expr, _handler(on_sample, direct))
 
+    def subscribe_queued(
+        self, spec: KeySpec[Any], capacity: int, **params: str,
+    ) -> zenoh.Subscriber[zenoh.Handler[zenoh.Sample]]:
+        """Subscribe into a queue that Zenoh fills without running any Python: no thread
+        takes this process's GIL when a sample arrives (for instruments that must not
+        delay the threads they share a process with). Drain with `drain_queued`.
+
+        Zenoh's receive thread waits when the queue is full: size `capacity` for
+        everything that can arrive between two drains."""
+        if capacity <= 0:
+            raise ValueError(f"capacity must be positive, got {capacity}")
+        return self.session.declare_subscriber(spec.wildcard(self.vehicle, **params),
+                                               zenoh.handlers.FifoChannel(capacity))
+
+    def drain_queued(self, spec: KeySpec[T],
+                     sub: zenoh.Subscriber[zenoh.Handler[zenoh.Sample]]) -> list[tuple[T, str]]:
+        """Everything queued so far by `subscribe_queued`, decoded, in arrival order
+        (before `sub` is undeclared: the queue goes with it). Undecodable payloads are
+        counted in `decode_errors` and left out."""
+        msg_type = spec.msg_type
+        if msg_type is None:
+            raise ValueError(f"key {spec.name!r} carries no message")
+        out: list[tuple[T, str]] = []
+        while (sample := sub.try_recv()) is not None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                continue
+            try:
+                out.append((decode(sample.payload.to_bytes(), msg_type), str(sample.key_expr)))
+            except DecodeError as exc:
+                self.decode_errors.add(spec.name)
+                self._rl.warning(f"decode:{spec.name}", "undecodable_payload",
+                                 key=str(sample.key_expr), error=exc)
+        return out
+
     def declare_queryable(
         self, spec: KeySpec[T], reply: Callable[[], T], **params: str
     ) -> zenoh.Queryable[None]:
