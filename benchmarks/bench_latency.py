@@ -1,7 +1,7 @@
 """Radar-to-brake latency on one host: from the last CAN frame of a radar cycle to the
 brake command's bytes on the actuator's serial line, per stage, beside its floor.
 
-    python -m benchmarks.bench_latency [--quick] [--out out/bench]
+    python -m benchmarks.bench_latency [--quick] [--out out/bench] [--cpu-latency-us 0]
 
 The stack runs as in `aeb demo` (tools/sim/session.py): a router, then radar, camera,
 fusion and brake, each its own process. This process is the SIMULATED vehicle: the
@@ -19,6 +19,13 @@ size, through the same router) -> relay -> Zenoh hop (BrakeCommand's) -> relay -
 command line on a serial pty that this process reads. Two floors are reported:
 - same transport: last frame written -> line read, through the relays;
 - Zenoh only: the two hops of those chains (the issue's "bare hops with no work").
+
+`--cpu-latency-us N` holds a PM QoS request for the run (benchmarks/cpu_latency.py): no
+CPU idle state with an exit latency above N us, for the stack and its floor alike.
+
+The benchmark's own process stamps the lines (the simulated actuator, the floor's
+reader), so it keeps its GIL free at those moments: the stack's messages are queued
+inside Zenoh and decoded after the run, the floor relay's reports go to a file.
 
 Every message carries the stamps that split the chain into the same seven stages for
 both (benchmarks/latency_chain.py). Targets (issue 6): p99 < 3.75 ms (5% of a 75 ms
@@ -42,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.bench_brake import LineTimes
+from benchmarks.cpu_latency import CpuLatencyRefused, cpu_latency
 from benchmarks.figures import Figure, machine_info
 from benchmarks.floor_relay import VEHICLE as FLOOR_VEHICLE
 from benchmarks.latency_chain import (
@@ -317,20 +325,28 @@ class Measured:
     load_after: tuple[float, float, float]
     realtime_priority: int = 0
     cpu: dict[str, float] = field(default_factory=dict)
+    cpu_latency_us: int | None = None
 
 
 def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None = None,
-            realtime_priority: int = 0) -> Measured:
+            realtime_priority: int = 0, cpu_latency_us: int | None = None) -> Measured:
     """Run the stack and its floor together for `seconds` of cycles (default by mode);
     every chain seen at every stage. `realtime_priority` > 0: the stack, the floor's
-    relays and the line readers with SCHED_FIFO (as deployed on a vehicle)."""
+    relays and the line readers with SCHED_FIFO (as deployed on a vehicle).
+    `cpu_latency_us`: a PM QoS request held for the run (benchmarks/cpu_latency.py);
+    raises CpuLatencyRefused when it cannot be made."""
     measure_s = seconds or (QUICK_MEASURE_S if quick else FULL_MEASURE_S)
     switch_interval = sys.getswitchinterval()
     if realtime_priority > 0:
         # the line readers stamp a line once they hold the GIL: as in the services
         sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     try:
-        return _measure(measure_s, out_dir, log, realtime_priority)
+        with contextlib.ExitStack() as stack:
+            if cpu_latency_us is not None:
+                stack.enter_context(cpu_latency(cpu_latency_us))
+            m = _measure(measure_s, out_dir, log, realtime_priority)
+        m.cpu_latency_us = cpu_latency_us
+        return m
     finally:
         sys.setswitchinterval(switch_interval)
 
@@ -390,7 +406,7 @@ def figures_from(m: Measured) -> list[Figure]:
         raise RuntimeError(f"no complete chain measured (stack {len(m.stack)}, floor "
                            f"{len(m.floor)} of {m.cycles} cycles)")
     load = (f"load {m.load_before[0]:.2f} -> {m.load_after[0]:.2f} (1 min), {_cpu(m)}; "
-            f"SCHED_FIFO {m.realtime_priority or 'off'}; "
+            f"SCHED_FIFO {m.realtime_priority or 'off'}; {_idle(m)}; "
             f"{len(m.stack)}/{m.cycles} stack and {len(m.floor)}/{m.floor_cycles} floor "
             f"cycles paired")
     same = "same-transport floor: slcan pty -> 3 relays, 2 hops -> serial pty"
@@ -422,6 +438,12 @@ def figures_from(m: Measured) -> list[Figure]:
     return figs
 
 
+def _idle(m: Measured) -> str:
+    if m.cpu_latency_us is None:
+        return "CPU idle states as configured"
+    return f"CPU idle exit latency held <= {m.cpu_latency_us} us"
+
+
 def _cpu(m: Measured) -> str:
     if not m.cpu:
         return "CPU share unknown"
@@ -440,6 +462,7 @@ def table(m: Measured) -> str:
     out = [f"radar-to-brake latency: {len(m.stack)} stack cycles, {len(m.floor)} floor "
            f"cycles in {m.seconds:.0f} s; load avg {m.load_before[0]:.2f} -> "
            f"{m.load_after[0]:.2f}, {_cpu(m)}; SCHED_FIFO {m.realtime_priority or 'off'}; "
+           f"{_idle(m)}; "
            "times in ms",
            f"{'stage':<38}{'stack p50':>10}{'p95':>8}{'p99':>8}{'max':>8}   "
            f"{'floor p50':>10}{'p95':>8}{'p99':>8}{'max':>8}"]
@@ -516,6 +539,7 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
         "floor_cycles": m.floor_cycles, "verdicts": m.verdicts,
         "load_avg_before": m.load_before, "load_avg_after": m.load_after,
         "realtime_priority": m.realtime_priority, "cpu": m.cpu,
+        "cpu_latency_us": m.cpu_latency_us,
         "stack": {n: summ(v) for n, v in st.items()},
         "floor": {n: summ(v) for n, v in fl.items()},
         "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),
@@ -524,11 +548,13 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
 
 
 def run(quick: bool, out_dir: Path, seconds: float | None = None,
-        realtime_priority: int = REALTIME_PRIORITY) -> list[Figure]:
+        realtime_priority: int = REALTIME_PRIORITY,
+        cpu_latency_us: int | None = None) -> list[Figure]:
     """The suite's entry point: measure, write JSON and PNG under `out_dir`, return the
     figures. Raises RuntimeError when the stack or the floor does not come up."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    m = measure(quick, out_dir, seconds=seconds, realtime_priority=realtime_priority)
+    m = measure(quick, out_dir, seconds=seconds, realtime_priority=realtime_priority,
+                cpu_latency_us=cpu_latency_us)
     figs = figures_from(m)
     print(table(m), flush=True)
     write_json(m, figs, out_dir / "bench_latency.json")
@@ -548,10 +574,20 @@ def main(argv: list[str] | None = None) -> int:
                         help="SCHED_FIFO priority of the stack, its floor and the line "
                              f"readers (default {REALTIME_PRIORITY}, as deployed; 0: off)")
     parser.add_argument("--out", default="out/bench")
+    parser.add_argument("--cpu-latency-us", type=int, metavar="US",
+                        help="hold a PM QoS request for the run: no CPU idle state with a "
+                             "longer exit latency (0: idle CPUs poll; root only). Default: "
+                             "the machine's idle states as they are")
     args = parser.parse_args(argv)
+    if args.cpu_latency_us is not None and args.cpu_latency_us < 0:
+        parser.error("--cpu-latency-us must be >= 0")
     out = Path(args.out)
     t0 = time.monotonic()
-    figs = run(args.quick, out, args.seconds, args.realtime_priority)
+    try:
+        figs = run(args.quick, out, args.seconds, args.realtime_priority, args.cpu_latency_us)
+    except CpuLatencyRefused as exc:
+        print(f"error: --cpu-latency-us: {exc}", file=sys.stderr)
+        return 2
     from benchmarks.report import print_table
 
     print()

@@ -1,0 +1,39 @@
+"""Linux's PM QoS CPU latency request (/dev/cpu_dma_latency), held while a benchmark runs.
+
+While a process keeps the device open with a value written, no CPU enters an idle state
+whose exit latency is above that many microseconds; 0 keeps idle CPUs polling, so that a
+woken thread runs at once instead of waiting for its CPU to leave a sleep state (on a VM,
+for the hypervisor to run the halted virtual CPU again). It costs power (or, on a VM, the
+host's CPU time): a deployment choice, measured by `bench_latency --cpu-latency-us`.
+"""
+
+import os
+import struct
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+DEVICE = "/dev/cpu_dma_latency"
+
+
+class CpuLatencyRefused(OSError):
+    """The request could not be made (no such device, or no permission: root only)."""
+
+
+@contextmanager
+def cpu_latency(max_us: int, device: str = DEVICE) -> Iterator[None]:
+    """Hold the request for the `with` block. Raises ValueError for a negative value and
+    CpuLatencyRefused when the device cannot be opened or written."""
+    if max_us < 0:
+        raise ValueError(f"cpu latency must be >= 0 us, got {max_us}")
+    try:
+        fd = os.open(device, os.O_WRONLY)
+    except OSError as exc:
+        raise CpuLatencyRefused(f"cannot open {device}: {exc}") from exc
+    try:
+        try:
+            os.write(fd, struct.pack("i", max_us))
+        except OSError as exc:
+            raise CpuLatencyRefused(f"cannot write {device}: {exc}") from exc
+        yield
+    finally:
+        os.close(fd)     # the kernel drops the request with the last close
