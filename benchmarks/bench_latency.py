@@ -60,6 +60,7 @@ from benchmarks.latency_chain import (
     CommandStamp,
     Summary,
     TracksStamp,
+    by_detections,
     floor_chains,
     stack_chains,
     stages_ns,
@@ -107,11 +108,13 @@ class Collected:
     processing_ns: dict[int, int] = field(default_factory=dict)
     commands: dict[int, CommandStamp] = field(default_factory=dict)
     brake: dict[int, BrakeStamp] = field(default_factory=dict)
+    detections: dict[int, int] = field(default_factory=dict)    # tracks' pub stamp -> n
     _subs: list[tuple[Any, Any, Callable[[Any, str], None]]] = field(default_factory=list)
 
     def on_tracks(self, msg: RadarTracks, key: str) -> None:
         self.tracks.append(TracksStamp(msg.meas_counter, msg.header.seq,
                                        msg.last_frame_mono_ns, msg.header.pub_mono_ns))
+        self.detections[msg.header.pub_mono_ns] = msg.n_detections
 
     def on_targets(self, msg: VerifiedTargets, key: str) -> None:
         self.processing_ns[msg.radar_seq] = msg.processing_ns
@@ -326,6 +329,7 @@ class Measured:
     realtime_priority: int = 0
     cpu: dict[str, float] = field(default_factory=dict)
     cpu_latency_us: int | None = None
+    detections: dict[int, int] = field(default_factory=dict)
 
 
 def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None = None,
@@ -390,7 +394,7 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
         floor_cycles = len(floor.feed.written)
         cpu = cpu_share(cpu0, cpu_times())
     return Measured(stack, fl, len(cycles), floor_cycles, seconds, verdicts, load_before,
-                    os.getloadavg(), realtime_priority, cpu)
+                    os.getloadavg(), realtime_priority, cpu, detections=collected.detections)
 
 
 def _ms(s: Summary | None, attr: str) -> float:
@@ -481,7 +485,33 @@ def table(m: Measured) -> str:
                    f"{total.p50_ms / zen.p50_ms:.2f}x the 2 bare hops (target <= "
                    f"{P50_TARGET_RATIO:g}x); p99 {total.p99_ms:.2f} ms (target < "
                    f"{P99_TARGET_MS:g} ms)")
+    groups = by_detection_count(m)
+    if groups:
+        out.append("stack p50 by the radar cycle's detections (ms): "
+                   + f"{'cycles':>7}{'total':>8}"
+                   + "".join(f"{_SHORT[n]:>9}" for n in STAGES))
+        for name, (n, p50) in groups.items():
+            out.append(f"{'':<18}{name + ' detections':>30}{n:>7}{p50['total']:>8.3f}"
+                       + "".join(f"{p50[s]:>9.3f}" for s in STAGES))
     return "\n".join(out)
+
+
+_SHORT = {"can_in": "CAN in", "decode_track": "track", "hop_radar_fusion": "hop 1",
+          "verify_decide": "decide", "hop_fusion_brake": "hop 2", "brake_write": "brake",
+          "serial_out": "serial"}
+
+
+def by_detection_count(m: Measured) -> dict[str, tuple[int, dict[str, float]]]:
+    """Per group of the radar cycle's detection count (0, 1, 2, 3, 4+): how many chains
+    and the p50 of the total and of each stage, ms. Few objects cost the most: with
+    one, the whole cycle comes in one burst of frames and its tracking waits for nothing
+    (docs/performance.md)."""
+    out: dict[str, tuple[int, dict[str, float]]] = {}
+    for name, chains in by_detections(m.stack, m.detections).items():
+        st = stages_ns(chains)
+        p50 = {k: _ms(summarize(v), "p50_ms") for k, v in st.items()}
+        out[name] = (len(chains), p50)
+    return out
 
 
 def plot(m: Measured, path: Path) -> Path:
@@ -543,6 +573,8 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
         "stack": {n: summ(v) for n, v in st.items()},
         "floor": {n: summ(v) for n, v in fl.items()},
         "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),
+        "stack_p50_by_detections": {name: {"cycles": n, **{f"{k}_ms": v for k, v in p.items()}}
+                                    for name, (n, p) in by_detection_count(m).items()},
         "figures": [f.to_json() for f in figs]}, indent=1))
     return path
 

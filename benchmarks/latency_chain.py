@@ -133,6 +133,19 @@ def stages_ns(chains: Sequence[Chain]) -> dict[str, list[int]]:
     return out
 
 
+def by_detections(chains: Sequence[Chain], detections: dict[int, int],
+                  top: int = 4) -> dict[str, list[Chain]]:
+    """The stack's chains grouped by how many detections their radar cycle had (`0`,
+    `1`, ... `<top>+`), found by the RadarTracks' publication stamp (`chain[2]`) in
+    `detections`; chains not in it are left out. Groups in increasing order."""
+    groups: dict[int, list[Chain]] = {}
+    for c in chains:
+        n = detections.get(c[2])
+        if n is not None:
+            groups.setdefault(min(n, top), []).append(c)
+    return {(f"{k}+" if k == top else str(k)): groups[k] for k in sorted(groups)}
+
+
 def zenoh_ns(chains: Sequence[Chain]) -> list[int]:
     """The two Zenoh hops of each chain, summed."""
     return [(c[3] - c[2]) + (c[5] - c[4]) for c in chains]
