@@ -183,3 +183,35 @@ def test_nearer_objects_hide_farther_ones(renderer):
     both = renderer.render([far, near], 0.0).astype(int)[box_px]
     assert np.abs(only_far - empty).mean() > 20.0      # the car stands behind the box
     assert np.abs(both - only_near).mean() < 6.0       # and the box hides it
+
+
+def test_feed_paces_bursts_stamps_each_write_and_then_lets_the_reader_run():
+    from services.radar.ars408 import ObjectGeneral, object_cycle_frames
+    from tools.sim.radar_feed import BURST_FRAMES, FRAME_TIME_S, RadarFeed
+
+    events: list[tuple[str, int]] = []
+    clock = {"now": 1_000_000}
+
+    class Sink:
+        def send(self, frames: object) -> None:
+            events.append(("write", len(frames)))     # type: ignore[arg-type]
+
+    def tick() -> int:
+        clock["now"] += 1_000
+        events.append(("clock", clock["now"]))
+        return clock["now"]
+
+    def sleep(s: float) -> None:
+        clock["now"] += round(s * 1e9)
+
+    feed = RadarFeed(Sink(), RadarLook(), clock=tick, sleep=sleep,
+                     yield_cpu=lambda: events.append(("yield", 0)))
+    frames = object_cycle_frames([ObjectGeneral(i, 10.0 + i, 0.0, -1.0, 0.0, 0, 5.0)
+                                  for i in range(6)], 3)      # 7 frames: two bursts
+    first, last = feed.send_paced(frames)
+    writes = [i for i, e in enumerate(events) if e[0] == "write"]
+    assert [events[i][1] for i in writes] == [BURST_FRAMES, len(frames) - BURST_FRAMES]
+    for i in writes:      # each write: stamped at once, then the CPU is offered
+        assert events[i + 1][0] == "clock" and events[i + 2] == ("yield", 0)
+    assert last == events[writes[-1] + 1][1]            # the last write's stamp
+    assert last - first >= BURST_FRAMES * FRAME_TIME_S * 1e9      # paced at the bus rate
