@@ -36,6 +36,8 @@ import logging
 import os
 import sys
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from common.config.realtime import RealtimeSettings
 from common.log import kv
@@ -48,6 +50,27 @@ def set_fifo(priority: int, tid: int = 0) -> None:
     """SCHED_FIFO at `priority` for thread `tid` (0: the calling thread). Raises OSError
     (EPERM without the capability) or AttributeError (not Linux)."""
     os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+
+
+@contextmanager
+def fifo_for(priority: int) -> Iterator[bool]:
+    """The calling thread at SCHED_FIFO `priority` for the `with` block, then back to its
+    own policy; yields whether it was granted (not without root or CAP_SYS_NICE, nor off
+    Linux, nor for `priority` 0). For an instrument that stamps an action the moment it
+    is done: a real-time thread it wakes cannot run in between."""
+    if priority <= 0:
+        yield False
+        return
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        set_fifo(priority)
+    except (OSError, AttributeError):
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        os.sched_setscheduler(0, policy, param)
 
 
 def thread_names() -> dict[int, str]:

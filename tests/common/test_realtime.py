@@ -70,6 +70,31 @@ def test_priority_zero_changes_nothing():
     assert in_thread(body) == os.SCHED_OTHER
 
 
+def test_fifo_for_holds_the_priority_for_the_block_only():
+    def body() -> tuple[object, ...]:
+        with realtime.fifo_for(31) as granted:
+            inside = (granted, policy(), os.sched_getparam(0).sched_priority)
+        with realtime.fifo_for(0) as granted_zero:
+            zero = (granted_zero, policy())
+        return inside, (policy(), os.sched_getparam(0).sched_priority), zero
+
+    assert in_thread(body) == ((True, os.SCHED_FIFO, 31), (os.SCHED_OTHER, 0),
+                               (False, os.SCHED_OTHER))
+
+
+def test_fifo_for_refused_runs_the_block_unchanged(monkeypatch):
+    def refuse(*args):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(realtime, "set_fifo", refuse)
+
+    def body() -> tuple[bool, int]:
+        with realtime.fifo_for(31) as granted:
+            return granted, policy()
+
+    assert in_thread(body) == (False, os.SCHED_OTHER)
+
+
 def test_a_refusal_is_logged_once_and_the_thread_keeps_running(monkeypatch, caplog):
     def refuse(*args):
         raise PermissionError(1, "Operation not permitted")
