@@ -20,7 +20,7 @@ command line on a serial pty that this process reads. Two floors are reported:
 - same transport: last frame written -> line read, through the relays;
 - Zenoh only: the two hops of those chains (the issue's "bare hops with no work").
 
-`--cpu-latency-us N` holds a PM QoS request for the run (benchmarks/cpu_latency.py): no
+`--cpu-latency-us N` holds a PM QoS request for the run (common/cpu_latency.py): no
 CPU idle state with an exit latency above N us, for the stack and its floor alike.
 
 The benchmark's own process stamps the lines (the simulated actuator, the floor's
@@ -49,7 +49,6 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.bench_brake import LineTimes
-from benchmarks.cpu_latency import CpuLatencyRefused, cpu_latency
 from benchmarks.figures import Figure, machine_info
 from benchmarks.floor_relay import VEHICLE as FLOOR_VEHICLE
 from benchmarks.latency_chain import (
@@ -70,6 +69,7 @@ from benchmarks.latency_chain import (
 from benchmarks.processes import stop_processes
 from common.bus import Bus
 from common.clock import mono_ns
+from common.cpu_latency import CpuLatencyRefused, cpu_latency
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
 from common.realtime import GIL_SWITCH_INTERVAL_S, set_fifo
@@ -347,7 +347,7 @@ def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None 
     """Run the stack and its floor together for `seconds` of cycles (default by mode);
     every chain seen at every stage. `realtime_priority` > 0: the stack, the floor's
     relays and the line readers with SCHED_FIFO (as deployed on a vehicle).
-    `cpu_latency_us`: a PM QoS request held for the run (benchmarks/cpu_latency.py);
+    `cpu_latency_us`: a PM QoS request held for the run (common/cpu_latency.py);
     raises CpuLatencyRefused when it cannot be made."""
     measure_s = seconds or (QUICK_MEASURE_S if quick else FULL_MEASURE_S)
     switch_interval = sys.getswitchinterval()

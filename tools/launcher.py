@@ -11,9 +11,12 @@ process's name; stop everything on Ctrl-C or SIGTERM.
 import argparse
 import shlex
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 from common.config.loader import ConfigError
+from common.cpu_latency import CpuLatencyRefused, cpu_latency
 from common.service import stop_event_on_signals
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import load_table, resolve_launches
@@ -62,7 +65,24 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals(grace_s=None)
     supervisor = Supervisor(launches, printer)
     supervisor.say(f"table {args.table}: {', '.join(launch.name for launch in launches)}")
-    return supervisor.run(stop)
+    with held_cpu_latency(table.cpu_latency_us, supervisor.say):
+        return supervisor.run(stop)
+
+
+@contextmanager
+def held_cpu_latency(max_us: int | None, say: Callable[[str], None],
+                     device: str | None = None) -> Iterator[None]:
+    """The table's PM QoS request for the `with` block. Refused (not root, no such
+    device), the stack runs all the same: it is said once, as a real-time refusal is."""
+    with ExitStack() as held:
+        if max_us is not None:
+            try:
+                held.enter_context(cpu_latency(max_us, device))
+                say(f"cpu_latency_us={max_us}: no CPU idle state with a longer exit "
+                    "latency while the table runs")
+            except CpuLatencyRefused as exc:
+                say(f"cpu_latency_us={max_us} refused, the machine's idle states stay: {exc}")
+        yield
 
 
 if __name__ == "__main__":

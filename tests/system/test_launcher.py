@@ -77,6 +77,8 @@ def lines_of(proc: ServiceProcess, prefix: str) -> list[str]:
          "nope.json5"),
         ('[restart]\nmode = "sometimes"\n', "$.restart.mode"),
         ('[[service]]\nname = "x"\nexec = ["no-such-program-anywhere"]\n', "not found"),
+        ('cpu_latency_us = -1\n[[service]]\nname = "a"\naeb = "radar"\n',
+         "$.cpu_latency_us"),
     ],
 )
 def test_invalid_tables_exit_2_naming_the_problem(tmp_path, table, named):
@@ -84,6 +86,24 @@ def test_invalid_tables_exit_2_naming_the_problem(tmp_path, table, named):
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert named in proc.stderr
     assert "table.toml" in proc.stderr
+
+
+def test_the_tables_cpu_latency_request_is_held_for_the_run_and_a_refusal_is_said(tmp_path):
+    import struct
+
+    from tools.launcher import held_cpu_latency
+
+    said: list[str] = []
+    stand_in = tmp_path / "cpu_dma_latency"
+    stand_in.write_bytes(b"")
+    with held_cpu_latency(0, said.append, device=str(stand_in)):
+        assert struct.unpack("i", stand_in.read_bytes()) == (0,)
+    with held_cpu_latency(5, said.append, device=str(tmp_path / "missing")):
+        pass                                  # the stack runs all the same
+    with held_cpu_latency(None, said.append, device=str(tmp_path / "missing")):
+        pass                                  # nothing asked, nothing said
+    assert len(said) == 2
+    assert said[0].startswith("cpu_latency_us=0: ") and "refused" in said[1]
 
 
 def test_check_prints_resolved_commands_and_only_filters(tmp_path):

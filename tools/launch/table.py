@@ -86,6 +86,10 @@ class ProcessTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     description: str = ""
     workdir: str = "."
     stop_grace_s: Seconds = 5.0
+    # Hold a PM QoS CPU latency request (microseconds) while the table runs: no CPU idle
+    # state with a longer exit latency; 0 keeps idle CPUs polling (common/cpu_latency.py,
+    # docs/deploy.md). Unset: the machine's idle states as they are.
+    cpu_latency_us: Annotated[int, msgspec.Meta(ge=0)] | None = None
     router: RouterEntry = msgspec.field(default_factory=RouterEntry)
     zenoh: ZenohEntry = msgspec.field(default_factory=ZenohEntry)
     restart: RestartEntry = msgspec.field(default_factory=RestartEntry)
