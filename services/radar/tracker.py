@@ -30,6 +30,7 @@ fewer numpy calls. The update reuses the gate's S^-1: x' = z - R S^-1 (z - x),
 P' = R S^-1 P (the same as x + K (z - x), (I - K) P with K = P S^-1).
 """
 
+import math
 from itertools import starmap
 
 import numpy as np
@@ -45,6 +46,11 @@ I = npt.NDArray[np.int64]  # noqa: E741
 B = npt.NDArray[np.bool_]
 
 _EMPTY = np.zeros(0, dtype=np.int64)
+# Up to this many tracks, the messages and the class annotation are built from Python
+# lists (two numpy calls instead of about ten): the same cost in a hot loop, but both run
+# after a cycle's last frame, on caches a radar service wakes up to cold, where every
+# numpy call costs tens of microseconds.
+_LISTS_MAX = 16
 # Up to this many track x detection pairs, the gate's boxes are tested on the dense
 # matrix: fewer numpy calls than the strip grid.
 _DENSE_MAX = 2048
@@ -325,16 +331,36 @@ class KalmanTracker:
         cycle's detections, classes attached after the tracker ran), by radar ID."""
         if not len(self) or not len(det):
             return
+        if len(self) <= _LISTS_MAX and len(det) <= _LISTS_MAX and self._annotate_class_lists(det):
+            return
         lut = np.full(256, -1, dtype=np.int64)
         lut[det.radar_id] = det.ints[OBJ_CLASS]
         meta = self.meta
         fresh = (meta[MISSES] == 0) & (meta[META_RADAR_ID] >= 0)
         meta[META_OBJ_CLASS, fresh] = lut[meta[META_RADAR_ID, fresh]]
 
+    def _annotate_class_lists(self, det: Detections) -> bool:
+        """annotate_class for a few tracks and detections (the same result, bit for bit:
+        the last detection of a radar ID wins, as in the look-up table); False, with
+        nothing done, for a radar ID outside 0..255 (no radar sends one: the table's
+        indexing decides)."""
+        ids, classes = det.ints[RADAR_ID].tolist(), det.ints[OBJ_CLASS].tolist()
+        if min(ids) < 0 or max(ids) > 255:
+            return False
+        by_id = dict(zip(ids, classes, strict=True))
+        meta = self.meta
+        rows = meta.tolist()
+        for j, (misses, rid) in enumerate(zip(rows[MISSES], rows[META_RADAR_ID], strict=True)):
+            if misses == 0 and rid >= 0:
+                meta[META_OBJ_CLASS, j] = by_id.get(rid, -1)
+        return True
+
     def tracks(self) -> list[RadarTrack]:
         """Every track, confirmed or not, as messages."""
         if not len(self):
             return []
+        if len(self) <= _LISTS_MAX:
+            return self._tracks_lists()
         st = self.state
         r = np.hypot(st[0], st[1])
         rr = np.divide(st[0] * st[2] + st[1] * st[3], r, out=np.zeros_like(r), where=r > 0)
@@ -347,3 +373,18 @@ class KalmanTracker:
             (self.meta[CONFIRMED] > 0).tolist(), m[HITS], m[MISSES], x_var, y_var,
             m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS], strict=True,
         )))
+
+    def _tracks_lists(self) -> list[RadarTrack]:
+        """tracks() for a few tracks: the same messages (the range by math.hypot, which
+        may differ from numpy's in the last bit)."""
+        st = self.state.tolist()
+        m = self.meta.tolist()
+        out = []
+        for j, (x, y, vx, vy) in enumerate(zip(st[0], st[1], st[2], st[3], strict=True)):
+            r = math.hypot(x, y)
+            out.append(RadarTrack(
+                m[ID][j], x, y, vx, vy, r, (x * vx + y * vy) / r if r > 0 else 0.0,
+                st[TRACK_RCS][j], m[CONFIRMED][j] > 0, m[HITS][j], m[MISSES][j],
+                st[VAR_P.start][j], st[VAR_P.start + 1][j], m[META_RADAR_ID][j],
+                m[META_DYN_PROP][j], m[META_OBJ_CLASS][j]))
+        return out

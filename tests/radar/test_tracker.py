@@ -191,3 +191,44 @@ def test_tracks_are_valid_messages():
     msg = tracks[0]
     again = msgspec.msgpack.decode(msgspec.msgpack.encode(msg), type=type(msg))
     assert again == msg and msg.radar_object_id == 0
+
+
+def test_a_few_tracks_give_the_same_messages_and_classes_from_lists_as_from_arrays(
+        monkeypatch):
+    import copy
+    import math
+
+    import services.radar.tracker as tracker_module
+
+    rng = np.random.default_rng(11)
+    tracker = KalmanTracker(TrackerSettings())
+    lists_seen = annotated = 0
+    for k in range(300):
+        # a handful of targets that come and go, plus ghosts, with radar IDs and classes
+        n = int(rng.integers(0, 7))
+        det = Detections.of(rng.uniform(1, 60, n).round(1), rng.uniform(-6, 6, n).round(1),
+                            rng.uniform(-10, 3, n), rng.uniform(-1, 1, n),
+                            radar_id=rng.permutation(8)[:n], dyn_prop=1,
+                            obj_class=rng.integers(0, 7, n))
+        if k % 3 == 0 and n:
+            det = Detections.of(np.full(n, 20.0), np.zeros(n), radar_id=[7] * n,
+                                obj_class=rng.integers(0, 7, n))   # one ID, several classes
+        tracker.step(det, 100.0 + k * DT)
+        other = copy.deepcopy(tracker)
+        tracker.annotate_class(det)                          # lists (few tracks)
+        monkeypatch.setattr(tracker_module, "_LISTS_MAX", 0)
+        other.annotate_class(det)                            # arrays
+        from_arrays = tracker.tracks()
+        monkeypatch.undo()
+        assert np.array_equal(tracker.meta, other.meta)
+        from_lists = tracker.tracks()
+        lists_seen += 0 < len(tracker) <= tracker_module._LISTS_MAX
+        annotated += bool(len(tracker)) and bool(len(det))
+        assert len(from_lists) == len(from_arrays)
+        for a, b in zip(from_lists, from_arrays, strict=True):
+            # every field the same; the range by math.hypot may differ in the last bit
+            assert a.range_m == b.range_m or math.isclose(a.range_m, b.range_m, rel_tol=1e-15)
+            assert math.isclose(a.range_rate_mps, b.range_rate_mps, rel_tol=1e-14, abs_tol=1e-15)
+            assert msgspec.structs.replace(a, range_m=0.0, range_rate_mps=0.0) == \
+                msgspec.structs.replace(b, range_m=0.0, range_rate_mps=0.0)
+    assert lists_seen > 200 and annotated > 150
