@@ -46,10 +46,10 @@ I = npt.NDArray[np.int64]  # noqa: E741
 B = npt.NDArray[np.bool_]
 
 _EMPTY = np.zeros(0, dtype=np.int64)
-# Up to this many tracks, the messages and the class annotation are built from Python
-# lists (two numpy calls instead of about ten): the same cost in a hot loop, but both run
-# after a cycle's last frame, on caches a radar service wakes up to cold, where every
-# numpy call costs tens of microseconds.
+# Up to this many tracks (and detections), a step, the messages and the class annotation
+# run on Python lists (a few numpy calls instead of dozens): about the same cost in a hot
+# loop, but a radar service wakes to cold caches every cycle, where every numpy call
+# costs tens of microseconds, and with one object the whole cycle is on the chain.
 _LISTS_MAX = 16
 # Up to this many track x detection pairs, the gate's boxes are tested on the dense
 # matrix: fewer numpy calls than the strip grid.
@@ -122,6 +122,28 @@ def greedy_pairs(ti: I, di: I, cost: F) -> tuple[I, I]:
             np.concatenate([di[alone], np.asarray(md, dtype=np.int64)]))
 
 
+def _greedy_lists(pairs: list[tuple[float, int, int]]) -> list[tuple[int, int]]:
+    """greedy_pairs on (cost, track, detection) tuples: the same pairs (a pair alone on
+    its track and detection whatever its cost; the others in order of cost, then track,
+    then detection)."""
+    per_track: dict[int, int] = {}
+    per_det: dict[int, int] = {}
+    for _, i, j in pairs:
+        per_track[i] = per_track.get(i, 0) + 1
+        per_det[j] = per_det.get(j, 0) + 1
+    out = [(i, j) for _, i, j in pairs if per_track[i] == 1 and per_det[j] == 1]
+    contested = sorted(p for p in pairs if per_track[p[1]] > 1 or per_det[p[2]] > 1)
+    used_t: set[int] = set()
+    used_d: set[int] = set()
+    for _, i, j in contested:
+        if i in used_t or j in used_d:
+            continue
+        used_t.add(i)
+        used_d.add(j)
+        out.append((i, j))
+    return out
+
+
 class KalmanTracker:
     """`state` (11, n): a row per quantity ([x, y, vx, vy], the per-axis covariance
     blocks, the RCS), a column per track; `meta` (7, n): track ID, consecutive hits,
@@ -146,6 +168,10 @@ class KalmanTracker:
         self.last_t: float | None = None
         self.resets = 0
         self._step_cache: tuple[float, F, F] | None = None
+        # the same quantities as Python floats, for _step_lists
+        self._r_list = [float(v) for v in self._r_cov[:, 0]]
+        self._scale_list = [float(v) for v in self._update_scale[:, 0]]
+        self._noise_cache: tuple[float, list[float]] | None = None
         self._clear()
 
     def _clear(self) -> None:
@@ -294,7 +320,11 @@ class KalmanTracker:
     def step(self, det: Detections, t_s: float) -> None:
         """Advance to time `t_s` (seconds, the cycle's source clock) with this cycle's
         detections."""
-        self.predict(self._dt(t_s))
+        dt = self._dt(t_s)
+        if len(self) <= _LISTS_MAX and len(det) <= _LISTS_MAX:
+            self._step_lists(det, dt)
+            return
+        self.predict(dt)
         rows, drows = self.associate(det)
         self._update(rows, det, drows)
         if len(self):
@@ -303,6 +333,124 @@ class KalmanTracker:
             unmatched = np.ones(len(det), dtype=np.bool_)
             unmatched[drows] = False
             self._birth(det, np.flatnonzero(unmatched))
+
+    def _step_lists(self, det: Detections, dt: float) -> None:
+        """`step` on Python lists, for a few tracks and detections: the same formulas in
+        the same order as the array path (only the covariance prediction, a matrix
+        product there, may round differently in the last bit)."""
+        s = self.s
+        n, m = len(self), len(det)
+        st: list[list[float]] = self.state.tolist() if n else [[] for _ in range(N_STATE)]
+        meta: list[list[int]] = self.meta.tolist() if n else [[] for _ in range(N_META)]
+        df: list[list[float]] = det.floats.tolist() if m else []
+        di: list[list[int]] = det.ints.tolist() if m else []
+        r = self._r_list
+        if n:
+            q = self._noise(dt)
+            two_dt, dt2 = 2 * dt, dt * dt
+            for a in (0, 1):
+                pos, vel, vp, cv, vv = st[a], st[2 + a], st[4 + a], st[6 + a], st[8 + a]
+                qp, qc, qv = q[a], q[2 + a], q[4 + a]
+                for j in range(n):
+                    pos[j] = pos[j] + dt * vel[j]
+                    p, c, v = vp[j], cv[j], vv[j]
+                    vp[j] = p + two_dt * c + dt2 * v + qp
+                    cv[j] = c + dt * v + qc
+                    vv[j] = v + qv
+        matched: list[tuple[int, int]] = []
+        if n and m:
+            # per track and axis: alpha, beta, gamma of S^-1 (see _innovation)
+            coef = []
+            for j in range(n):
+                k = []
+                for a in (0, 1):
+                    sa = st[4 + a][j] + r[a]
+                    sb = st[6 + a][j] + r[2 + a]
+                    sv = st[8 + a][j] + r[4 + a]
+                    d = sa * sv - sb * sb
+                    k.append((sv / d, sb / d * 2.0, sa / d))
+                coef.append(k)
+            cap2 = self._cap**2
+            bonus = s.radar_id_bonus
+            pairs: list[tuple[float, int, int]] = []
+            for i in range(n):
+                (ax, bx, gx), (ay, by, gy) = coef[i]
+                x, y, vx, vy = st[0][i], st[1][i], st[2][i], st[3][i]
+                for j in range(m):
+                    dpx, dpy = df[X][j] - x, df[Y][j] - y
+                    dvx, dvy = df[2][j] - vx, df[3][j] - vy
+                    d2 = ((ax * dpx * dpx - bx * dpx * dvx + gx * dvx * dvx)
+                          + (ay * dpy * dpy - by * dpy * dvy + gy * dvy * dvy))
+                    if d2 <= self._chi2 and dpx * dpx + dpy * dpy <= cap2:
+                        if bonus > 0:
+                            rid = di[RADAR_ID][j]
+                            d2 = d2 - bonus * (meta[META_RADAR_ID][i] == rid and rid >= 0)
+                        pairs.append((d2, i, j))
+            matched = _greedy_lists(pairs)
+            for i, j in matched:
+                for a in (0, 1):
+                    alpha, beta, gamma = coef[i][a]
+                    hb = 0.5 * beta
+                    rp, rv = self._scale_list[4 + a], self._scale_list[8 + a]
+                    dp, dv = df[a][j] - st[a][i], df[2 + a][j] - st[2 + a][i]
+                    p, c, v = st[4 + a][i], st[6 + a][i], st[8 + a][i]
+                    st[a][i] = -rp * (alpha * dp - hb * dv) + df[a][j]
+                    st[2 + a][i] = -rv * (gamma * dv - hb * dp) + df[2 + a][j]
+                    st[4 + a][i] = rp * (alpha * p - hb * c)
+                    st[6 + a][i] = rp * (alpha * c - hb * v)
+                    st[8 + a][i] = rv * (gamma * v - hb * c)
+                st[TRACK_RCS][i] = df[RCS][j]
+                for row in (META_RADAR_ID, META_DYN_PROP, META_OBJ_CLASS):
+                    meta[row][i] = di[row - META_RADAR_ID][j]
+        if n:
+            st, meta = self._count_lists(st, meta, {i for i, _ in matched})
+        taken = {j for _, j in matched}
+        for j in range(m):
+            if j in taken:
+                continue
+            for row, value in enumerate((df[X][j], df[Y][j], df[2][j], df[3][j], *r,
+                                         df[RCS][j])):
+                st[row].append(value)
+            for row, value in enumerate((self.next_id, 1, 0, int(s.confirm_hits <= 1),
+                                         di[RADAR_ID][j], di[DYN_PROP][j], di[OBJ_CLASS][j])):
+                meta[row].append(value)
+            self.next_id += 1
+        if st[0]:
+            self.state = np.array(st, dtype=np.float64)
+            self.meta = np.array(meta, dtype=np.int64)
+        else:
+            self._clear()
+
+    def _noise(self, dt: float) -> list[float]:
+        """The process noise rows of covariance_step, as floats (cached per dt)."""
+        cached = self._noise_cache
+        if cached is None or cached[0] != dt:
+            cached = self._noise_cache = (dt, covariance_step(dt, self.s.accel_std_mps2)[1]
+                                          [:, 0].tolist())
+        return cached[1]
+
+    def _count_lists(self, st: list[list[float]], meta: list[list[int]], rows: set[int]
+                     ) -> tuple[list[list[float]], list[list[int]]]:
+        """`_count` on lists: hits, misses, confirmation, deletion."""
+        s = self.s
+        hits, misses, confirmed = meta[HITS], meta[MISSES], meta[CONFIRMED]
+        n = len(hits)
+        for j in range(n):
+            if j in rows:
+                hits[j] += 1
+                misses[j] = 0
+            else:
+                hits[j] = 0
+                misses[j] += 1
+            confirmed[j] |= hits[j] >= s.confirm_hits
+        if len(rows) == n or max(misses) < self._min_misses:
+            return st, meta
+        keep = [misses[j] < (s.delete_after_misses if confirmed[j] > 0
+                             else s.delete_tentative_after_misses) for j in range(n)]
+        if all(keep):
+            return st, meta
+        return ([[v for v, k in zip(row, keep, strict=True) if k] for row in st],
+                [[v for v, k in zip(row, keep, strict=True) if k] for row in meta])
 
     def _count(self, rows: I) -> None:
         """Hits and misses after an update of `rows`; confirmation; deletion."""
