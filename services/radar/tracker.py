@@ -28,6 +28,12 @@ grid (`neighbours.candidates_in_boxes`) yields the few candidates per track and 
 get the 4-d Mahalanobis distance; with few tracks and detections the dense matrix is
 fewer numpy calls. The update reuses the gate's S^-1: x' = z - R S^-1 (z - x),
 P' = R S^-1 P (the same as x + K (z - x), (I - K) P with K = P S^-1).
+
+Up to `_LISTS_MAX` tracks and detections (the usual road: a few objects), a step, the
+messages and the class annotation run on Python lists instead (`_step_lists`): the same
+formulas in the same order, a few numpy calls instead of dozens. Both cost about the
+same in a hot loop, but a radar service wakes to cold caches every cycle, where each
+numpy call costs tens of microseconds (docs/performance.md).
 """
 
 import math
