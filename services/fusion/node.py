@@ -121,9 +121,8 @@ class FusionNode:
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
         """Process one cycle: the BrakeCommand is published the moment the core has
-        decided it, the targets when every track is done."""
-        if self.rhythm is not None:
-            self.rhythm.on_cycle(rx_mono_ns)
+        decided it, the targets when every track is done; the radar's rhythm (for the
+        frame decoders) is updated last, off the command's path."""
         with self._lock:
             self._check_order(tracks)
             feeds = [d.snapshot() for d in self.decoders]
@@ -153,7 +152,10 @@ class FusionNode:
             self._tgt_pub.put(targets)
             self._count(result)
             self._proc_us.append(processing_ns / 1e3)
-            return CycleResult(targets, result.command)
+        if self.rhythm is not None:
+            # the arrival time is given: updating it now or earlier is the same
+            self.rhythm.on_cycle(rx_mono_ns)
+        return CycleResult(targets, result.command)
 
     def _check_order(self, tracks: RadarTracks) -> None:
         seq = tracks.header.seq
