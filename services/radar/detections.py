@@ -109,6 +109,10 @@ class Detections:
         return Detections(f, i)
 
 
+# An empty cycle's detections (nothing ahead: every cycle of an empty road), shared:
+# arrays with no column cannot be changed in place.
+_NO_DETECTIONS = Detections.empty()
+
 _SPECS: dict[OutputMode, tuple[MessageSpec, MessageSpec, MessageSpec | None]] = {
     OutputMode.OBJECTS: (BY_KIND[Kind.OBJECT_GENERAL], BY_KIND[Kind.OBJECT_QUALITY],
                          BY_KIND[Kind.OBJECT_EXTENDED]),
@@ -212,7 +216,7 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
     general_spec = _SPECS[cycle.mode][0]
     datas = _present(cycle.general)
     if not datas:
-        return GeneralFrames(Detections.empty(), _NO_IDS, _NO_IDS, None, rejected)
+        return GeneralFrames(_NO_DETECTIONS, _NO_IDS, _NO_IDS, None, rejected)
     cols = decode_columns(general_spec, datas)
     rejected.update(cols.rejected)
     ids = cols.raw[0]

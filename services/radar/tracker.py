@@ -346,6 +346,8 @@ class KalmanTracker:
         product there, may round differently in the last bit)."""
         s = self.s
         n, m = len(self), len(det)
+        if not n and not m:
+            return          # an empty road: nothing to predict, match or start
         st: list[list[float]] = self.state.tolist() if n else [[] for _ in range(N_STATE)]
         meta: list[list[int]] = self.meta.tolist() if n else [[] for _ in range(N_META)]
         df: list[list[float]] = det.floats.tolist() if m else []

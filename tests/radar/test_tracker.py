@@ -303,3 +303,13 @@ def test_greedy_on_lists_takes_the_same_pairs_as_on_arrays_ties_included():
         pairs = [(float(c), int(i), int(j)) for c, i, j in zip(cost, ti, di, strict=True)]
         assert sorted(_greedy_lists(pairs)) == sorted(zip(rows.tolist(), drows.tolist(),
                                                           strict=True))
+
+
+def test_an_empty_road_costs_the_tracker_nothing_but_the_clock():
+    tracker = KalmanTracker(TrackerSettings())
+    state, meta = tracker.state, tracker.meta
+    for k in range(3):
+        tracker.step(Detections.empty(), 100.0 + k * DT)
+    # no array rebuilt (each would be a numpy call on cold caches), the time kept
+    assert tracker.state is state and tracker.meta is meta and len(tracker) == 0
+    assert tracker.last_t == 100.0 + 2 * DT
