@@ -151,3 +151,26 @@ def test_pair_searches_find_exactly_the_near_pairs(n):
               if a < b}
     assert {(min(a, b), max(a, b)) for a, b in zip(i.tolist(), j.tolist(), strict=True)} \
         == expect and len(i) == len(expect)
+
+
+@pytest.mark.parametrize("settings", [
+    PrefilterSettings(),
+    PrefilterSettings(forward_only=False, min_range_m=2.0, max_range_m=40.0, min_rcs_dbsm=0.0),
+    PrefilterSettings(min_prob_of_exist=4, drop_cluster_invalid_states=(1, 6, 7)),
+])
+def test_a_few_detections_are_prefiltered_on_lists_exactly_as_on_arrays(settings, monkeypatch):
+    import services.radar.detections as detections_module
+
+    rng = np.random.default_rng(9)
+    for _ in range(300):
+        n = int(rng.integers(1, detections_module.PREFILTER_LISTS_MAX + 1))
+        det = Detections.of(rng.uniform(-10, 60, n).round(1), rng.uniform(-30, 30, n),
+                            rng.uniform(-5, 5, n), 0.0, rng.uniform(-30, 30, n).round(),
+                            radar_id=np.arange(n), prob_of_exist=rng.integers(-1, 8, n),
+                            invalid_state=rng.integers(-1, 9, n))
+        on_lists = prefilter(det, settings)
+        monkeypatch.setattr(detections_module, "PREFILTER_LISTS_MAX", 0)
+        on_arrays = prefilter(det, settings)
+        monkeypatch.undo()
+        assert np.array_equal(on_lists.floats, on_arrays.floats)
+        assert np.array_equal(on_lists.ints, on_arrays.ints)
