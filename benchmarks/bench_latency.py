@@ -72,7 +72,7 @@ from common.clock import mono_ns
 from common.cpu_latency import CpuLatencyRefused, cpu_latency
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
-from common.realtime import GIL_SWITCH_INTERVAL_S, set_fifo
+from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
 from services.brake.pty_pair import PtyPair
 from services.radar.ars408 import Frame
 from services.radar.can_links import SlcanPtyLink
@@ -340,6 +340,7 @@ class Measured:
     cpu: dict[str, float] = field(default_factory=dict)
     cpu_latency_us: int | None = None
     detections: dict[int, int] = field(default_factory=dict)
+    stamp_priority: int = 0        # the feeds' write-and-stamp priority, 0 when refused
 
 
 def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None = None,
@@ -378,6 +379,8 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
         cpu0 = cpu_times()
         first_cycle = len(loop.feed.cycles())
         loop.feed.write_priority = write_stamp_priority(realtime_priority)
+        with fifo_for(loop.feed.write_priority) as granted:
+            stamp_priority = loop.feed.write_priority if granted else 0
         loop.feed.on_cycle = floor.feed.on_cycle
         deadline = time.monotonic() + measure_s
         i = 0
@@ -405,7 +408,8 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
         floor_cycles = len(floor.feed.written)
         cpu = cpu_share(cpu0, cpu_times())
     return Measured(stack, fl, len(cycles), floor_cycles, seconds, verdicts, load_before,
-                    os.getloadavg(), realtime_priority, cpu, detections=collected.detections)
+                    os.getloadavg(), realtime_priority, cpu, detections=collected.detections,
+                    stamp_priority=stamp_priority)
 
 
 def _ms(s: Summary | None, attr: str) -> float:
@@ -454,9 +458,12 @@ def figures_from(m: Measured) -> list[Figure]:
 
 
 def _idle(m: Measured) -> str:
-    if m.cpu_latency_us is None:
-        return "CPU idle states as configured"
-    return f"CPU idle exit latency held <= {m.cpu_latency_us} us"
+    idle = ("CPU idle states as configured" if m.cpu_latency_us is None
+            else f"CPU idle exit latency held <= {m.cpu_latency_us} us")
+    if not m.stamp_priority:
+        # without the priority a woken service can run before the write is stamped
+        idle += "; frames stamped at normal priority (SCHED_FIFO refused: CAN in may read low)"
+    return idle
 
 
 def _cpu(m: Measured) -> str:
@@ -580,7 +587,7 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
         "floor_cycles": m.floor_cycles, "verdicts": m.verdicts,
         "load_avg_before": m.load_before, "load_avg_after": m.load_after,
         "realtime_priority": m.realtime_priority, "cpu": m.cpu,
-        "cpu_latency_us": m.cpu_latency_us,
+        "cpu_latency_us": m.cpu_latency_us, "stamp_priority": m.stamp_priority,
         "stack": {n: summ(v) for n, v in st.items()},
         "floor": {n: summ(v) for n, v in fl.items()},
         "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),
