@@ -44,7 +44,17 @@ import numpy.typing as npt
 
 from common.config.radar import TrackerSettings
 from common.messages.radar import RadarTrack
-from services.radar.detections import DYN_PROP, OBJ_CLASS, RADAR_ID, RCS, Detections, X, Y
+from services.radar.detections import (
+    DYN_PROP,
+    OBJ_CLASS,
+    RADAR_ID,
+    RCS,
+    VX,
+    VY,
+    Detections,
+    X,
+    Y,
+)
 from services.radar.neighbours import candidates_in_boxes
 
 F = npt.NDArray[np.float64]
@@ -386,7 +396,7 @@ class KalmanTracker:
                 x, y, vx, vy = st[0][i], st[1][i], st[2][i], st[3][i]
                 for j in range(m):
                     dpx, dpy = df[X][j] - x, df[Y][j] - y
-                    dvx, dvy = df[2][j] - vx, df[3][j] - vy
+                    dvx, dvy = df[VX][j] - vx, df[VY][j] - vy
                     d2 = ((ax * dpx * dpx - bx * dpx * dvx + gx * dvx * dvx)
                           + (ay * dpy * dpy - by * dpy * dvy + gy * dvy * dvy))
                     if d2 <= self._chi2 and dpx * dpx + dpy * dpy <= cap2:
@@ -400,10 +410,11 @@ class KalmanTracker:
                     alpha, beta, gamma = coef[i][a]
                     hb = 0.5 * beta
                     rp, rv = self._scale_list[4 + a], self._scale_list[8 + a]
-                    dp, dv = df[a][j] - st[a][i], df[2 + a][j] - st[2 + a][i]
+                    # detection rows X, Y, VX, VY and state rows x, y, vx, vy coincide
+                    dp, dv = df[X + a][j] - st[a][i], df[VX + a][j] - st[2 + a][i]
                     p, c, v = st[4 + a][i], st[6 + a][i], st[8 + a][i]
-                    st[a][i] = -rp * (alpha * dp - hb * dv) + df[a][j]
-                    st[2 + a][i] = -rv * (gamma * dv - hb * dp) + df[2 + a][j]
+                    st[a][i] = -rp * (alpha * dp - hb * dv) + df[X + a][j]
+                    st[2 + a][i] = -rv * (gamma * dv - hb * dp) + df[VX + a][j]
                     st[4 + a][i] = rp * (alpha * p - hb * c)
                     st[6 + a][i] = rp * (alpha * c - hb * v)
                     st[8 + a][i] = rv * (gamma * v - hb * c)
@@ -416,7 +427,7 @@ class KalmanTracker:
         for j in range(m):
             if j in taken:
                 continue
-            for row, value in enumerate((df[X][j], df[Y][j], df[2][j], df[3][j], *r,
+            for row, value in enumerate((df[X][j], df[Y][j], df[VX][j], df[VY][j], *r,
                                          df[RCS][j])):
                 st[row].append(value)
             for row, value in enumerate((self.next_id, 1, 0, int(s.confirm_hits <= 1),
