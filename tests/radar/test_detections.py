@@ -174,3 +174,36 @@ def test_a_few_detections_are_prefiltered_on_lists_exactly_as_on_arrays(settings
         monkeypatch.undo()
         assert np.array_equal(on_lists.floats, on_arrays.floats)
         assert np.array_equal(on_lists.ints, on_arrays.ints)
+
+
+@pytest.mark.parametrize("mode", [OutputMode.OBJECTS, OutputMode.CLUSTERS])
+def test_a_few_general_frames_decode_on_lists_exactly_as_on_arrays(mode, monkeypatch):
+    import services.radar.detections as detections_module
+    from services.radar.ars408 import ClusterGeneral
+    from services.radar.detections import decode_general
+
+    rng = np.random.default_rng(4)
+    make = ObjectGeneral if mode is OutputMode.OBJECTS else ClusterGeneral
+    on_lists = 0
+    for _ in range(400):
+        n = int(rng.integers(1, 5))
+        ids = rng.integers(0, 6, n)                # now and then a repeated ID
+        frames: list[bytes | None] = [
+            data(make(int(k), round(float(rng.uniform(1, 100)), 1),
+                      round(float(rng.uniform(-20, 20)), 1), -2.0, 0.5, int(rng.integers(0, 7)),
+                      float(rng.integers(-10, 30)))) for k in ids]
+        if rng.random() < 0.2:
+            frames[0] = bytes(8)                   # out of range: the array path decides
+        cycle = raw_cycle(mode, frames)
+        few = decode_general(cycle)
+        monkeypatch.setattr(detections_module, "SCALAR_MAX_FRAMES", 0)
+        many = decode_general(cycle)
+        monkeypatch.undo()
+        assert np.array_equal(few.det.floats, many.det.floats)
+        assert np.array_equal(few.det.ints, many.det.ints)
+        assert np.array_equal(few.ids, many.ids) and np.array_equal(few.keys, many.keys)
+        assert (few.rows is None) == (many.rows is None) and few.rejected == many.rejected
+        if few.rows is not None and many.rows is not None:
+            assert np.array_equal(few.rows, many.rows)
+        on_lists += few.rows is None and not few.rejected
+    assert on_lists > 100

@@ -176,11 +176,20 @@ def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[
     return np.frombuffer(buf, dtype=">i8").astype(np.int64)
 
 
-def _columns_one_by_one(spec: MessageSpec, lay: "_Layout",
-                        datas: Sequence[bytes | bytearray]) -> Columns:
-    """`decode_columns` for a few frames: Python arithmetic on each frame's word (the
-    same IEEE operations in the same order as numpy's, so the same values), and one
-    array per result."""
+class Rows(NamedTuple):
+    """`decode_rows`' result: what Columns holds, as Python lists (a row per signal)."""
+
+    raw: list[list[int]]
+    phys: list[list[float]]
+    valid: list[bool]
+    rejected: dict[str, int]
+
+
+def decode_rows(spec: MessageSpec, datas: Sequence[bytes | bytearray]) -> Rows:
+    """`decode_columns` for a few DLC-checked frames, as lists, with no numpy call:
+    Python arithmetic on each frame's word, the same IEEE operations in the same order
+    as numpy's, so the same values."""
+    lay = _layout(spec)
     n = len(datas)
     raw = [[0] * n for _ in lay.scalar]
     phys = [[0.0] * n for _ in lay.scalar]
@@ -200,8 +209,16 @@ def _columns_one_by_one(spec: MessageSpec, lay: "_Layout",
             valid[j] = False
             key = f"out_of_range:{first_bad}"
             rejected[key] = rejected.get(key, 0) + 1
-    return Columns(lay.attrs, np.array(valid, dtype=np.bool_), all(valid), rejected,
-                   np.array(raw, dtype=np.int64), np.array(phys, dtype=np.float64))
+    return Rows(raw, phys, valid, rejected)
+
+
+def _columns_one_by_one(spec: MessageSpec, lay: "_Layout",
+                        datas: Sequence[bytes | bytearray]) -> Columns:
+    """`decode_columns` for a few frames: `decode_rows`, and one array per result."""
+    rows = decode_rows(spec, datas)
+    return Columns(lay.attrs, np.array(rows.valid, dtype=np.bool_), all(rows.valid),
+                   rows.rejected, np.array(rows.raw, dtype=np.int64),
+                   np.array(rows.phys, dtype=np.float64))
 
 
 class _Layout(NamedTuple):
