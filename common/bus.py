@@ -193,11 +193,8 @@ class Bus:
             if sample.kind != zenoh.SampleKind.PUT:
                 return
             key = str(sample.key_expr)
-            try:
-                msg = decode(sample.payload.to_bytes(), msg_type)
-            except DecodeError as exc:
-                self.decode_errors.add(spec.name)
-                self._rl.warning(f"decode:{spec.name}", "undecodable_payload", key=key, error=exc)
+            msg = self._decoded(spec, msg_type, sample, key)
+            if msg is None:
                 return
             try:
                 callback(msg, key)
@@ -262,13 +259,21 @@ class Bus:
         while (sample := sub.try_recv()) is not None:
             if sample.kind != zenoh.SampleKind.PUT:
                 continue
-            try:
-                out.append((decode(sample.payload.to_bytes(), msg_type), str(sample.key_expr)))
-            except DecodeError as exc:
-                self.decode_errors.add(spec.name)
-                self._rl.warning(f"decode:{spec.name}", "undecodable_payload",
-                                 key=str(sample.key_expr), error=exc)
+            key = str(sample.key_expr)
+            msg = self._decoded(spec, msg_type, sample, key)
+            if msg is not None:
+                out.append((msg, key))
         return out
+
+    def _decoded(self, spec: KeySpec[Any], msg_type: type[T], sample: zenoh.Sample,
+                 key: str) -> T | None:
+        """The sample's message; None, counted and logged, when it does not decode."""
+        try:
+            return decode(sample.payload.to_bytes(), msg_type)
+        except DecodeError as exc:
+            self.decode_errors.add(spec.name)
+            self._rl.warning(f"decode:{spec.name}", "undecodable_payload", key=key, error=exc)
+            return None
 
     def declare_queryable(
         self, spec: KeySpec[T], reply: Callable[[], T], **params: str
