@@ -44,17 +44,7 @@ import numpy.typing as npt
 
 from common.config.radar import TrackerSettings
 from common.messages.radar import RadarTrack
-from services.radar.detections import (
-    DYN_PROP,
-    OBJ_CLASS,
-    RADAR_ID,
-    RCS,
-    VX,
-    VY,
-    Detections,
-    X,
-    Y,
-)
+from services.radar.detections import DYN_PROP, OBJ_CLASS, RADAR_ID, RCS, VX, VY, Detections, X, Y
 from services.radar.neighbours import candidates_in_boxes
 
 F = npt.NDArray[np.float64]
@@ -183,11 +173,11 @@ class KalmanTracker:
         self.next_id = 1
         self.last_t: float | None = None
         self.resets = 0
-        self._step_cache: tuple[float, F, F] | None = None
+        # dt and its covariance step (M, q), with q also as floats (for _step_lists)
+        self._step_cache: tuple[float, F, F, list[float]] | None = None
         # the same quantities as Python floats, for _step_lists
         self._r_list = [float(v) for v in self._r_cov[:, 0]]
         self._scale_list = [float(v) for v in self._update_scale[:, 0]]
-        self._noise_cache: tuple[float, list[float]] | None = None
         self._clear()
 
     def _clear(self) -> None:
@@ -234,9 +224,7 @@ class KalmanTracker:
         """x' = F x, P' = F P F^T + Q."""
         if not len(self):
             return
-        cached = self._step_cache
-        if cached is None or cached[0] != dt:
-            cached = self._step_cache = (dt, *covariance_step(dt, self.s.accel_std_mps2))
+        cached = self._covariance_step(dt)
         st = self.state
         st[POS] += dt * st[VEL]
         st[COV] = cached[1] @ st[COV] + cached[2]
@@ -364,7 +352,7 @@ class KalmanTracker:
         di: list[list[int]] = det.ints.tolist() if m else []
         r = self._r_list
         if n:
-            q = self._noise(dt)
+            q = self._covariance_step(dt)[3]
             two_dt, dt2 = 2 * dt, dt * dt
             for a in (0, 1):
                 pos, vel, vp, cv, vv = st[a], st[2 + a], st[4 + a], st[6 + a], st[8 + a]
@@ -440,13 +428,13 @@ class KalmanTracker:
         else:
             self._clear()
 
-    def _noise(self, dt: float) -> list[float]:
-        """The process noise rows of covariance_step, as floats (cached per dt)."""
-        cached = self._noise_cache
+    def _covariance_step(self, dt: float) -> tuple[float, F, F, list[float]]:
+        """(dt, M, q, q as floats) of covariance_step, cached while dt stays the same."""
+        cached = self._step_cache
         if cached is None or cached[0] != dt:
-            cached = self._noise_cache = (dt, covariance_step(dt, self.s.accel_std_mps2)[1]
-                                          [:, 0].tolist())
-        return cached[1]
+            m, q = covariance_step(dt, self.s.accel_std_mps2)
+            cached = self._step_cache = (dt, m, q, q[:, 0].tolist())
+        return cached
 
     def _count_lists(self, st: list[list[float]], meta: list[list[int]], rows: set[int]
                      ) -> tuple[list[list[float]], list[list[int]]]:
