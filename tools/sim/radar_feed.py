@@ -50,15 +50,12 @@ FRAME_TIME_S = 125 / 500_000
 BURST_FRAMES = 4
 
 
-def _yield_cpu() -> None:
-    # A pseudo-terminal's bytes reach the reader through a kernel worker thread with
-    # normal scheduling: if the simulator kept its CPU after a write (modelling the
-    # world, rendering, logging), the frames would wait for it, a delay a real CAN
-    # adapter does not add (first burst of a cycle: 0.17 ms -> 0.05 ms to the radar's
-    # read). Linux only; elsewhere nothing.
-    sched_yield = getattr(os, "sched_yield", None)
-    if sched_yield is not None:
-        sched_yield()
+# After each write: a pseudo-terminal's bytes reach the reader through a kernel worker
+# thread with normal scheduling, and if the simulator kept its CPU (modelling the world,
+# rendering, logging) the frames would wait for it, a delay a real CAN adapter does not
+# add (first burst of a cycle: 0.17 ms -> 0.05 ms to the radar's read). Unix only;
+# elsewhere nothing.
+_yield_cpu: Callable[[], None] = getattr(os, "sched_yield", lambda: None)
 
 
 class FrameSink(Protocol):
