@@ -425,7 +425,7 @@ def figures_from(m: Measured) -> list[Figure]:
         raise RuntimeError(f"no complete chain measured (stack {len(m.stack)}, floor "
                            f"{len(m.floor)} of {m.cycles} cycles)")
     load = (f"load {m.load_before[0]:.2f} -> {m.load_after[0]:.2f} (1 min), {_cpu(m)}; "
-            f"SCHED_FIFO {m.realtime_priority or 'off'}; {_idle(m)}; "
+            f"SCHED_FIFO {m.realtime_priority or 'off'}; {_conditions(m)}; "
             f"{len(m.stack)}/{m.cycles} stack and {len(m.floor)}/{m.floor_cycles} floor "
             f"cycles paired")
     same = "same-transport floor: slcan pty -> 3 relays, 2 hops -> serial pty"
@@ -457,7 +457,8 @@ def figures_from(m: Measured) -> list[Figure]:
     return figs
 
 
-def _idle(m: Measured) -> str:
+def _conditions(m: Measured) -> str:
+    """The CPU idle states and how the frames were stamped, for the table and notes."""
     idle = ("CPU idle states as configured" if m.cpu_latency_us is None
             else f"CPU idle exit latency held <= {m.cpu_latency_us} us")
     if not m.stamp_priority:
@@ -484,7 +485,7 @@ def table(m: Measured) -> str:
     out = [f"radar-to-brake latency: {len(m.stack)} stack cycles, {len(m.floor)} floor "
            f"cycles in {m.seconds:.0f} s; load avg {m.load_before[0]:.2f} -> "
            f"{m.load_after[0]:.2f}, {_cpu(m)}; SCHED_FIFO {m.realtime_priority or 'off'}; "
-           f"{_idle(m)}; "
+           f"{_conditions(m)}; "
            "times in ms",
            f"{'stage':<38}{'stack p50':>10}{'p95':>8}{'p99':>8}{'max':>8}   "
            f"{'floor p50':>10}{'p95':>8}{'p99':>8}{'max':>8}"]
