@@ -254,8 +254,8 @@ def _decode_general_few(spec: MessageSpec, datas: list[bytes]) -> GeneralFrames 
         return None
     n = len(ids)
     f = np.array([rows.phys[k] for k in _GENERAL_F], dtype=np.float64)
-    i = np.array([*(rows.raw[k] for k in _GENERAL_I), *([UNKNOWN] * n for _ in range(3))],
-                 dtype=np.int64)
+    unknown = ([UNKNOWN] * n for _ in range(OBJ_CLASS, INVALID_STATE + 1))   # not sent yet
+    i = np.array([*(rows.raw[k] for k in _GENERAL_I), *unknown], dtype=np.int64)
     id_array = i[RADAR_ID].copy()
     return GeneralFrames(Detections(f, i), id_array, id_array, None, {})
 
