@@ -155,6 +155,8 @@ class WatchdogPolicy(enum.Enum):
 
 @dataclass(frozen=True, slots=True)
 class Received:
+    """A command line; `t_ns` is when its bytes were read."""
+
     t_ns: int
     cmd: Command
 
@@ -406,9 +408,11 @@ class SimActuator:
                 with contextlib.suppress(OSError):
                     os.read(self._wake_r, 4096)
             data = b""
+            read_ns = 0
             if ep is not None and ep.fileno() in ready:
                 try:
                     data = ep.read_available()
+                    read_ns = self._clock()
                 except EndpointClosed as exc:
                     with self._lock:
                         if self._endpoint is ep:
@@ -417,7 +421,9 @@ class SimActuator:
                             self._event(self._clock(), "disconnect")
                             _log.info(kv("sim_actuator_disconnected", error=exc))
             with self._lock:
-                now = self._clock()
+                # Lines take effect when their bytes arrived, not when this thread got the
+                # lock from the simulator's: a latency instrument times the line.
+                now = read_ns or self._clock()
                 for item in self._reader.feed(data) if data else ():
                     self._handle(item, now)
                 self._housekeeping(now)

@@ -4,12 +4,15 @@ import json
 import math
 import subprocess
 import sys
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import serial
 
+from common.clock import mono_ns
 from services.brake.protocol import (
     FAULT_WATCHDOG,
     Ack,
@@ -84,6 +87,33 @@ def test_acknowledges_with_a_first_order_position(sim_host):
     wait_for(lambda: events, 5)
     assert events[0].kind == "command" and events[0].cmd is not None
     assert events[0].cmd.level_pct == 100 and events[0].target_pct == 100.0
+
+
+def test_a_line_is_stamped_when_read_even_while_the_simulator_holds_its_lock(sim_host):
+    # The latency benchmark times commands by this stamp: another thread of the simulator
+    # holding the lock (the physics, a snapshot) must not make the line look late.
+    sim, host = sim_host
+    ep = sim._endpoint
+    assert ep is not None
+    read = threading.Event()
+    plain_read = ep.read_available
+
+    def read_and_tell() -> bytes:
+        data = plain_read()
+        if data:
+            read.set()
+        return data
+
+    ep.read_available = read_and_tell
+    with sim._lock:
+        seq = host.send(40)
+        assert read.wait(10), "the actuator never read the line"
+        read_seen = mono_ns()
+        time.sleep(0.05)        # the stimulus: the lock held 50 ms after the read
+    host.wait(lambda f: isinstance(f, Ack) and f.seq == seq)
+    received = sim.commands_since(0)[-1]
+    assert received.cmd.seq == seq
+    assert received.t_ns < read_seen + 40_000_000
 
 
 @pytest.mark.parametrize("policy", [WatchdogPolicy.HOLD, WatchdogPolicy.RELEASE])
