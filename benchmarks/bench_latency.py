@@ -52,6 +52,7 @@ from benchmarks.bench_brake import LineTimes
 from benchmarks.figures import Figure, machine_info
 from benchmarks.floor_relay import VEHICLE as FLOOR_VEHICLE
 from benchmarks.latency_chain import (
+    STAGE_SHORT,
     STAGE_TITLES,
     STAGES,
     BrakeStamp,
@@ -508,16 +509,11 @@ def table(m: Measured) -> str:
     if groups:
         out.append("stack p50 by the radar cycle's detections (ms): "
                    + f"{'cycles':>7}{'total':>8}"
-                   + "".join(f"{_SHORT[n]:>9}" for n in STAGES))
+                   + "".join(f"{STAGE_SHORT[n]:>9}" for n in STAGES))
         for name, (n, p50) in groups.items():
             out.append(f"{'':<18}{name + ' detections':>30}{n:>7}{p50['total']:>8.3f}"
                        + "".join(f"{p50[s]:>9.3f}" for s in STAGES))
     return "\n".join(out)
-
-
-_SHORT = {"can_in": "CAN in", "decode_track": "track", "hop_radar_fusion": "hop 1",
-          "verify_decide": "decide", "hop_fusion_brake": "hop 2", "brake_write": "brake",
-          "serial_out": "serial"}
 
 
 def by_detection_count(m: Measured) -> dict[str, tuple[int, dict[str, float]]]:

@@ -36,6 +36,10 @@ STAGE_TITLES = {
     "brake_write": "brake: validate + write",
     "serial_out": "serial out (pty)",
 }
+# the same stages as column headings of a narrow table
+STAGE_SHORT = {"can_in": "CAN in", "decode_track": "track", "hop_radar_fusion": "hop 1",
+               "verify_decide": "decide", "hop_fusion_brake": "hop 2", "brake_write": "brake",
+               "serial_out": "serial"}
 ZENOH_HOPS = ("hop_radar_fusion", "hop_fusion_brake")
 # A line later than this after the receipt that should have caused it is not its line.
 DEFAULT_MAX_NS = 20_000_000
