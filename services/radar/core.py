@@ -252,10 +252,8 @@ class SensorCore:
         done = early if early is not None and early.cycle is cycle else self._track(cycle)
         g = done.general
         if not done.extras_attached:
-            if not done.quality_attached:
-                attach_list(cycle, g, ListRole.QUALITY)
+            attach_extras(cycle, g, quality=not done.quality_attached)
             if cycle.mode is OutputMode.OBJECTS:
-                attach_list(cycle, g, ListRole.EXTENDED)
                 self.tracker.annotate_class(g.det)
         for reason, n in g.rejected.items():
             self.rejected.add(reason, n)

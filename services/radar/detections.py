@@ -260,10 +260,12 @@ def _decode_general_few(spec: MessageSpec, datas: list[bytes]) -> GeneralFrames 
     return GeneralFrames(Detections(f, i), id_array, id_array, None, {})
 
 
-def attach_extras(cycle: RawCycle, g: GeneralFrames) -> None:
+def attach_extras(cycle: RawCycle, g: GeneralFrames, quality: bool = True) -> None:
     """Decode the cycle's quality / extended frames into the detections' ProbOfExist,
-    class (objects) or InvalidState (clusters) rows; rejections go to `g.rejected`."""
-    attach_list(cycle, g, ListRole.QUALITY)
+    class (objects) or InvalidState (clusters) rows; rejections go to `g.rejected`.
+    `quality` False: the quality list was attached already (attach_list)."""
+    if quality:
+        attach_list(cycle, g, ListRole.QUALITY)
     if cycle.mode is OutputMode.OBJECTS:
         attach_list(cycle, g, ListRole.EXTENDED)
 
