@@ -15,8 +15,8 @@ A chain is eight monotonic times; the stages are their differences:
 | serial_out | -> line read by the actuator | -> line read by the benchmark |
 
 Fusion's receipt is its BrakeCommand's publish time minus `VerifiedTargets.processing_ns`
-(receipt to decided, measured by fusion): the put of the command itself, tens of
-microseconds, is counted in verify_decide rather than in the hop.
+(receipt to decided, measured by fusion, ending at the command's `pub_mono_ns`): the put
+of each message is counted in the hop that follows, for the stack and the floor alike.
 """
 
 import bisect

@@ -129,10 +129,13 @@ class FusionNode:
             sent: list[BrakeCommand] = []
 
             def publish(cmd: BrakeCommand) -> None:
-                self._cmd_pub.put(msgspec.structs.replace(
-                    cmd, header=msgspec.structs.replace(cmd.header, pub_mono_ns=mono_ns())))
-                sent.append(cmd)
+                # decided when handed to Zenoh: the put itself is the hop's, as the radar's
+                # put is (processing_ns ends where the command's pub_mono_ns begins)
                 self._decided_ns = mono_ns()
+                self._cmd_pub.put(msgspec.structs.replace(
+                    cmd, header=msgspec.structs.replace(cmd.header,
+                                                        pub_mono_ns=self._decided_ns)))
+                sent.append(cmd)
 
             try:
                 result = self.core.process(tracks, feeds, wall_ns(), mono_ns(), publish)

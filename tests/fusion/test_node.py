@@ -61,6 +61,26 @@ def test_command_then_targets_for_each_cycle():
     assert targets.processing_ns > 0 and targets.radar_seq == 0
 
 
+def test_processing_ends_where_the_command_is_handed_to_zenoh_so_the_put_is_the_hops():
+    from common.clock import mono_ns
+
+    class SlowPut(FakePublisher):
+        def put(self, msg) -> None:
+            until = mono_ns() + 2_000_000          # a put taking 2 ms
+            while mono_ns() < until:
+                pass
+            super().put(msg)
+
+    node, bus = node_with(FixedVerifier())
+    node._cmd_pub = SlowPut(bus.log, "fusion_brake_cmd")  # type: ignore[assignment]
+    fresh(node)
+    rx = mono_ns()
+    node.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", rx)
+    command, targets = bus.log[0][1], bus.log[1][1]
+    assert targets.processing_ns == command.header.pub_mono_ns - rx
+    assert targets.processing_ns < 2_000_000 < mono_ns() - rx
+
+
 def test_a_failure_after_the_command_never_sends_a_second_one():
     calls = []
 
