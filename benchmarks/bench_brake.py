@@ -44,6 +44,7 @@ from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, Decision, Header, VerifierStatus
+from common.net import free_port
 from services.brake.pty_pair import PtyPair
 from services.brake.sim_actuator import SimActuator
 
@@ -59,12 +60,6 @@ class Row:
     def pct(self, q: float) -> float:
         v = sorted(self.values_us)
         return v[min(len(v) - 1, round(q * (len(v) - 1)))]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _wait(pred: Callable[[], bool], timeout_s: float, what: str) -> None:
@@ -197,7 +192,7 @@ def _health(bus: Bus, service: str) -> threading.Event:
 
 
 def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
-    port = _free_port()
+    port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     procs: list[subprocess.Popen[bytes]] = []
     log = open(work / "processes.log", "wb")  # noqa: SIM115 (closed below)

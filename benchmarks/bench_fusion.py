@@ -63,6 +63,7 @@ from common.messages import (
     RadarTracks,
     encode,
 )
+from common.net import free_endpoint
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.node import FusionNode
@@ -431,14 +432,6 @@ def one_decode_us(reps: int = 40) -> float:
     return float(np.median(samples))
 
 
-def _free_endpoint() -> str:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
-
-
 def _wait_listening(endpoint: str, timeout_s: float) -> None:
     import socket
 
@@ -457,7 +450,7 @@ def _wait_listening(endpoint: str, timeout_s: float) -> None:
 def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
                     ) -> dict[str, Any]:
     """The cameras scale: each camera count, with and without traffic, both policies."""
-    endpoint = _free_endpoint()
+    endpoint = free_endpoint()
     router = subprocess.Popen([sys.executable, "-m", "common.router", "--listen", endpoint],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     results: dict[str, Any] = {"one_decode_us": one_decode_us(), "counts": list(counts)}

@@ -26,6 +26,7 @@ from common.config.camera import CameraSettings, SyntheticSource
 from common.imaging import encode_jpeg
 from common.keys import CAMERA_JPEG
 from common.messages import CompressedFrame
+from common.net import free_port
 from services.camera.node import CameraNode
 from services.camera.synthetic import MovingBoxSource
 
@@ -58,14 +59,6 @@ def bench_encode(n: int, qualities: tuple[int, ...]) -> list[tuple[str, float, f
         p50, p95 = percentiles(times)
         rows.append((name, p50, p95, size / 1024))
     return rows
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def run_camera(endpoint: str, seconds: float, encode_delay_s: float

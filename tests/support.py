@@ -15,18 +15,13 @@ from typing import Any, TypeVar
 
 from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
+from common.net import free_port
 
 REPO = Path(__file__).resolve().parent.parent
 T = TypeVar("T")
 
 # Deadlines are generous: CI is a loaded 2-core machine.
 START_TIMEOUT_S = 60.0
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def wait_for(

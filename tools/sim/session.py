@@ -15,6 +15,7 @@ from typing import IO, Any
 
 from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
+from common.net import free_port
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import load_table, resolve_launches
 from tools.sim.radar_feed import RadarFeed
@@ -29,14 +30,6 @@ SETTLE_TIMEOUT_S = 60.0
 
 class StackStartError(RuntimeError):
     """The stack did not come up (a service exited or never declared its token)."""
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def write_table(folder: Path, endpoint: str, configs: StackConfigs,
