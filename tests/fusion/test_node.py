@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from common.clock import wall_ns
+from common.clock import mono_ns, wall_ns
 from common.messages import BrakeCommand, Decision, VerifiedTargets, encode
 from services.fusion.frames import FrameDecoder
 from services.fusion.node import FusionNode
@@ -62,8 +62,6 @@ def test_command_then_targets_for_each_cycle():
 
 
 def test_processing_ends_where_the_command_is_handed_to_zenoh_so_the_put_is_the_hops():
-    from common.clock import mono_ns
-
     class SlowPut(FakePublisher):
         def put(self, msg) -> None:
             until = mono_ns() + 2_000_000          # a put taking 2 ms
