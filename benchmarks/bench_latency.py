@@ -2,6 +2,7 @@
 brake command's bytes on the actuator's serial line, per stage, beside its floor.
 
     python -m benchmarks.bench_latency [--quick] [--out out/bench] [--cpu-latency-us 0]
+                                       [--floor-work codec]
 
 The stack runs as in `aeb demo` (tools/sim/session.py): a router, then radar, camera,
 fusion and brake, each its own process. This process is the SIMULATED vehicle: the
@@ -19,6 +20,10 @@ size, through the same router) -> relay -> Zenoh hop (BrakeCommand's) -> relay -
 command line on a serial pty that this process reads. Two floors are reported:
 - same transport: last frame written -> line read, through the relays;
 - Zenoh only: the two hops of those chains (the issue's "bare hops with no work").
+
+`--floor-work codec` has the relays decode and encode the real frames and messages
+(benchmarks/codec_floor.py): the least a Python chain of these three services does, so
+that the stack's own logic is what is left between it and the stack.
 
 `--cpu-latency-us N` holds a PM QoS request for the run (common/cpu_latency.py): no
 CPU idle state with an exit latency above N us, for the stack and its floor alike.
@@ -225,9 +230,11 @@ def read_reports(lines: Iterable[str]) -> list[tuple[int, ...]]:
 
 
 @contextmanager
-def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Iterator[Floor]:
+def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0,
+                floor_work: str = "none") -> Iterator[Floor]:
     """The three relays on the stack's router (scheduled as the stack), their ptys, the
-    interleaved feed. Raises RuntimeError when a relay does not come up."""
+    interleaved feed; `floor_work`: the relays' `--work`. Raises RuntimeError when a relay
+    does not come up."""
     link = SlcanPtyLink()
     pty = PtyPair(work / "floor-serial")
     procs: list[subprocess.Popen[str]] = []
@@ -248,7 +255,7 @@ def floor_chain(loop: ClosedLoop, work: Path, realtime_priority: int = 0) -> Ite
     try:
         base = [sys.executable, "-m", "benchmarks.floor_relay"]
         common_args = ["--connect", loop.endpoint, "--vehicle", FLOOR_VEHICLE,
-                       "--realtime-priority", str(realtime_priority)]
+                       "--realtime-priority", str(realtime_priority), "--work", floor_work]
         for role, extra in (("serial", ["--port", str(pty.path)]), ("hop", []),
                             ("can", ["--channel", link.path])):
             procs.append(subprocess.Popen(
@@ -342,10 +349,12 @@ class Measured:
     cpu_latency_us: int | None = None
     detections: dict[int, int] = field(default_factory=dict)
     stamp_priority: int = 0        # the feeds' write-and-stamp priority, 0 when refused
+    floor_work: str = "none"       # the floor relays' work (floor_relay --work)
 
 
 def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None = None,
-            realtime_priority: int = 0, cpu_latency_us: int | None = None) -> Measured:
+            realtime_priority: int = 0, cpu_latency_us: int | None = None,
+            floor_work: str = "none") -> Measured:
     """Run the stack and its floor together for `seconds` of cycles (default by mode);
     every chain seen at every stage. `realtime_priority` > 0: the stack, the floor's
     relays and the line readers with SCHED_FIFO (as deployed on a vehicle).
@@ -360,21 +369,22 @@ def measure(quick: bool, out_dir: Path, log: bool = True, seconds: float | None 
         with contextlib.ExitStack() as stack:
             if cpu_latency_us is not None:
                 stack.enter_context(cpu_latency(cpu_latency_us))
-            m = _measure(measure_s, out_dir, log, realtime_priority)
+            m = _measure(measure_s, out_dir, log, realtime_priority, floor_work)
         m.cpu_latency_us = cpu_latency_us
         return m
     finally:
         sys.setswitchinterval(switch_interval)
 
 
-def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int) -> Measured:
+def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int,
+             floor_work: str = "none") -> Measured:
     load_before = os.getloadavg()
     collected = Collected()
     verdicts: list[str] = []
     run_dir = out_dir / "latency-run"
     with closed_loop(run_dir, log=sys.stdout if log else None,
                      realtime_priority=realtime_priority) as loop, \
-            floor_chain(loop, run_dir / "run", realtime_priority) as floor:
+            floor_chain(loop, run_dir / "run", realtime_priority, floor_work) as floor:
         collected.subscribe(loop.bus, measure_s)
         t0 = mono_ns()
         cpu0 = cpu_times()
@@ -410,11 +420,18 @@ def _measure(measure_s: float, out_dir: Path, log: bool, realtime_priority: int)
         cpu = cpu_share(cpu0, cpu_times())
     return Measured(stack, fl, len(cycles), floor_cycles, seconds, verdicts, load_before,
                     os.getloadavg(), realtime_priority, cpu, detections=collected.detections,
-                    stamp_priority=stamp_priority)
+                    stamp_priority=stamp_priority, floor_work=floor_work)
 
 
 def _ms(s: Summary | None, attr: str) -> float:
     return float("nan") if s is None else float(getattr(s, attr))
+
+
+FLOOR_TITLES = {
+    "none": ("same-transport floor", "slcan pty -> 3 relays, 2 hops -> serial pty"),
+    "codec": ("codec floor", "the same, the relays decoding and encoding the real frames "
+                             "and messages"),
+}
 
 
 def figures_from(m: Measured) -> list[Figure]:
@@ -429,7 +446,7 @@ def figures_from(m: Measured) -> list[Figure]:
             f"SCHED_FIFO {m.realtime_priority or 'off'}; {_conditions(m)}; "
             f"{len(m.stack)}/{m.cycles} stack and {len(m.floor)}/{m.floor_cycles} floor "
             f"cycles paired")
-    same = "same-transport floor: slcan pty -> 3 relays, 2 hops -> serial pty"
+    same = ": ".join(FLOOR_TITLES[m.floor_work])
     bare = "Zenoh-only floor: the same 2 hops, no work"
     figs = [
         Figure("latency", "radar-to-brake p50", total.p50_ms, "ms", baseline=same,
@@ -465,6 +482,8 @@ def _conditions(m: Measured) -> str:
     if not m.stamp_priority:
         # without the priority a woken service can run before the write is stamped
         idle += "; frames stamped at normal priority (SCHED_FIFO refused: CAN in may read low)"
+    if m.floor_work != "none":
+        idle += f"; floor relays with {m.floor_work} work"
     return idle
 
 
@@ -501,7 +520,11 @@ def table(m: Measured) -> str:
         out.append(f"{title:<38}{cells[0]}   {cells[1]}")
     total, ft = summarize(st["total"]), summarize(fl["total"])
     if total and ft and zen:
-        out.append(f"p50 ratio: {total.p50_ms / ft.p50_ms:.2f}x the same-transport floor, "
+        if m.floor_work != "none":
+            out.append(f"floor ({m.floor_work} work): {ft.p50_ms / zen.p50_ms:.2f}x its "
+                       "2 bare hops at p50")
+        out.append(f"p50 ratio: {total.p50_ms / ft.p50_ms:.2f}x the "
+                   f"{FLOOR_TITLES[m.floor_work][0]}, "
                    f"{total.p50_ms / zen.p50_ms:.2f}x the 2 bare hops (target <= "
                    f"{P50_TARGET_RATIO:g}x); p99 {total.p99_ms:.2f} ms (target < "
                    f"{P99_TARGET_MS:g} ms)")
@@ -539,7 +562,7 @@ def plot(m: Measured, path: Path) -> Path:
     st, fl = stages_ns(m.stack), stages_ns(m.floor)
     fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.8))
     series = (("stack: last CAN frame -> brake bytes", st["total"], "tab:red"),
-              ("floor: same transports, 3 relays", fl["total"], "tab:gray"),
+              (FLOOR_TITLES[m.floor_work][0], fl["total"], "tab:gray"),
               ("floor: 2 bare Zenoh hops", zenoh_ns(m.floor), "tab:blue"))
     for label, values, line_colour in series:
         if values:
@@ -585,6 +608,7 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
         "load_avg_before": m.load_before, "load_avg_after": m.load_after,
         "realtime_priority": m.realtime_priority, "cpu": m.cpu,
         "cpu_latency_us": m.cpu_latency_us, "stamp_priority": m.stamp_priority,
+        "floor_work": m.floor_work,
         "stack": {n: summ(v) for n, v in st.items()},
         "floor": {n: summ(v) for n, v in fl.items()},
         "floor_zenoh_2_hops": summ(zenoh_ns(m.floor)),
@@ -596,12 +620,12 @@ def write_json(m: Measured, figs: list[Figure], path: Path) -> Path:
 
 def run(quick: bool, out_dir: Path, seconds: float | None = None,
         realtime_priority: int = REALTIME_PRIORITY,
-        cpu_latency_us: int | None = None) -> list[Figure]:
+        cpu_latency_us: int | None = None, floor_work: str = "none") -> list[Figure]:
     """The suite's entry point: measure, write JSON and PNG under `out_dir`, return the
     figures. Raises RuntimeError when the stack or the floor does not come up."""
     out_dir.mkdir(parents=True, exist_ok=True)
     m = measure(quick, out_dir, seconds=seconds, realtime_priority=realtime_priority,
-                cpu_latency_us=cpu_latency_us)
+                cpu_latency_us=cpu_latency_us, floor_work=floor_work)
     figs = figures_from(m)
     print(table(m), flush=True)
     write_json(m, figs, out_dir / "bench_latency.json")
@@ -625,13 +649,18 @@ def main(argv: list[str] | None = None) -> int:
                         help="hold a PM QoS request for the run: no CPU idle state with a "
                              "longer exit latency (0: idle CPUs poll; root only). Default: "
                              "the machine's idle states as they are")
+    parser.add_argument("--floor-work", choices=("none", "codec"), default="none",
+                        help="the floor relays' work: none (the issue's floor) or codec: "
+                             "the frames and messages decoded and encoded, nothing "
+                             "decided (benchmarks/codec_floor.py)")
     args = parser.parse_args(argv)
     if args.cpu_latency_us is not None and args.cpu_latency_us < 0:
         parser.error("--cpu-latency-us must be >= 0")
     out = Path(args.out)
     t0 = time.monotonic()
     try:
-        figs = run(args.quick, out, args.seconds, args.realtime_priority, args.cpu_latency_us)
+        figs = run(args.quick, out, args.seconds, args.realtime_priority, args.cpu_latency_us,
+                   args.floor_work)
     except CpuLatencyRefused as exc:
         print(f"error: --cpu-latency-us: {exc}", file=sys.stderr)
         return 2

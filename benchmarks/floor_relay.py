@@ -14,6 +14,11 @@ between. Three relay processes, one per service of the chain:
 - `serial` writes a brake command line to its serial port for every payload (the brake
   service's write path: straight to the fd), then prints the chain's stamps on stdout.
 
+`--work codec` makes each relay do the least work a Python implementation of its service
+must do (benchmarks/codec_floor.py): the radar's frames and the project's messages decoded
+and encoded, nothing decided. Its payloads are then the encoded messages, with the stamps
+appended after them.
+
 Every key is under another vehicle id (`--vehicle`, default `floor`) so that nothing of
 the stack sees these payloads. Payloads are stamps (monotonic ns, little-endian int64)
 padded to size: `counter, can_rx, can_pub[, hop_rx, hop_pub]`. The `serial` relay prints
@@ -31,6 +36,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from benchmarks.codec_floor import FusionCodec, RadarCodec, brake_line
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
@@ -137,9 +143,11 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, json.loads(value)
 
 
-def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: int) -> None:
+def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: int,
+            codec: bool = False) -> None:
     pub = bus.publisher(RADAR_TRACKS, sensor=SENSOR)
-    sizes = [tracks_size(n) for n in range(MAX_OBJECTS + 1)]
+    sizes = [] if codec else [tracks_size(n) for n in range(MAX_OBJECTS + 1)]
+    radar = RadarCodec(SENSOR)
     fd = os.open(channel, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
     try:
         os.write(fd, b"O\r")            # as python-can opens the channel: the link sees it
@@ -157,18 +165,30 @@ def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: in
             rx = mono_ns()
             *lines, buf = (buf + chunk).split(b"\r")
             for line in lines:
-                if end.line(line):
+                if codec:
+                    radar.line(line)
+                if not end.line(line):
+                    continue
+                if codec:
+                    msg, pub_ns = radar.tracks(end.counter, rx, wall_ns(), mono_ns)
+                    pub.put_bytes(msg + _STAMPS.pack(end.counter, rx, pub_ns))
+                else:
                     head = _STAMPS.pack(end.counter, rx, mono_ns())
                     pub.put_bytes(pad(head, sizes[min(end.objects, MAX_OBJECTS)]))
     finally:
         os.close(fd)
 
 
-def run_hop(bus: Bus, stop: threading.Event, direct: bool) -> None:
+def run_hop(bus: Bus, stop: threading.Event, direct: bool, codec: bool = False) -> None:
     pub = bus.publisher(FUSION_BRAKE_CMD, instance=INSTANCE)
     size = command_size()
+    fusion = FusionCodec(INSTANCE)
 
     def forward(payload: bytes, key: str, rx: int) -> None:
+        if codec:
+            msg, pub_ns = fusion.command(memoryview(payload)[:-_STAMPS.size], mono_ns)
+            pub.put_bytes(msg + payload[-_STAMPS.size:] + _HOP_STAMPS.pack(rx, pub_ns))
+            return
         head = payload[:_STAMPS.size] + _HOP_STAMPS.pack(rx, mono_ns())
         pub.put_bytes(pad(head, size))
 
@@ -178,7 +198,7 @@ def run_hop(bus: Bus, stop: threading.Event, direct: bool) -> None:
 
 
 def run_serial(bus: Bus, port: str, stop: threading.Event,
-               report: Callable[[str], None], direct: bool) -> None:
+               report: Callable[[str], None], direct: bool, codec: bool = False) -> None:
     import serial
 
     ser = serial.Serial(port, 115200, timeout=0.05, write_timeout=0.02)
@@ -186,9 +206,14 @@ def run_serial(bus: Bus, port: str, stop: threading.Event,
     n = _STAMPS.size + _HOP_STAMPS.size
 
     def write(payload: bytes, key: str, rx: int) -> None:
-        os.write(ser.fd, line)
-        written = mono_ns()
-        stamps = struct.unpack("<qqqqq", payload[:n])
+        if codec:
+            os.write(ser.fd, brake_line(memoryview(payload)[:-n]))
+            written = mono_ns()
+            stamps = struct.unpack("<qqqqq", payload[-n:])
+        else:
+            os.write(ser.fd, line)
+            written = mono_ns()
+            stamps = struct.unpack("<qqqqq", payload[:n])
         report(" ".join(str(v) for v in (*stamps, rx, written)))
 
     bus.subscribe_raw(FUSION_BRAKE_CMD, write, direct=direct, instance=INSTANCE)
@@ -212,6 +237,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--channel", help="can: the slcan pty to read")
     parser.add_argument("--port", help="serial: the serial port to write")
     parser.add_argument("--frames-per-object", type=int, default=FRAMES_PER_OBJECT)
+    parser.add_argument("--work", choices=("none", "codec"), default="none",
+                        help="none: forward stamps; codec: decode and encode the real "
+                             "frames and messages (benchmarks/codec_floor.py)")
     parser.add_argument("--direct", action="store_true",
                         help="callbacks on Zenoh's receive thread (Bus.subscribe_raw direct)")
     parser.add_argument("--realtime-priority", type=int, default=0, choices=range(100),
@@ -227,17 +255,18 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("can needs --channel")
     if args.role == "serial" and not args.port:
         parser.error("serial needs --port")
+    codec = args.work == "codec"
     stop = stop_event_on_signals()
     # as the router: every thread of a relay is on its path, and inherits the policy
     ThreadRealtime(RealtimeSettings(priority=args.realtime_priority),
                    setup_logging("floor_relay"), f"floor relay {args.role}").ensure()
     with Bus.open(settings(args.connect, overrides), args.vehicle, f"floor/{args.role}") as bus:
         if args.role == "can":
-            run_can(bus, args.channel, stop, args.frames_per_object)
+            run_can(bus, args.channel, stop, args.frames_per_object, codec)
         elif args.role == "hop":
-            run_hop(bus, stop, args.direct)
+            run_hop(bus, stop, args.direct, codec)
         else:
-            run_serial(bus, args.port, stop, _print_line, args.direct)
+            run_serial(bus, args.port, stop, _print_line, args.direct, codec)
     return 0
 
 

@@ -20,10 +20,12 @@ from tools.sim.scenario import RadarLook
 pytestmark = pytest.mark.slow
 
 
-def test_the_floor_relays_carry_a_cycle_from_the_can_pty_to_the_serial_pty(router, tmp_path):
+@pytest.mark.parametrize("work", ["none", "codec"])
+def test_the_floor_relays_carry_a_cycle_from_the_can_pty_to_the_serial_pty(
+        router, tmp_path, work):
     link, pty = SlcanPtyLink(), PtyPair(tmp_path / "serial")
     base = [sys.executable, "-m", "benchmarks.floor_relay"]
-    args = ["--connect", router, "--frames-per-object", "1", "--direct"]
+    args = ["--connect", router, "--frames-per-object", "1", "--direct", "--work", work]
     reports_path = tmp_path / "reports.txt"
     with open(reports_path, "w") as reports_out:
         procs: list[subprocess.Popen[str]] = [
