@@ -32,12 +32,10 @@ from common.messages import (
     encode,
 )
 from services.brake.protocol import SEQ_MODULO, HostMode, command_line, level_to_wire
-from services.radar.ars408.codec import decode_frame
-from services.radar.ars408.records import ObjectGeneral
+from services.radar.ars408 import Kind, ObjectGeneral, classify
+from services.radar.ars408 import decode as decode_record
 from services.radar.can_links import parse_slcan_frame
 
-GENERAL_PREFIX = b"t60B"
-STATUS_ID = 0x60A
 COMMAND_TTL_MS = 250
 
 
@@ -51,14 +49,16 @@ class RadarCodec:
         self._seq = 0
 
     def line(self, line: bytes) -> None:
-        """One slcan line of the cycle (a status line starts a new one; lines other than
-        standard frames are not the cycle's)."""
+        """One slcan line of the cycle (a status frame starts a new one; lines that are
+        not ARS408 frames are not the cycle's)."""
         frame = parse_slcan_frame(line.decode())
-        if frame is None:
+        found = classify(frame.arb_id) if frame is not None else None
+        if frame is None or found is None:
             return
-        if line[:4] == GENERAL_PREFIX:
-            self._objects.append(decode_frame(frame.arb_id, frame.data)[2])
-        elif frame.arb_id == STATUS_ID:
+        spec = found[0]
+        if spec.kind is Kind.OBJECT_GENERAL:
+            self._objects.append(decode_record(spec, frame.data))
+        elif spec.kind is Kind.OBJECT_STATUS:
             self._objects = []
 
     def tracks(self, meas_counter: int, last_frame_mono_ns: int, now_wall_ns: int,

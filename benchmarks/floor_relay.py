@@ -146,8 +146,17 @@ def parse_override(text: str) -> tuple[str, Any]:
 def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: int,
             codec: bool = False) -> None:
     pub = bus.publisher(RADAR_TRACKS, sensor=SENSOR)
+    radar = RadarCodec(SENSOR) if codec else None
     sizes = [] if codec else [tracks_size(n) for n in range(MAX_OBJECTS + 1)]
-    radar = RadarCodec(SENSOR)
+
+    def publish(end: CycleEnd, rx: int) -> None:
+        if radar is None:
+            head = _STAMPS.pack(end.counter, rx, mono_ns())
+            pub.put_bytes(pad(head, sizes[min(end.objects, MAX_OBJECTS)]))
+        else:
+            msg, pub_ns = radar.tracks(end.counter, rx, wall_ns(), mono_ns)
+            pub.put_bytes(msg + _STAMPS.pack(end.counter, rx, pub_ns))
+
     fd = os.open(channel, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
     try:
         os.write(fd, b"O\r")            # as python-can opens the channel: the link sees it
@@ -165,16 +174,10 @@ def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: in
             rx = mono_ns()
             *lines, buf = (buf + chunk).split(b"\r")
             for line in lines:
-                if codec:
+                if radar is not None:
                     radar.line(line)
-                if not end.line(line):
-                    continue
-                if codec:
-                    msg, pub_ns = radar.tracks(end.counter, rx, wall_ns(), mono_ns)
-                    pub.put_bytes(msg + _STAMPS.pack(end.counter, rx, pub_ns))
-                else:
-                    head = _STAMPS.pack(end.counter, rx, mono_ns())
-                    pub.put_bytes(pad(head, sizes[min(end.objects, MAX_OBJECTS)]))
+                if end.line(line):
+                    publish(end, rx)
     finally:
         os.close(fd)
 
@@ -206,14 +209,10 @@ def run_serial(bus: Bus, port: str, stop: threading.Event,
     n = _STAMPS.size + _HOP_STAMPS.size
 
     def write(payload: bytes, key: str, rx: int) -> None:
-        if codec:
-            os.write(ser.fd, brake_line(memoryview(payload)[:-n]))
-            written = mono_ns()
-            stamps = struct.unpack("<qqqqq", payload[-n:])
-        else:
-            os.write(ser.fd, line)
-            written = mono_ns()
-            stamps = struct.unpack("<qqqqq", payload[:n])
+        # codec: the stamps follow the message; otherwise they are the payload's head
+        os.write(ser.fd, brake_line(memoryview(payload)[:-n]) if codec else line)
+        written = mono_ns()
+        stamps = struct.unpack("<qqqqq", payload[-n:] if codec else payload[:n])
         report(" ".join(str(v) for v in (*stamps, rx, written)))
 
     bus.subscribe_raw(FUSION_BRAKE_CMD, write, direct=direct, instance=INSTANCE)
