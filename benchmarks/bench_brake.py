@@ -3,7 +3,7 @@
     python -m benchmarks.bench_brake [--quick] [--out out/bench] [--count N] [--rate-hz R]
 
 Starts a Zenoh router and the brake service (`python -m services.brake`) as their own
-processes; the SIMULATED actuator (services/brake/sim_actuator.py) runs in this process
+processes; the SIMULATED actuator (tools/sim/actuator.py) runs in this process
 on a pty and timestamps every line it reads. This process publishes BrakeCommands at
 `--rate-hz` (BRAKE at 50% once armed), then measures, for each command:
 
@@ -45,8 +45,8 @@ from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, Decision, Header, VerifierStatus
 from common.net import free_port
-from services.brake.pty_pair import PtyPair
-from services.brake.sim_actuator import SimActuator
+from tools.sim.actuator import SimActuator
+from tools.sim.pty_pair import PtyPair
 
 WARMUP = 20
 BASELINE_INSTANCE = "bench"

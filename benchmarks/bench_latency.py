@@ -9,7 +9,7 @@ fusion and brake, each its own process. This process is the SIMULATED vehicle: t
 closed-loop simulator writes real ARS408 frames on the radar's slcan pty (python-can's
 `slcan` interface in the radar, as with a USB-CAN adapter), publishes the world that the
 camera's plugin renders (so fusion verifies against real frames), and the simulated
-actuator (services/brake/sim_actuator.py) reads the brake's pty and stamps each line.
+actuator (tools/sim/actuator.py) reads the brake's pty and stamps each line.
 Scenarios run one after the other (threats brake, others do not) with the empty road in
 between, so every decision path is in the figures.
 
@@ -79,9 +79,9 @@ from common.cpu_latency import CpuLatencyRefused, cpu_latency
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
 from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
-from services.brake.pty_pair import PtyPair
 from services.radar.ars408 import Frame
 from services.radar.can_links import SlcanPtyLink
+from tools.sim.pty_pair import PtyPair
 from tools.sim.radar_feed import CycleSent, RadarFeed
 from tools.sim.scenario import RadarLook, find_scenario, load_scenario
 from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop

@@ -13,8 +13,6 @@ from typing import Any
 from common.bus import Bus
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeState, BrakeStatus
-from services.brake.pty_pair import PtyPair
-from services.brake.sim_actuator import SimActuator
 from tests.support import (
     START_TIMEOUT_S,
     HealthWatch,
@@ -23,6 +21,8 @@ from tests.support import (
     python_module,
     router_process,
 )
+from tools.sim.actuator import SimActuator
+from tools.sim.pty_pair import PtyPair
 
 LIVE = (BrakeState.ARMED, BrakeState.BRAKING)
 

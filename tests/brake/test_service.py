@@ -12,7 +12,6 @@ import pytest
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeState, encode
 from services.brake.protocol import HostMode
-from services.brake.sim_actuator import SimActuator
 from tests.brake.helpers import command
 from tests.brake.rig import BrakeRig, Stream, brake_rig
 from tests.support import (
@@ -24,6 +23,7 @@ from tests.support import (
     router_process,
     wait_for,
 )
+from tools.sim.actuator import SimActuator
 
 pytestmark = pytest.mark.slow
 
