@@ -40,7 +40,7 @@ SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
 
 
-class BrakeService:
+class BrakeShell:
     def __init__(self, cfg: BrakeConfig, log: logging.Logger) -> None:
         s = cfg.brake
         self.cfg = cfg
