@@ -139,9 +139,6 @@ class BrakeShell:
             if self.core.version != version:   # a plain acknowledgement changes nothing
                 self._status_owed(now)
             self._log_transition(before)
-            # the line is delivered: this thread is awake anyway, the next command is
-            # tens of milliseconds away
-            self.core.prepare_next_line()
             owed = self._publish_at_ns is not None
         if owed:
             # the actuator answered: the line is delivered, the status no longer competes
