@@ -85,9 +85,9 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
         values.update(settings.overrides)
         for key, value in values.items():
             conf.insert_json5(key, json.dumps(value))
-    except BusError:
-        raise
-    except Exception as exc:  # zenoh raises ZError or ValueError with its own text
+    except (zenoh.ZError, TypeError, ValueError) as exc:
+        # ZError: a key, value or file zenoh refuses; TypeError/ValueError: an override
+        # that is not JSON
         raise BusError(f"invalid zenoh configuration: {exc}") from exc
     return conf
 
@@ -97,7 +97,7 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
     conf = zenoh_config(settings)
     try:
         return zenoh.open(conf)
-    except Exception as exc:
+    except zenoh.ZError as exc:
         raise BusError(f"cannot open zenoh session: {exc}") from exc
 
 
@@ -198,10 +198,8 @@ class Bus:
                 return
             try:
                 callback(msg, key)
-            except Exception as exc:  # never let a bug kill Zenoh's callback thread silently
-                self.callback_errors.add(spec.name)
-                self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
-                _log.debug("callback traceback", exc_info=True)
+            except Exception as exc:  # a subscriber's bug must not end delivery to the rest
+                self._callback_failed(spec, key, exc)
 
         return self.session.declare_subscriber(expr, _handler(on_sample, direct))
 
@@ -225,11 +223,11 @@ class Bus:
             if sample.kind != zenoh.SampleKind.PUT:
                 return
             t = mono_ns()
+            key = str(sample.key_expr)
             try:
-                callback(sample.payload.to_bytes(), str(sample.key_expr), t)
-            except Exception as exc:
-                self.callback_errors.add(spec.name)
-                self._rl.error(f"cb:{spec.name}", "callback_failed", error=repr(exc))
+                callback(sample.payload.to_bytes(), key, t)
+            except Exception as exc:  # a subscriber's bug must not end delivery to the rest
+                self._callback_failed(spec, key, exc)
 
         return self.session.declare_subscriber(expr, _handler(on_sample, direct))
 
@@ -265,6 +263,11 @@ class Bus:
                 out.append((msg, key))
         return out
 
+    def _callback_failed(self, spec: KeySpec[Any], key: str, exc: Exception) -> None:
+        self.callback_errors.add(spec.name)
+        self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
+        _log.debug("callback traceback", exc_info=True)
+
     def _decoded(self, spec: KeySpec[Any], msg_type: type[T], sample: zenoh.Sample,
                  key: str) -> T | None:
         """The sample's message; None, counted and logged, when it does not decode."""
@@ -285,7 +288,7 @@ class Bus:
         def on_query(query: zenoh.Query) -> None:
             try:
                 payload = encode(reply())
-            except Exception as exc:
+            except Exception as exc:  # the querier gets an error reply, not a timeout
                 self.callback_errors.add(spec.name)
                 self._rl.error(f"query:{spec.name}", "query_reply_failed", key=key,
                                error=repr(exc))

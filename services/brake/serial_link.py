@@ -112,9 +112,7 @@ class SerialLink:
             self._stop.wait(delay)
 
     def _read_until_failure(self, port: serial.Serial) -> str:
-        """Whatever the port holds, in one read per wake-up (common/serial_read.py):
-        pyserial's `read(in_waiting or 1)` was a third of the service's CPU at nominal
-        rates."""
+        """Whatever the port holds, in one read per wake-up (common/serial_read.py)."""
         reader = LineReader()
         while not self._stop.is_set():
             if self._write_error is not None:

@@ -19,6 +19,7 @@ start already leads to FAILSAFE.
 import logging
 import os
 import threading
+from collections import Counter
 from collections.abc import Callable
 
 import zenoh
@@ -46,6 +47,7 @@ class BrakeShell:
         self.cfg = cfg
         self._log = log
         self._rl = RateLimitedLog(log, cfg.log.repeat_interval_s)
+        self.errors: Counter[str] = Counter()   # the shell's own faults, in the status
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
@@ -112,11 +114,10 @@ class BrakeShell:
             if (self.core.state, self.core.command_state) != before:
                 self._status_owed(rx_mono_ns)
             else:
-                # Not from here: published at once it took a CPU from the line being
-                # delivered ("serial out" p50 0.34 -> 0.10 ms deferred). Nor a wake-up of
-                # its own (each costs 0.1-0.2 ms of CPU on a VM like CI's): the line's
-                # acknowledgement publishes it (serial reader), or the timer's next wake-up
-                # if the actuator does not answer.
+                # Not from here, nor by waking the timer for it: a status published now
+                # competes with the line for the CPU. The line's acknowledgement publishes
+                # it (serial reader), or the timer's next wake-up if the actuator does not
+                # answer.
                 self._status_owed(rx_mono_ns, wake_timer=False)
             rejection = self.core.last_rejection
             self._log_transition(before)
@@ -168,8 +169,11 @@ class BrakeShell:
             while not self._stopping:
                 try:
                     self._tick()
-                except Exception as exc:  # the deadline check must outlive a bug: log, go on
-                    self._rl.error("timer", "timer_tick_failed", error=repr(exc))
+                except Exception as exc:  # the deadline check must outlive a bug
+                    self.errors["timer_tick_failed"] += 1
+                    self._rl.error("timer", "timer_tick_failed", error=repr(exc),
+                                   state=self.core.state.value,
+                                   count=self.errors["timer_tick_failed"])
                     self._log.debug("timer traceback", exc_info=True)
                 now = mono_ns()
                 wake = now + self._period_ns
@@ -221,7 +225,8 @@ class BrakeShell:
                 self._publish_at_ns = None
             try:
                 publisher.put(status)
-            except Exception as exc:
+            except zenoh.ZError as exc:   # the session is closing
+                self.errors["status_publish_failed"] += 1
                 self._rl.error("status", "status_publish_failed", error=repr(exc))
 
     def _set_realtime_priority(self) -> None:
@@ -281,6 +286,6 @@ class BrakeShell:
             actuator_position_pct=v.actuator_position_pct, actuator_state=v.actuator_state,
             actuator_connected=v.actuator_connected, cmd_to_serial_us=self.cmd_to_serial_us,
             radar_to_serial_us=self.radar_to_serial_us, rejected=v.rejected,
-            counters=v.counters, state_since_mono_ns=v.since_ns,
+            counters={**v.counters, **self.errors}, state_since_mono_ns=v.since_ns,
             last_cmd_rx_mono_ns=v.last_cmd_rx_ns, command_state=v.command_state,
         )

@@ -33,6 +33,60 @@ def test_bad_override_and_missing_file_are_bus_errors():
         zenoh_config(ZenohSettings(overrides={"no/such/key": 1}))
     with pytest.raises(BusError, match="not found"):
         zenoh_config(ZenohSettings(config_file="/nonexistent.json5"))
+    with pytest.raises(BusError, match="invalid zenoh configuration"):   # not JSON
+        zenoh_config(ZenohSettings(overrides={"transport/unicast/max_links": {1, 2}}))
+
+
+def test_a_port_already_taken_is_a_bus_error():
+    import socket
+
+    from common.bus import open_session
+    from common.config.base import ZenohMode
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(BusError, match="cannot open zenoh session"):
+            open_session(ZenohSettings(mode=ZenohMode.PEER, connect=(),
+                                       listen=(f"tcp/127.0.0.1:{port}",)))
+
+
+def test_a_failing_callback_is_counted_and_later_samples_still_arrive(router):
+    with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:
+        got: list[int] = []
+        raw: list[str] = []
+
+        def picky(msg: BrakeCommand, key: str) -> None:
+            if msg.header.seq == 1:
+                raise RuntimeError("a bug in the subscriber")
+            got.append(msg.header.seq)
+
+        def picky_raw(payload: bytes, key: str, rx_mono_ns: int) -> None:
+            raw.append(key)
+            if len(raw) == 2:
+                raise RuntimeError("a bug in the raw subscriber")
+
+        sub_bus.subscribe(FUSION_BRAKE_CMD, picky, instance="primary")
+        sub_bus.subscribe_raw(BRAKE_STATUS, picky_raw)
+        pub = pub_bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        status_key = pub_bus.key(BRAKE_STATUS)
+
+        def first_samples() -> bool:    # until both subscriptions have propagated
+            pub.put(cmd(0))
+            if not raw:
+                pub_bus.session.put(status_key, b"x")
+            return bool(got) and bool(raw)
+
+        wait_for(first_samples, 30, 0.05, "first samples")
+        pub.put(cmd(1))
+        pub.put(cmd(2))
+        pub_bus.session.put(status_key, b"x")
+        pub_bus.session.put(status_key, b"x")
+        wait_for(lambda: 2 in got and len(raw) >= 3, 10, 0.02, "samples after the failures")
+        assert 1 not in got
+        assert sub_bus.callback_errors.get("fusion_brake_cmd") == 1
+        assert sub_bus.callback_errors.get("brake_status") == 1
 
 
 def test_publish_subscribe_through_a_router_and_count_garbage(router):
