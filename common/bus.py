@@ -25,6 +25,9 @@ from common.messages import DecodeError, decode, encode
 T = TypeVar("T", bound=msgspec.Struct)
 
 _log = logging.getLogger("bus")
+# a client retries its router from 100 ms, doubling up to this: a router that comes up
+# late is joined within a second
+CONNECT_RETRY_MAX_MS = 1000
 
 _PRIORITY = {
     Priority.REAL_TIME: zenoh.Priority.REAL_TIME,
@@ -79,7 +82,7 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             values["connect/exit_on_failure"] = False
             values["connect/retry"] = {
                 "period_init_ms": 100,
-                "period_max_ms": settings.connect_retry_max_ms,
+                "period_max_ms": CONNECT_RETRY_MAX_MS,
                 "period_increase_factor": 2,
             }
         values.update(settings.overrides)

@@ -2,14 +2,15 @@
 
 - Zenoh's callback thread: every BrakeCommand sample -> core -> serial write, right there
   (the command path: no queue, no hand-off to another thread);
-- the timer thread (`brake-timer`): wakes at the core's next due time (deadline expiry,
-  hold end, heartbeat, acknowledgement timeout) and at least every `timer_period_ms`,
-  so that silence is detected without any message arriving; it also publishes
-  BrakeStatus (at once on a change of state, and every `status_period_ms`);
+- the timer thread (`brake-timer`, one real-time priority above the command path): wakes
+  at the core's next due time (deadline expiry, hold end, heartbeat, acknowledgement
+  timeout) and at least every TIMER_PERIOD_S, so that silence is detected without any
+  message arriving; it also publishes BrakeStatus (at once on a change of state, and at
+  the key's nominal rate);
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
   actuator, port loss and reopening; it publishes the status owed for a command when the
   actuator acknowledges its line (the timer does at its next wake-up, at most
-  `timer_period_ms` later, if no acknowledgement comes first).
+  TIMER_PERIOD_S later, if no acknowledgement comes first).
 
 The timer and the serial link start before the Zenoh session exists (`attach` comes
 later, from whatever thread opened the session), so that a silent bus from the very
@@ -17,7 +18,6 @@ start already leads to FAILSAFE.
 """
 
 import logging
-import os
 import threading
 from collections import Counter
 from collections.abc import Callable
@@ -30,7 +30,7 @@ from common.config.brake import AgeClock, BrakeConfig
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
-from common.realtime import ThreadRealtime, apply_process
+from common.realtime import ThreadRealtime, apply_process, set_fifo
 from services.brake.core import BrakeCore, Outgoing
 from services.brake.protocol import BadLine
 from services.brake.serial_link import SerialLink
@@ -39,6 +39,8 @@ SERVICE = "brake"
 INSTANCE = "main"
 SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
+TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
+STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
 
 
 class BrakeShell:
@@ -53,8 +55,6 @@ class BrakeShell:
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
                               mono_ns())
         self.link = SerialLink(s.serial, self._on_link_up, self._on_link_down, self._on_rx, log)
-        self._period_ns = round(s.timer_period_ms * 1e6)
-        self._status_period_ns = round(s.status_period_ms * 1e6)
         self._stopping = False
         self._status_pub: TypedPublisher[BrakeStatus] | None = None
         self._subscriber: zenoh.Subscriber[None] | None = None
@@ -176,9 +176,9 @@ class BrakeShell:
                                    count=self.errors["timer_tick_failed"])
                     self._log.debug("timer traceback", exc_info=True)
                 now = mono_ns()
-                wake = now + self._period_ns
+                wake = now + round(TIMER_PERIOD_S * 1e9)
                 if self._status_pub is not None:
-                    wake = min(wake, self._last_status_ns + self._status_period_ns)
+                    wake = min(wake, self._last_status_ns + STATUS_PERIOD_NS)
                     if self._publish_at_ns is not None:
                         wake = min(wake, self._publish_at_ns)
                 due = self.core.next_due_ns(now)
@@ -207,7 +207,7 @@ class BrakeShell:
 
     def _status_due(self, now: int) -> bool:
         owed = self._publish_at_ns is not None and now >= self._publish_at_ns
-        return owed or now - self._last_status_ns >= self._status_period_ns
+        return owed or now - self._last_status_ns >= STATUS_PERIOD_NS
 
     def _publish_status(self, due: Callable[[int], bool]) -> None:
         """Publish BrakeStatus if `due(now)` still holds. Called without the lock, from the
@@ -230,12 +230,14 @@ class BrakeShell:
                 self._rl.error("status", "status_publish_failed", error=repr(exc))
 
     def _set_realtime_priority(self) -> None:
-        prio = self.cfg.brake.timer_realtime_priority
-        if prio <= 0:
+        """The deadline timer above the command path: a command callback that runs long
+        never delays the detection of silence."""
+        base = self.cfg.brake.realtime.priority
+        if base <= 0:
             return
+        prio = min(99, base + 1)
         try:
-            # pid 0 on Linux: the calling thread only
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            set_fifo(prio)
             self._log.info(kv("timer_realtime", priority=prio))
         except (OSError, AttributeError) as exc:
             self._log.warning(kv("timer_realtime_refused", priority=prio, error=exc))
