@@ -44,13 +44,6 @@ _CONGESTION = {
 }
 
 
-def _handler(on_sample: Callable[[zenoh.Sample], None],
-             direct: bool) -> Callable[[zenoh.Sample], None]:
-    """zenoh-python runs a plain callable on its own callback thread (`indirect`); a
-    direct one runs on the receive thread that got the sample."""
-    return zenoh.handlers.Callback(on_sample, indirect=False) if direct else on_sample
-
-
 class BusError(RuntimeError):
     """The Zenoh configuration is invalid or the session could not be opened."""
 
@@ -180,13 +173,10 @@ class Bus:
         self,
         spec: KeySpec[T],
         callback: Callable[[T, str], None],
-        direct: bool = False,
         **params: str,
     ) -> zenoh.Subscriber[None]:
         """Subscribe to a key (missing parameters become `*`); `callback(msg, key)` gets
-        decoded messages only. Undecodable payloads are counted and logged.
-
-        `direct`: see `subscribe_raw`."""
+        decoded messages only. Undecodable payloads are counted and logged."""
         msg_type = spec.msg_type
         if msg_type is None:
             raise ValueError(f"key {spec.name!r} carries no message")
@@ -204,21 +194,14 @@ class Bus:
             except Exception as exc:  # a subscriber's bug must not end delivery to the rest
                 self._callback_failed(spec, key, exc)
 
-        return self.session.declare_subscriber(expr, _handler(on_sample, direct))
+        return self.session.declare_subscriber(expr, on_sample)
 
     def subscribe_raw(
-        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None],
-        direct: bool = False, **params: str,
+        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None], **params: str,
     ) -> zenoh.Subscriber[None]:
         """Subscribe without decoding: `callback(payload, key, receipt_mono_ns)`.
 
         For shells that decode off Zenoh's thread (e.g. JPEG frames) or time the receipt.
-
-        `direct`: run the callback on Zenoh's receive thread instead of handing each
-        sample to zenoh-python's callback thread (one thread wake-up less per sample).
-        Only for short callbacks on the latency path: while it runs, every other sample
-        arriving on the same link waits, and it must never wait for Zenoh itself (a
-        query, a subscription).
         """
         expr = spec.wildcard(self.vehicle, **params)
 
@@ -232,7 +215,7 @@ class Bus:
             except Exception as exc:  # a subscriber's bug must not end delivery to the rest
                 self._callback_failed(spec, key, exc)
 
-        return self.session.declare_subscriber(expr, _handler(on_sample, direct))
+        return self.session.declare_subscriber(expr, on_sample)
 
     def subscribe_queued(
         self, spec: KeySpec[Any], capacity: int, **params: str,

@@ -5,7 +5,7 @@ import pytest
 from common.bus import Bus, BusError, zenoh_config
 from common.config.base import ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-from common.messages import Decision, VerifierStatus
+from common.messages import Decision, VerifierStatus, decode, encode
 from common.messages.fusion import BrakeCommand
 from common.messages.header import Header
 from tests.support import Collector, HealthWatch, open_bus, wait_for
@@ -209,3 +209,19 @@ def test_queued_subscription_keeps_samples_until_drained_and_counts_garbage(rout
         assert sub_bus.decode_errors.get("fusion_brake_cmd") == 1
         assert sub_bus.drain_queued(FUSION_BRAKE_CMD, queued) == []
         queued.undeclare()
+
+
+def test_put_bytes_publishes_the_payload_unchanged(router):
+    with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:
+        got: list[bytes] = []
+        sub_bus.subscribe_raw(FUSION_BRAKE_CMD, lambda p, k, t: got.append(p),
+                              instance="primary")
+        pub = pub_bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        data = encode(cmd(5))
+
+        def seen() -> bool:
+            pub.put_bytes(data)
+            return bool(got)
+
+        wait_for(seen, 30, 0.05, "the raw payload")
+        assert got[0] == data and decode(got[0], BrakeCommand).header.seq == 5
