@@ -26,8 +26,8 @@ from common.config.base import ZenohMode, ZenohSettings
 from common.keys import REGISTRY, KeySpec
 from common.log import setup_logging
 from common.service import stop_event_on_signals
-from tools.monitoring.state import MonitorState
-from tools.monitoring.view import render_text, snapshot
+from tools.monitor.state import MonitorState
+from tools.monitor.view import render_text, snapshot
 from tools.sim.messages import SIM_WORLD
 
 _LOOPBACK = ("127.", "localhost", "[::1]")

@@ -13,7 +13,7 @@ from common.keys import (
     RADAR_TRACKS,
     KeySpec,
 )
-from tools.monitoring.state import MonitorState
+from tools.monitor.state import MonitorState
 from tools.sim.messages import SIM_WORLD
 
 _NS = 1_000_000_000
