@@ -24,11 +24,11 @@ from services.brake.protocol import (
     Ack,
     ActuatorState,
     BadLine,
+    Command,
     Fault,
     HostMode,
     Nak,
     ProtocolError,
-    command_line,
     decode,
     level_to_wire,
 )
@@ -51,12 +51,9 @@ def _ns(ms: float) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Outgoing:
-    """A line to write to the actuator now."""
+    """A command line to write to the actuator now."""
 
-    seq: int
-    line: bytes
-    level_pct: int
-    mode: HostMode
+    frame: Command
     cmd: BrakeCommand | None   # the accepted command that caused it (None: timer, link)
 
 
@@ -402,11 +399,10 @@ class BrakeCore:
         mode = _MODE[self.state]
         seq = self._tx_seq
         self._tx_seq = (seq + 1) % SEQ_MODULO
-        line = command_line(seq, self._wire_level, self._ttl_ms, mode)
         self._unacked.append((seq, now))
         if len(self._unacked) > MAX_UNACKED:
             self._unacked.popleft()
         self._last_tx_ns = now
         self._last_tx = (self._wire_level, mode)
         self.counters["tx_lines"] += 1
-        return Outgoing(seq, line, self._wire_level, mode, cmd)
+        return Outgoing(Command(seq, self._wire_level, self._ttl_ms, mode), cmd)

@@ -10,13 +10,15 @@
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
   actuator, port loss and reopening; it publishes the status owed for a command when the
   actuator acknowledges its line (the timer does at its next wake-up, at most
-  TIMER_PERIOD_S later, if no acknowledgement comes first).
+  TIMER_PERIOD_S later, if no acknowledgement comes first), and builds the line most
+  likely written next (`LineAhead`), so that the command path finds it ready.
 
 The timer and the serial link start before the Zenoh session exists (`attach` comes
 later, from whatever thread opened the session), so that a silent bus from the very
 start already leads to FAILSAFE.
 """
 
+import dataclasses
 import logging
 import threading
 from collections import Counter
@@ -32,7 +34,7 @@ from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
 from common.realtime import ThreadRealtime, apply_process, set_fifo
 from services.brake.core import BrakeCore, Outgoing
-from services.brake.protocol import BadLine
+from services.brake.protocol import SEQ_MODULO, BadLine, Command, encode
 from services.brake.serial_link import SerialLink
 
 SERVICE = "brake"
@@ -41,6 +43,29 @@ SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
 TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
 STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
+
+
+class LineAhead:
+    """The actuator line of each frame the core sends. `prepare` builds, off the command
+    path, the line of the frame most likely sent next; `line` hands it out when the frame
+    is that one and builds any other on the spot. Not thread-safe: the shell's lock."""
+
+    def __init__(self) -> None:
+        self._ready: tuple[Command, bytes] | None = None
+
+    def line(self, frame: Command) -> bytes:
+        ready, self._ready = self._ready, None
+        if ready is not None and ready[0] == frame:
+            return ready[1]
+        return encode(frame)
+
+    def prepare(self, frame: Command) -> None:
+        self._ready = (frame, encode(frame))
+
+
+def next_frame(frame: Command) -> Command:
+    """The frame sent after `frame` if nothing changes: the next sequence number."""
+    return dataclasses.replace(frame, seq=(frame.seq + 1) % SEQ_MODULO)
 
 
 class BrakeShell:
@@ -55,6 +80,8 @@ class BrakeShell:
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
                               mono_ns())
         self.link = SerialLink(s.serial, self._on_link_up, self._on_link_down, self._on_rx, log)
+        self._lines = LineAhead()
+        self._last_frame: Command | None = None   # the last line written
         self._stopping = False
         self._status_pub: TypedPublisher[BrakeStatus] | None = None
         self._subscriber: zenoh.Subscriber[None] | None = None
@@ -140,6 +167,10 @@ class BrakeShell:
             if self.core.version != version:   # a plain acknowledgement changes nothing
                 self._status_owed(now)
             self._log_transition(before)
+            if self._last_frame is not None:
+                # the line is delivered and the next command is a radar cycle away: this
+                # thread, awake anyway, builds the next line
+                self._lines.prepare(next_frame(self._last_frame))
             owed = self._publish_at_ns is not None
         if owed:
             # the actuator answered: the line is delivered, the status no longer competes
@@ -253,9 +284,10 @@ class BrakeShell:
                 self._cond.notify()
 
     def _write(self, out: Outgoing, rx_mono_ns: int | None) -> None:
-        if not self.link.write(out.line):
+        if not self.link.write(self._lines.line(out.frame)):
             self.core.on_link(False, mono_ns(), "write failed")
             return
+        self._last_frame = out.frame
         if out.cmd is None or rx_mono_ns is None:
             return
         written = mono_ns()

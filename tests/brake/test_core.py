@@ -53,7 +53,8 @@ class Rig:
     def _record(self, out: Outgoing | None) -> None:
         if out is None:
             return
-        frame = decode(out.line[:-1])
+        frame = decode(encode_line(out.frame))   # a valid line, checksum included
+        assert frame == out.frame
         assert isinstance(frame, Command)
         self.lines.append((self.t, frame))
         if self.auto_ack:
@@ -107,7 +108,7 @@ class Rig:
         return self
 
 
-def encode_line(frame: Ack | Fault | Nak) -> bytes:
+def encode_line(frame: Command | Ack | Fault | Nak) -> bytes:
     from services.brake.protocol import encode as encode_frame
 
     return encode_frame(frame)[:-1]
