@@ -43,6 +43,7 @@ SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
 TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
 STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
+_TIMER_PERIOD_NS = round(TIMER_PERIOD_S * 1e9)
 
 
 class LineAhead:
@@ -207,7 +208,7 @@ class BrakeShell:
                                    count=self.errors["timer_tick_failed"])
                     self._log.debug("timer traceback", exc_info=True)
                 now = mono_ns()
-                wake = now + round(TIMER_PERIOD_S * 1e9)
+                wake = now + _TIMER_PERIOD_NS
                 if self._status_pub is not None:
                     wake = min(wake, self._last_status_ns + STATUS_PERIOD_NS)
                     if self._publish_at_ns is not None:
