@@ -3,7 +3,7 @@
     python -m benchmarks.bench_brake [--quick] [--out out/bench] [--count N] [--rate-hz R]
 
 Starts a Zenoh router and the brake service (`python -m services.brake`) as their own
-processes; the SIMULATED actuator (services/brake/sim_actuator.py) runs in this process
+processes; the SIMULATED actuator (tools/sim/actuator.py) runs in this process
 on a pty and timestamps every line it reads. This process publishes BrakeCommands at
 `--rate-hz` (BRAKE at 50% once armed), then measures, for each command:
 
@@ -45,8 +45,9 @@ from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, Decision, Header, VerifierStatus
 from common.net import free_port
-from services.brake.pty_pair import PtyPair
-from services.brake.sim_actuator import SimActuator
+from services.brake.shell import TIMER_PERIOD_S
+from tools.sim.actuator import SimActuator
+from tools.sim.pty_pair import PtyPair
 
 WARMUP = 20
 BASELINE_INSTANCE = "bench"
@@ -163,13 +164,13 @@ def relay_main(endpoint: str, port: str) -> int:
     def relay(payload: bytes, key: str, rx_mono_ns: int) -> None:
         os.write(fd, line)
 
-    # the brake service's timer wakes at least every timer_period_ms (50 ms); the same
+    # the brake service's timer wakes at least every TIMER_PERIOD_S (50 ms); the same
     # here, so that both processes run under the same conditions (a process that sleeps
-    # longer wakes up slower on this kind of VM)
+    # longer wakes up slower)
     stop = threading.Event()
 
     def idle_timer() -> None:
-        while not stop.wait(0.05):
+        while not stop.wait(TIMER_PERIOD_S):
             pass
 
     threading.Thread(target=idle_timer, daemon=True).start()

@@ -21,7 +21,7 @@ from benchmarks.processes import stop_processes
 from tools.sim.scenario import find_scenario, load_scenario
 from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 
-# Issue 6: radar under 5% of a core, fusion under 15%, brake under 2%, each under 150 MB.
+# The bars: radar under 5% of a core, fusion under 15%, brake under 2%, each under 150 MB.
 CPU_TARGET_PCT = {"radar": 5.0, "fusion": 15.0, "brake": 2.0}
 RSS_TARGET_MB = 150.0
 SERVICES = ("radar", "camera", "fusion", "brake")

@@ -14,11 +14,6 @@ between. Three relay processes, one per service of the chain:
 - `serial` writes a brake command line to its serial port for every payload (the brake
   service's write path: straight to the fd), then prints the chain's stamps on stdout.
 
-`--work codec` makes each relay do the least work a Python implementation of its service
-must do (benchmarks/codec_floor.py): the radar's frames and the project's messages decoded
-and encoded, nothing decided. Its payloads are then the encoded messages, with the stamps
-appended after them.
-
 Every key is under another vehicle id (`--vehicle`, default `floor`) so that nothing of
 the stack sees these payloads. Payloads are stamps (monotonic ns, little-endian int64)
 padded to size: `counter, can_rx, can_pub[, hop_rx, hop_pub]`. The `serial` relay prints
@@ -27,16 +22,13 @@ Each relay declares `health/floor-<role>/main` once it serves and stops on SIGTE
 """
 
 import argparse
-import json
 import os
 import select
 import struct
 import sys
 import threading
 from collections.abc import Callable
-from typing import Any
 
-from benchmarks.codec_floor import FusionCodec, RadarCodec, brake_line
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
@@ -130,38 +122,19 @@ class CycleEnd:
         return False
 
 
-def settings(endpoint: str, overrides: dict[str, Any] | None = None) -> ZenohSettings:
-    return ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,),
-                         overrides=dict(overrides or {}))
-
-
-def parse_override(text: str) -> tuple[str, Any]:
-    """`KEY=JSON` (a raw Zenoh config key and its value). Raises ValueError."""
-    key, sep, value = text.partition("=")
-    if not sep or not key:
-        raise ValueError(f"{text!r} is not KEY=JSON")
-    return key, json.loads(value)
-
-
-def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: int,
-            codec: bool = False) -> None:
+def run_can(bus: Bus, channel: str, stop: threading.Event) -> None:
     pub = bus.publisher(RADAR_TRACKS, sensor=SENSOR)
-    radar = RadarCodec(SENSOR) if codec else None
-    sizes = [] if codec else [tracks_size(n) for n in range(MAX_OBJECTS + 1)]
+    sizes = [tracks_size(n) for n in range(MAX_OBJECTS + 1)]
 
     def publish(end: CycleEnd, rx: int) -> None:
-        if radar is None:
-            head = _STAMPS.pack(end.counter, rx, mono_ns())
-            pub.put_bytes(pad(head, sizes[min(end.objects, MAX_OBJECTS)]))
-        else:
-            msg, pub_ns = radar.tracks(end.counter, rx, wall_ns(), mono_ns)
-            pub.put_bytes(msg + _STAMPS.pack(end.counter, rx, pub_ns))
+        head = _STAMPS.pack(end.counter, rx, mono_ns())
+        pub.put_bytes(pad(head, sizes[min(end.objects, MAX_OBJECTS)]))
 
     fd = os.open(channel, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
     try:
         os.write(fd, b"O\r")            # as python-can opens the channel: the link sees it
         bus.declare_health("floor-can", "main")
-        end = CycleEnd(frames_per_object)
+        end = CycleEnd()
         buf = b""
         while not stop.is_set():
             ready, _, _ = select.select([fd], [], [], 0.2)
@@ -174,34 +147,27 @@ def run_can(bus: Bus, channel: str, stop: threading.Event, frames_per_object: in
             rx = mono_ns()
             *lines, buf = (buf + chunk).split(b"\r")
             for line in lines:
-                if radar is not None:
-                    radar.line(line)
                 if end.line(line):
                     publish(end, rx)
     finally:
         os.close(fd)
 
 
-def run_hop(bus: Bus, stop: threading.Event, direct: bool, codec: bool = False) -> None:
+def run_hop(bus: Bus, stop: threading.Event) -> None:
     pub = bus.publisher(FUSION_BRAKE_CMD, instance=INSTANCE)
     size = command_size()
-    fusion = FusionCodec(INSTANCE)
 
     def forward(payload: bytes, key: str, rx: int) -> None:
-        if codec:
-            msg, pub_ns = fusion.command(memoryview(payload)[:-_STAMPS.size], mono_ns)
-            pub.put_bytes(msg + payload[-_STAMPS.size:] + _HOP_STAMPS.pack(rx, pub_ns))
-            return
         head = payload[:_STAMPS.size] + _HOP_STAMPS.pack(rx, mono_ns())
         pub.put_bytes(pad(head, size))
 
-    bus.subscribe_raw(RADAR_TRACKS, forward, direct=direct, sensor=SENSOR)
+    bus.subscribe_raw(RADAR_TRACKS, forward, sensor=SENSOR)
     bus.declare_health("floor-hop", "main")
     stop.wait()
 
 
 def run_serial(bus: Bus, port: str, stop: threading.Event,
-               report: Callable[[str], None], direct: bool, codec: bool = False) -> None:
+               report: Callable[[str], None]) -> None:
     import serial
 
     ser = serial.Serial(port, 115200, timeout=0.05, write_timeout=0.02)
@@ -209,13 +175,12 @@ def run_serial(bus: Bus, port: str, stop: threading.Event,
     n = _STAMPS.size + _HOP_STAMPS.size
 
     def write(payload: bytes, key: str, rx: int) -> None:
-        # codec: the stamps follow the message; otherwise they are the payload's head
-        os.write(ser.fd, brake_line(memoryview(payload)[:-n]) if codec else line)
+        os.write(ser.fd, line)
         written = mono_ns()
-        stamps = struct.unpack("<qqqqq", payload[-n:] if codec else payload[:n])
+        stamps = struct.unpack("<qqqqq", payload[:n])
         report(" ".join(str(v) for v in (*stamps, rx, written)))
 
-    bus.subscribe_raw(FUSION_BRAKE_CMD, write, direct=direct, instance=INSTANCE)
+    bus.subscribe_raw(FUSION_BRAKE_CMD, write, instance=INSTANCE)
     bus.declare_health("floor-serial", "main")
     stop.wait()
     ser.close()
@@ -235,37 +200,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--vehicle", default=VEHICLE)
     parser.add_argument("--channel", help="can: the slcan pty to read")
     parser.add_argument("--port", help="serial: the serial port to write")
-    parser.add_argument("--frames-per-object", type=int, default=FRAMES_PER_OBJECT)
-    parser.add_argument("--work", choices=("none", "codec"), default="none",
-                        help="none: forward stamps; codec: decode and encode the real "
-                             "frames and messages (benchmarks/codec_floor.py)")
-    parser.add_argument("--direct", action="store_true",
-                        help="callbacks on Zenoh's receive thread (Bus.subscribe_raw direct)")
     parser.add_argument("--realtime-priority", type=int, default=0, choices=range(100),
                         metavar="0..99", help="SCHED_FIFO for every thread (as the stack's)")
-    parser.add_argument("--zenoh", action="append", default=[], metavar="KEY=JSON",
-                        help="a raw Zenoh config override, as the services get (repeatable)")
     args = parser.parse_args(argv)
-    try:
-        overrides = dict(parse_override(o) for o in args.zenoh)
-    except ValueError as exc:
-        parser.error(str(exc))
     if args.role == "can" and not args.channel:
         parser.error("can needs --channel")
     if args.role == "serial" and not args.port:
         parser.error("serial needs --port")
-    codec = args.work == "codec"
     stop = stop_event_on_signals()
     # as the router: every thread of a relay is on its path, and inherits the policy
     ThreadRealtime(RealtimeSettings(priority=args.realtime_priority),
                    setup_logging("floor_relay"), f"floor relay {args.role}").ensure()
-    with Bus.open(settings(args.connect, overrides), args.vehicle, f"floor/{args.role}") as bus:
+    settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(args.connect,))
+    with Bus.open(settings, args.vehicle, f"floor/{args.role}") as bus:
         if args.role == "can":
-            run_can(bus, args.channel, stop, args.frames_per_object, codec)
+            run_can(bus, args.channel, stop)
         elif args.role == "hop":
-            run_hop(bus, stop, args.direct, codec)
+            run_hop(bus, stop)
         else:
-            run_serial(bus, args.port, stop, _print_line, args.direct, codec)
+            run_serial(bus, args.port, stop, _print_line)
     return 0
 
 

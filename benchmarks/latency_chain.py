@@ -36,10 +36,6 @@ STAGE_TITLES = {
     "brake_write": "brake: validate + write",
     "serial_out": "serial out (pty)",
 }
-# the same stages as column headings of a narrow table
-STAGE_SHORT = {"can_in": "CAN in", "decode_track": "track", "hop_radar_fusion": "hop 1",
-               "verify_decide": "decide", "hop_fusion_brake": "hop 2", "brake_write": "brake",
-               "serial_out": "serial"}
 ZENOH_HOPS = ("hop_radar_fusion", "hop_fusion_brake")
 # A line later than this after the receipt that should have caused it is not its line.
 DEFAULT_MAX_NS = 20_000_000
@@ -135,19 +131,6 @@ def stages_ns(chains: Sequence[Chain]) -> dict[str, list[int]]:
             out[name].append(c[i + 1] - c[i])
         out["total"].append(c[-1] - c[0])
     return out
-
-
-def by_detections(chains: Sequence[Chain], detections: dict[int, int],
-                  top: int = 4) -> dict[str, list[Chain]]:
-    """The stack's chains grouped by how many detections their radar cycle had (`0`,
-    `1`, ... `<top>+`), found by the RadarTracks' publication stamp (`chain[2]`) in
-    `detections`; chains not in it are left out. Groups in increasing order."""
-    groups: dict[int, list[Chain]] = {}
-    for c in chains:
-        n = detections.get(c[2])
-        if n is not None:
-            groups.setdefault(min(n, top), []).append(c)
-    return {(f"{k}+" if k == top else str(k)): groups[k] for k in sorted(groups)}
 
 
 def zenoh_ns(chains: Sequence[Chain]) -> list[int]:

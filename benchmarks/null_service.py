@@ -1,5 +1,6 @@
 """The cost floor of a service: a Python process with a Zenoh session that receives every
-key of the stack and does nothing with it. `python -m benchmarks.null_service --connect EP`.
+key of the stack (the simulator's too) and does nothing with it.
+`python -m benchmarks.null_service --connect EP`.
 
 Ready when its liveliness token `health/bench/null` is up; stops on SIGTERM.
 """
@@ -11,6 +12,7 @@ from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import REGISTRY
 from common.service import stop_event_on_signals
+from tools.sim.messages import SIM_WORLD
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
 
     settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(args.connect,))
     with Bus.open(settings, args.vehicle, "bench/null") as bus:
-        subs = [bus.subscribe_raw(spec, on_raw) for spec in REGISTRY.values()
+        subs = [bus.subscribe_raw(spec, on_raw) for spec in (*REGISTRY.values(), SIM_WORLD)
                 if spec.msg_type is not None]
         token = bus.declare_health("bench", "null")
         stop.wait()

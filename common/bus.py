@@ -25,6 +25,9 @@ from common.messages import DecodeError, decode, encode
 T = TypeVar("T", bound=msgspec.Struct)
 
 _log = logging.getLogger("bus")
+# a client retries its router from 100 ms, doubling up to this: a router that comes up
+# late is joined within a second
+CONNECT_RETRY_MAX_MS = 1000
 
 _PRIORITY = {
     Priority.REAL_TIME: zenoh.Priority.REAL_TIME,
@@ -39,13 +42,6 @@ _CONGESTION = {
     Congestion.BLOCK: zenoh.CongestionControl.BLOCK,
     Congestion.DROP: zenoh.CongestionControl.DROP,
 }
-
-
-def _handler(on_sample: Callable[[zenoh.Sample], None],
-             direct: bool) -> Callable[[zenoh.Sample], None]:
-    """zenoh-python runs a plain callable on its own callback thread (`indirect`); a
-    direct one runs on the receive thread that got the sample."""
-    return zenoh.handlers.Callback(on_sample, indirect=False) if direct else on_sample
 
 
 class BusError(RuntimeError):
@@ -79,15 +75,15 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             values["connect/exit_on_failure"] = False
             values["connect/retry"] = {
                 "period_init_ms": 100,
-                "period_max_ms": settings.connect_retry_max_ms,
+                "period_max_ms": CONNECT_RETRY_MAX_MS,
                 "period_increase_factor": 2,
             }
         values.update(settings.overrides)
         for key, value in values.items():
             conf.insert_json5(key, json.dumps(value))
-    except BusError:
-        raise
-    except Exception as exc:  # zenoh raises ZError or ValueError with its own text
+    except (zenoh.ZError, TypeError, ValueError) as exc:
+        # ZError: a key, value or file zenoh refuses; TypeError/ValueError: an override
+        # that is not JSON
         raise BusError(f"invalid zenoh configuration: {exc}") from exc
     return conf
 
@@ -97,7 +93,7 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
     conf = zenoh_config(settings)
     try:
         return zenoh.open(conf)
-    except Exception as exc:
+    except zenoh.ZError as exc:
         raise BusError(f"cannot open zenoh session: {exc}") from exc
 
 
@@ -177,13 +173,10 @@ class Bus:
         self,
         spec: KeySpec[T],
         callback: Callable[[T, str], None],
-        direct: bool = False,
         **params: str,
     ) -> zenoh.Subscriber[None]:
         """Subscribe to a key (missing parameters become `*`); `callback(msg, key)` gets
-        decoded messages only. Undecodable payloads are counted and logged.
-
-        `direct`: see `subscribe_raw`."""
+        decoded messages only. Undecodable payloads are counted and logged."""
         msg_type = spec.msg_type
         if msg_type is None:
             raise ValueError(f"key {spec.name!r} carries no message")
@@ -198,26 +191,17 @@ class Bus:
                 return
             try:
                 callback(msg, key)
-            except Exception as exc:  # never let a bug kill Zenoh's callback thread silently
-                self.callback_errors.add(spec.name)
-                self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
-                _log.debug("callback traceback", exc_info=True)
+            except Exception as exc:  # a subscriber's bug must not end delivery to the rest
+                self._callback_failed(spec, key, exc)
 
-        return self.session.declare_subscriber(expr, _handler(on_sample, direct))
+        return self.session.declare_subscriber(expr, on_sample)
 
     def subscribe_raw(
-        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None],
-        direct: bool = False, **params: str,
+        self, spec: KeySpec[Any], callback: Callable[[bytes, str, int], None], **params: str,
     ) -> zenoh.Subscriber[None]:
         """Subscribe without decoding: `callback(payload, key, receipt_mono_ns)`.
 
         For shells that decode off Zenoh's thread (e.g. JPEG frames) or time the receipt.
-
-        `direct`: run the callback on Zenoh's receive thread instead of handing each
-        sample to zenoh-python's callback thread (one thread wake-up less per sample).
-        Only for short callbacks on the latency path: while it runs, every other sample
-        arriving on the same link waits, and it must never wait for Zenoh itself (a
-        query, a subscription).
         """
         expr = spec.wildcard(self.vehicle, **params)
 
@@ -225,13 +209,13 @@ class Bus:
             if sample.kind != zenoh.SampleKind.PUT:
                 return
             t = mono_ns()
+            key = str(sample.key_expr)
             try:
-                callback(sample.payload.to_bytes(), str(sample.key_expr), t)
-            except Exception as exc:
-                self.callback_errors.add(spec.name)
-                self._rl.error(f"cb:{spec.name}", "callback_failed", error=repr(exc))
+                callback(sample.payload.to_bytes(), key, t)
+            except Exception as exc:  # a subscriber's bug must not end delivery to the rest
+                self._callback_failed(spec, key, exc)
 
-        return self.session.declare_subscriber(expr, _handler(on_sample, direct))
+        return self.session.declare_subscriber(expr, on_sample)
 
     def subscribe_queued(
         self, spec: KeySpec[Any], capacity: int, **params: str,
@@ -265,6 +249,11 @@ class Bus:
                 out.append((msg, key))
         return out
 
+    def _callback_failed(self, spec: KeySpec[Any], key: str, exc: Exception) -> None:
+        self.callback_errors.add(spec.name)
+        self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
+        _log.debug("callback traceback", exc_info=True)
+
     def _decoded(self, spec: KeySpec[Any], msg_type: type[T], sample: zenoh.Sample,
                  key: str) -> T | None:
         """The sample's message; None, counted and logged, when it does not decode."""
@@ -285,7 +274,7 @@ class Bus:
         def on_query(query: zenoh.Query) -> None:
             try:
                 payload = encode(reply())
-            except Exception as exc:
+            except Exception as exc:  # the querier gets an error reply, not a timeout
                 self.callback_errors.add(spec.name)
                 self._rl.error(f"query:{spec.name}", "query_reply_failed", key=key,
                                error=repr(exc))

@@ -21,7 +21,6 @@ from common.messages import (
     RadarTracks,
     VerifiedTargets,
 )
-from common.messages.sim import SimWorld
 
 ROOT = "aeb"
 
@@ -142,10 +141,6 @@ EGO_MOTION: KeySpec[EgoMotion] = KeySpec(
     "ego_motion", "vehicle/motion", EgoMotion,
     rate_hz=50.0, max_age_s=0.1, qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
 )
-SIM_WORLD: KeySpec[SimWorld] = KeySpec(
-    "sim_world", "sim/world", SimWorld,
-    rate_hz=50.0, max_age_s=1.0, qos=QoS(Priority.DATA_HIGH, Congestion.DROP, express=True),
-)
 HEALTH: KeySpec[Any] = KeySpec(
     "health", "health/{service}/{instance}", None,
     rate_hz=None, max_age_s=None, qos=QoS(),
@@ -155,6 +150,6 @@ REGISTRY: dict[str, KeySpec[Any]] = {
     spec.name: spec
     for spec in (
         RADAR_TRACKS, RADAR_STATUS, CAMERA_JPEG, CAMERA_INFO,
-        FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, SIM_WORLD, HEALTH,
+        FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, HEALTH,
     )
 }

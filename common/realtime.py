@@ -9,12 +9,12 @@ thread. What gets it (settings: common/config/realtime.py, `priority` > 0):
 - the thread that runs a service's latency path, set by the thread itself the first time
   it runs it (`ThreadRealtime.ensure`): the radar's CAN loop, the Zenoh callback that
   carries a radar cycle in fusion and a command in the brake;
-- with `zenoh_threads`, the process's Zenoh receive and transmit threads (zenoh's `rx-N`
-  and `tx-N` runtimes, found by thread name), which carry every sample in and out;
-- with `other_threads`, every other thread of the process still on normal scheduling, one
-  priority lower: a frame decoder or a serial reader that holds the GIL when a radar cycle
-  arrives is then never preempted by the rest of the machine while the latency path waits
-  for it (Python's GIL has no priority inheritance).
+- the process's Zenoh receive and transmit threads (zenoh's `rx-N` and `tx-N` runtimes,
+  found by thread name), which carry every sample in and out;
+- every other thread of the process still on normal scheduling, one priority lower: a
+  frame decoder or a serial reader that holds the GIL when a radar cycle arrives is then
+  never preempted by the rest of the machine while the latency path waits for it
+  (Python's GIL has no priority inheritance).
 
 Each of these threads blocks (select, epoll, condition variables) between samples and
 does bounded work per sample; none polls. With a priority, the GIL's switch interval is
@@ -26,9 +26,10 @@ their other threads (decoders, timers, serial readers) from the main thread befo
 Refused (no root or CAP_SYS_NICE, not Linux), a warning is logged once and the thread
 keeps normal scheduling.
 
-`freeze_gc` (gc.freeze once started): the objects of start-up (modules, configuration,
-Zenoh and numpy state) leave the collector's generations, so that a full collection,
-which Python runs now and then on whatever thread allocates, does not walk them.
+`apply_process` also freezes the collector (gc.freeze once started): the objects of
+start-up (modules, configuration, Zenoh and numpy state) leave the collector's
+generations, so that a full collection, which Python runs now and then on whatever thread
+allocates, does not walk them.
 """
 
 import gc
@@ -100,9 +101,8 @@ def apply_process(settings: RealtimeSettings, log: logging.Logger) -> list[str]:
     threads started): freeze the collector and, with a priority, shorten the GIL's switch
     interval and make the Zenoh I/O threads and the other threads real-time. Returns
     `name:priority` of each thread changed (empty when refused or off)."""
-    if settings.freeze_gc:
-        gc.collect()
-        gc.freeze()
+    gc.collect()
+    gc.freeze()
     if settings.priority <= 0:
         return []
     # A real-time thread that wants the GIL from a normal one waits up to this interval
@@ -111,15 +111,12 @@ def apply_process(settings: RealtimeSettings, log: logging.Logger) -> list[str]:
     done: list[str] = []
     names = thread_names()
     zenoh = zenoh_io_threads(names)
-    plan: list[tuple[int, str, int]] = []
-    if settings.zenoh_threads:
-        plan += [(tid, name, settings.priority) for tid, name in sorted(zenoh.items())]
-        if not zenoh:
-            log.warning(kv("realtime_zenoh_threads_not_found", expected="rx-N,tx-N"))
-    if settings.other_threads:
-        other = max(1, settings.priority - 1)
-        plan += [(tid, name, other) for tid, name in sorted(names.items())
-                 if tid not in zenoh and _normal(tid)]
+    if not zenoh:
+        log.warning(kv("realtime_zenoh_threads_not_found", expected="rx-N,tx-N"))
+    other = max(1, settings.priority - 1)
+    plan = [(tid, name, settings.priority) for tid, name in sorted(zenoh.items())]
+    plan += [(tid, name, other) for tid, name in sorted(names.items())
+             if tid not in zenoh and _normal(tid)]
     for tid, name, priority in plan:
         try:
             set_fifo(priority, tid)

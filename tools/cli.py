@@ -11,13 +11,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "camera": ("services.camera.main", "camera service: frames to JPEG on Zenoh"),
     "fusion": ("services.fusion.main", "fusion service: verify tracks in the image, decide"),
     "brake": ("services.brake.main", "brake service: commands to the actuator, fail-safe"),
-    "sim-actuator": ("services.brake.sim_actuator", "simulated brake actuator on a serial port"),
+    "sim-actuator": ("tools.sim.actuator", "simulated brake actuator on a serial port"),
     "calib-check": ("tools.calib_check", "draw projected radar tracks over a frame (PNG)"),
     "router": ("common.router", "a Zenoh router"),
-    "up": ("tools.launcher", "start the router and services of a process table"),
+    "up": ("tools.launch.main", "start the router and services of a process table"),
     "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
-    "monitor": ("tools.monitor", "live view of tracks, targets, brake state, health"),
-    "ab-report": ("tools.ab_report", "where a primary and a candidate fusion disagreed"),
+    "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
+    "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
 }
 

@@ -32,7 +32,7 @@ from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
 from common.log import setup_logging
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, render
-from tools.ab_report import Feeder
+from tools.ab.feeder import Feeder
 from tools.sim.latency import chain_latencies_ns
 from tools.sim.plot import plot_timeline
 from tools.sim.radar_feed import RadarFeed

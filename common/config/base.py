@@ -30,7 +30,6 @@ class ZenohSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     config_file: str = ""
     multicast_scouting: bool = False
     gossip_scouting: bool = False
-    connect_retry_max_ms: Annotated[int, msgspec.Meta(ge=100)] = 1000
     overrides: dict[str, Any] = msgspec.field(default_factory=dict)
 
     def __post_init__(self) -> None:

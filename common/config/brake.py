@@ -32,15 +32,10 @@ class SerialSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     port: str = "/dev/ttyACM0"
     baudrate: Annotated[int, msgspec.Meta(gt=0)] = 115200
     exclusive: bool = True                    # flock: a second brake process cannot open it
-    write_timeout_ms: _Ms = 20.0              # a stuck port cannot block the command path longer
-    reconnect_min_ms: _Ms = 100.0
-    reconnect_max_ms: _Ms = 2000.0
 
     def __post_init__(self) -> None:
         if not self.port:
             raise ValueError("serial.port must name a device")
-        if self.reconnect_max_ms < self.reconnect_min_ms:
-            raise ValueError("reconnect_max_ms must be >= reconnect_min_ms")
 
 
 class ActuatorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -59,9 +54,6 @@ class ActuatorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     instance: str = "primary"          # the one fusion instance whose commands count
     deadline_ms: _Ms = 200.0           # no valid command for this long: FAILSAFE
-    # the timer also wakes at every due time (the deadline itself): this is its longest sleep
-    timer_period_ms: Annotated[float, msgspec.Meta(gt=0, le=50)] = 50.0
-    timer_realtime_priority: Annotated[int, msgspec.Meta(ge=0, le=99)] = 0  # 0: normal
     recover_count: Annotated[int, msgspec.Meta(ge=1)] = 3   # consecutive commands to arm
     min_brake_hold_ms: Annotated[float, msgspec.Meta(ge=0)] = 1000.0
     policy: FailsafePolicy = FailsafePolicy.HOLD
@@ -70,16 +62,13 @@ class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     age_clock: AgeClock = AgeClock.MONOTONIC
     max_age_ms: _Ms = 100.0
     max_future_ms: Annotated[float, msgspec.Meta(ge=0)] = 5.0
-    status_period_ms: Annotated[float, msgspec.Meta(gt=0, le=100)] = 100.0   # >= 10 Hz
     serial: SerialSettings = msgspec.field(default_factory=SerialSettings)
     actuator: ActuatorSettings = msgspec.field(default_factory=ActuatorSettings)
     # SCHED_FIFO for the command callback (validate, decide, write) and the Zenoh I/O
-    # threads; the timer has its own `timer_realtime_priority`
+    # threads; the deadline timer runs one priority above
     realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
 
     def __post_init__(self) -> None:
-        if self.deadline_ms <= self.timer_period_ms:
-            raise ValueError("deadline_ms must be longer than timer_period_ms")
         if not math.isfinite(self.failsafe_hold_s):
             raise ValueError("failsafe_hold_s must be finite")
 

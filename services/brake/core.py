@@ -24,11 +24,11 @@ from services.brake.protocol import (
     Ack,
     ActuatorState,
     BadLine,
+    Command,
     Fault,
     HostMode,
     Nak,
     ProtocolError,
-    command_line,
     decode,
     level_to_wire,
 )
@@ -51,12 +51,9 @@ def _ns(ms: float) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Outgoing:
-    """A line to write to the actuator now."""
+    """A command line to write to the actuator now."""
 
-    seq: int
-    line: bytes
-    level_pct: int
-    mode: HostMode
+    frame: Command
     cmd: BrakeCommand | None   # the accepted command that caused it (None: timer, link)
 
 
@@ -87,9 +84,6 @@ class BrakeCore:
         self._heartbeat = _ns(s.actuator.heartbeat_ms)
         self._ack_timeout = _ns(s.actuator.ack_timeout_ms)
         self._ttl_ms = s.actuator.ttl_ms
-        # (seq, level, mode, line): the line the next send most likely writes, built off
-        # the command path (prepare_next_line)
-        self._next_line: tuple[int, int, HostMode, bytes] | None = None
         self.validator = CommandValidator(
             expected_key, s.instance, s.age_clock, _ns(s.max_age_ms), _ns(s.max_future_ms)
         )
@@ -205,14 +199,6 @@ class BrakeCore:
             self.position_pct = None
         self._evaluate(now)
         return self._send(now, None)
-
-    def prepare_next_line(self) -> None:
-        """Build now the line the next send would write if nothing changes (the next
-        sequence number, the current level and mode), so that a command's path only looks
-        it up: formatting and checksumming a line costs tens of microseconds on the cold
-        caches a command arrives to. A change before the next send makes it unused."""
-        seq, level, mode = self._tx_seq, self._wire_level, _MODE[self.state]
-        self._next_line = (seq, level, mode, command_line(seq, level, self._ttl_ms, mode))
 
     def next_due_ns(self, now: int) -> int | None:
         """When `on_tick` must run next at the latest (None: nothing pending)."""
@@ -413,16 +399,10 @@ class BrakeCore:
         mode = _MODE[self.state]
         seq = self._tx_seq
         self._tx_seq = (seq + 1) % SEQ_MODULO
-        ready = self._next_line
-        if ready is not None and ready[:3] == (seq, self._wire_level, mode):
-            line = ready[3]
-        else:
-            line = command_line(seq, self._wire_level, self._ttl_ms, mode)
-        self._next_line = None
         self._unacked.append((seq, now))
         if len(self._unacked) > MAX_UNACKED:
             self._unacked.popleft()
         self._last_tx_ns = now
         self._last_tx = (self._wire_level, mode)
         self.counters["tx_lines"] += 1
-        return Outgoing(seq, line, self._wire_level, mode, cmd)
+        return Outgoing(Command(seq, self._wire_level, self._ttl_ms, mode), cmd)

@@ -9,10 +9,10 @@ from common.bus import Bus, BusError
 from common.config.brake import BrakeConfig
 from common.log import kv, setup_logging
 from common.service import load_service_config, service_argparser, stop_event_on_signals
-from services.brake.service import SOURCE, BrakeService
+from services.brake.shell import SOURCE, BrakeShell
 
 
-def _serve_bus(cfg: BrakeConfig, service: BrakeService, stop: threading.Event,
+def _serve_bus(cfg: BrakeConfig, shell: BrakeShell, stop: threading.Event,
                opened: list[Bus], errors: list[str]) -> None:
     """Blocks until the router is reachable: runs on its own thread so that the timer and
     the actuator link work (and the deadline is enforced) without a bus."""
@@ -24,7 +24,7 @@ def _serve_bus(cfg: BrakeConfig, service: BrakeService, stop: threading.Event,
         return
     opened.append(bus)
     if not stop.is_set():
-        service.attach(bus)
+        shell.attach(bus)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,14 +39,14 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals()
     # the timer thread waits at most ~1 ms for the GIL instead of the default 5 ms
     sys.setswitchinterval(0.001)
-    service = BrakeService(cfg, log)
-    service.start()
+    shell = BrakeShell(cfg, log)
+    shell.start()
     opened: list[Bus] = []
     errors: list[str] = []
-    threading.Thread(target=_serve_bus, args=(cfg, service, stop, opened, errors),
+    threading.Thread(target=_serve_bus, args=(cfg, shell, stop, opened, errors),
                      name="brake-bus", daemon=True).start()
     stop.wait()
-    service.stop()
+    shell.stop()
     for bus in opened:
         bus.close()
     if errors:

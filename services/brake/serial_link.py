@@ -17,6 +17,9 @@ from common.serial_read import read_available
 from services.brake.protocol import BadLine, LineReader
 
 READ_TIMEOUT_S = 0.05   # how often the reader looks at the stop flag and write failures
+WRITE_TIMEOUT_S = 0.02  # a stuck port blocks the command path at most this long
+RECONNECT_MIN_S = 0.1   # reopening after the port vanished: 100 ms, doubling ...
+RECONNECT_MAX_S = 2.0   # ... up to 2 s
 
 
 class SerialLink:
@@ -64,7 +67,7 @@ class SerialLink:
             try:
                 # straight to the (non-blocking) fd: pyserial's write adds a select and
                 # timeout bookkeeping to every line; it only takes over when the kernel
-                # buffer is full, and then waits at most write_timeout_ms
+                # buffer is full, and then waits at most WRITE_TIMEOUT_S
                 try:
                     n = os.write(port.fd, data)
                 except BlockingIOError:
@@ -79,13 +82,13 @@ class SerialLink:
     def _open(self) -> serial.Serial:
         s = self.settings
         return serial.Serial(
-            s.port, s.baudrate, timeout=READ_TIMEOUT_S, write_timeout=s.write_timeout_ms / 1000,
+            s.port, s.baudrate, timeout=READ_TIMEOUT_S, write_timeout=WRITE_TIMEOUT_S,
             exclusive=s.exclusive,
         )
 
     def _run(self) -> None:
         s = self.settings
-        delay = s.reconnect_min_ms / 1000
+        delay = RECONNECT_MIN_S
         while not self._stop.is_set():
             try:
                 port = self._open()
@@ -93,9 +96,9 @@ class SerialLink:
                 self._rl.warning("open", "serial_open_failed", port=s.port, error=exc,
                                  retry_s=delay)
                 self._stop.wait(delay)
-                delay = min(delay * 2, s.reconnect_max_ms / 1000)
+                delay = min(delay * 2, RECONNECT_MAX_S)
                 continue
-            delay = s.reconnect_min_ms / 1000
+            delay = RECONNECT_MIN_S
             self._log.info(kv("serial_open", port=s.port))
             with self._port_lock:
                 self._port = port
@@ -112,9 +115,7 @@ class SerialLink:
             self._stop.wait(delay)
 
     def _read_until_failure(self, port: serial.Serial) -> str:
-        """Whatever the port holds, in one read per wake-up (common/serial_read.py):
-        pyserial's `read(in_waiting or 1)` was a third of the service's CPU at nominal
-        rates."""
+        """Whatever the port holds, in one read per wake-up (common/serial_read.py)."""
         reader = LineReader()
         while not self._stop.is_set():
             if self._write_error is not None:

@@ -9,23 +9,22 @@ import pytest
 
 from benchmarks import bench_latency
 from benchmarks.bench_brake import LineTimes
+from benchmarks.floor_relay import FRAMES_PER_OBJECT
 from benchmarks.latency_chain import floor_chains
-from services.brake.pty_pair import PtyPair
 from services.radar.ars408 import ObjectGeneral, object_cycle_frames
 from services.radar.can_links import SlcanPtyLink
 from tests.support import wait_for
+from tools.sim.pty_pair import PtyPair
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.scenario import RadarLook
 
 pytestmark = pytest.mark.slow
 
 
-@pytest.mark.parametrize("work", ["none", "codec"])
-def test_the_floor_relays_carry_a_cycle_from_the_can_pty_to_the_serial_pty(
-        router, tmp_path, work):
+def test_the_floor_relays_carry_a_cycle_from_the_can_pty_to_the_serial_pty(router, tmp_path):
     link, pty = SlcanPtyLink(), PtyPair(tmp_path / "serial")
     base = [sys.executable, "-m", "benchmarks.floor_relay"]
-    args = ["--connect", router, "--frames-per-object", "1", "--direct", "--work", work]
+    args = ["--connect", router]
     reports_path = tmp_path / "reports.txt"
     with open(reports_path, "w") as reports_out:
         procs: list[subprocess.Popen[str]] = [
@@ -46,8 +45,10 @@ def test_the_floor_relays_carry_a_cycle_from_the_can_pty_to_the_serial_pty(
 
         def through() -> bool:     # until the relays' subscriptions have propagated
             counter = len(written)
-            frames = object_cycle_frames([ObjectGeneral(1, 9.0, 0.0, -2.0, 0.0, 0, 5.0)],
-                                         counter)
+            status, general = object_cycle_frames(
+                [ObjectGeneral(1, 9.0, 0.0, -2.0, 0.0, 0, 5.0)], counter)
+            # three frames per object, as the simulated radar sends (the relay counts them)
+            frames = [status] + [general] * FRAMES_PER_OBJECT
             started[counter], written[counter] = feed.send_paced(frames)
             return bool(floor_chains(written, reports(), sorted(lines.times)))
 

@@ -8,7 +8,6 @@ from benchmarks.latency_chain import (
     BrakeStamp,
     CommandStamp,
     TracksStamp,
-    by_detections,
     floor_chains,
     line_after,
     stack_chains,
@@ -95,16 +94,3 @@ def test_cpu_share_of_a_run_counts_busy_and_stolen_time():
     after = [150, 0, 75, 850, 10, 0, 0, 90]       # +50 user +25 sys +50 idle +50 steal
     assert cpu_share(before, after) == {"busy_pct": 42.9, "steal_pct": 28.6}
     assert cpu_share([], after) == {}
-
-
-def test_chains_group_by_their_cycles_detection_count():
-    def chain(pub: int) -> tuple[int, int, int, int, int, int, int, int]:
-        return (0, 1, pub, 3, 4, 5, 6, 7)
-
-    chains = [chain(10), chain(20), chain(30), chain(40), chain(50), chain(60)]
-    detections = {10: 1, 20: 0, 30: 1, 40: 4, 50: 9}     # 60: never seen, left out
-    groups = by_detections(chains, detections)
-    assert list(groups) == ["0", "1", "4+"]
-    assert groups["1"] == [chain(10), chain(30)]
-    assert groups["4+"] == [chain(40), chain(50)]
-    assert list(by_detections(chains, detections, top=9)) == ["0", "1", "4", "9+"]

@@ -13,8 +13,7 @@ from typing import Any
 from common.bus import Bus
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeState, BrakeStatus
-from services.brake.pty_pair import PtyPair
-from services.brake.sim_actuator import SimActuator
+from services.brake.shell import TIMER_PERIOD_S
 from tests.support import (
     START_TIMEOUT_S,
     HealthWatch,
@@ -23,6 +22,8 @@ from tests.support import (
     python_module,
     router_process,
 )
+from tools.sim.actuator import SimActuator
+from tools.sim.pty_pair import PtyPair
 
 LIVE = (BrakeState.ARMED, BrakeState.BRAKING)
 
@@ -152,7 +153,7 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
             raise AssertionError(f"brake did not start:\n{proc.output()}") from None
         yield BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
                        float(brake.get("deadline_ms", 200.0)),
-                       float(brake.get("timer_period_ms", 50.0)))
+                       TIMER_PERIOD_S * 1000)
         assert proc.alive(), f"brake process died:\n{proc.output()}"
 
 

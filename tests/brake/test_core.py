@@ -53,7 +53,8 @@ class Rig:
     def _record(self, out: Outgoing | None) -> None:
         if out is None:
             return
-        frame = decode(out.line[:-1])
+        frame = decode(encode_line(out.frame))   # a valid line, checksum included
+        assert frame == out.frame
         assert isinstance(frame, Command)
         self.lines.append((self.t, frame))
         if self.auto_ack:
@@ -107,7 +108,7 @@ class Rig:
         return self
 
 
-def encode_line(frame: Ack | Fault | Nak) -> bytes:
+def encode_line(frame: Command | Ack | Fault | Nak) -> bytes:
     from services.brake.protocol import encode as encode_frame
 
     return encode_frame(frame)[:-1]
@@ -471,29 +472,15 @@ def test_a_command_never_writes_more_than_one_line():
     assert isinstance(out, Outgoing) and out.cmd is not None and out.cmd.header.seq == rig.seq
 
 
-def test_a_prepared_line_is_sent_only_when_it_is_the_line_due(monkeypatch):
-    import services.brake.core as core_module
-
+def test_each_line_carries_the_next_sequence_number_the_level_and_the_mode():
     rig = Rig().armed()
-    built: list[tuple[int, int, HostMode]] = []
-    real = core_module.command_line
-
-    def counting(seq: int, level: int, ttl: int, mode: HostMode) -> bytes:
-        built.append((seq, level, mode))
-        return real(seq, level, ttl, mode)
-
-    monkeypatch.setattr(core_module, "command_line", counting)
     before = rig.lines[-1][1].seq
-    rig.core.prepare_next_line()           # as the shell does when a line is acknowledged
-    assert built == [(before + 1, 0, HostMode.ARMED)]
-    rig.send(0.0)                          # nothing changed: the prepared line, not rebuilt
-    assert len(built) == 1
+    rig.send(0.0)
     sent = rig.lines[-1][1]                # decoded, its checksum checked
     assert (sent.seq, sent.level_pct, sent.mode) == (before + 1, 0, HostMode.ARMED)
-    rig.core.prepare_next_line()
-    rig.send(60.0)                         # the level changed: built on the spot
-    assert built[-1] == (before + 2, 60, HostMode.BRAKING) and len(built) == 3
+    rig.send(60.0)
     sent = rig.lines[-1][1]
     assert (sent.seq, sent.level_pct, sent.mode) == (before + 2, 60, HostMode.BRAKING)
-    rig.send(60.0)                         # nothing prepared since: built, not a stale one
-    assert built[-1] == (before + 3, 60, HostMode.BRAKING)
+    rig.send(60.0)
+    sent = rig.lines[-1][1]
+    assert (sent.seq, sent.level_pct, sent.mode) == (before + 3, 60, HostMode.BRAKING)

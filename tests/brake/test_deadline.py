@@ -1,4 +1,4 @@
-"""Must show 2: a command publisher that stops (SIGKILL, and separately SIGSTOP) leads to
+"""A command publisher that stops (SIGKILL, and separately SIGSTOP) leads to
 FAILSAFE within the deadline plus one timer period, in every one of 50 trials of each
 kind; each fail-safe policy does what docs/brake.md says on the serial line.
 
@@ -75,9 +75,9 @@ def _trial(rig: BrakeRig, pub: ServiceProcess, how: str, level: float, live_at: 
 
 
 def _check_timing(rig: BrakeRig, t: Trial) -> None:
-    # Issue 4's bound: the deadline plus one timer period. The timer sleeps until the
-    # deadline itself, so entry is usually within a millisecond of it (see _report), but a
-    # loaded 2-core CI machine has woken it 29 ms late: the period is the guarantee.
+    # The bound: the deadline plus one timer period. The timer sleeps until the deadline
+    # itself, so entry is usually within a millisecond of it (see _report), but a loaded
+    # 2-core machine can wake it tens of ms late: the period is the guarantee.
     bound = rig.deadline_ms + rig.period_ms
     assert rig.deadline_ms <= t.detect_ms <= bound, (
         f"{t.how}: FAILSAFE {t.detect_ms:.1f} ms after the last command (bound {bound} ms)")

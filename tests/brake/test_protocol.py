@@ -143,7 +143,7 @@ def test_reader_memory_stays_bounded_on_endless_garbage_without_newlines():
 
 
 def test_random_garbage_never_decodes_and_never_hides_the_next_good_line():
-    """Must show 5 (protocol level): 20k random bursts, each followed by a real ack."""
+    """20k random bursts, each followed by a real ack."""
     rng = random.Random(5)
     r = LineReader()
     good = 0

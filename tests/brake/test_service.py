@@ -1,4 +1,4 @@
-"""The brake service as its own process (must show 1, 3, 4, 5 of the issue): a router,
+"""The brake service as its own process: a router,
 the simulated actuator on a pty, commands over Zenoh, bytes checked on the line."""
 
 import os
@@ -12,7 +12,6 @@ import pytest
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeState, encode
 from services.brake.protocol import HostMode
-from services.brake.sim_actuator import SimActuator
 from tests.brake.helpers import command
 from tests.brake.rig import BrakeRig, Stream, brake_rig
 from tests.support import (
@@ -24,6 +23,7 @@ from tests.support import (
     router_process,
     wait_for,
 )
+from tools.sim.actuator import SimActuator
 
 pytestmark = pytest.mark.slow
 
@@ -40,7 +40,7 @@ def _levels_since(rig: BrakeRig, t_ns: int) -> list[int]:
 
 
 def test_brake_command_puts_brake_bytes_on_the_line(rig):
-    """Must show 1."""
+    """A BRAKE command: its level on the actuator line, mode B."""
     start = len(rig.status)
     with Stream(rig.bus) as stream:
         rig.wait_live(start)
@@ -63,7 +63,7 @@ def test_brake_command_puts_brake_bytes_on_the_line(rig):
 
 
 def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
-    """Must show 3: wrong instance (a real candidate process and a forged payload), old
+    """Wrong instance (a real candidate process and a forged payload), old
     sequence, duplicate, too old, malformed, out-of-contract; the line stays at 0."""
     start = len(rig.status)
     before = None
@@ -106,7 +106,7 @@ def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
 
 
 def test_pty_closed_and_recreated_reconnects_and_brakes_again(rig):
-    """Must show 4: the port vanishes (EIO) and comes back under another /dev/pts name
+    """The port vanishes (EIO) and comes back under another /dev/pts name
     behind the configured path; the service reopens it by itself."""
     start = len(rig.status)
     with Stream(rig.bus, level=50.0) as stream:
@@ -132,7 +132,7 @@ def test_pty_closed_and_recreated_reconnects_and_brakes_again(rig):
 
 
 def test_garbage_on_the_line_never_crashes_and_never_acknowledges(rig):
-    """Must show 5, on the live service: random bytes, cut-short and corrupted lines
+    """On the live service: random bytes, cut-short and corrupted lines
     between the acknowledgements, then garbage alone (no acknowledgements at all)."""
     start = len(rig.status)
     stop = threading.Event()
@@ -215,7 +215,7 @@ def test_silence_from_the_start_is_failsafe_even_without_a_router(tmp_path: Path
 
 
 def test_every_accepted_command_gets_its_own_status_soon_after(rig):
-    """Issue 4: BrakeStatus on every change of the last sequence, not only at 10 Hz. A
+    """BrakeStatus on every change of the last sequence, not only at 10 Hz. A
     plain command's status goes out when the actuator acknowledges its line (not at a
     tick): each sequence of a 75 ms stream (the radar's rhythm), within a few ms."""
     start = len(rig.status)

@@ -5,7 +5,7 @@ import pytest
 from common.bus import Bus, BusError, zenoh_config
 from common.config.base import ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-from common.messages import Decision, VerifierStatus
+from common.messages import Decision, VerifierStatus, decode, encode
 from common.messages.fusion import BrakeCommand
 from common.messages.header import Header
 from tests.support import Collector, HealthWatch, open_bus, wait_for
@@ -33,6 +33,60 @@ def test_bad_override_and_missing_file_are_bus_errors():
         zenoh_config(ZenohSettings(overrides={"no/such/key": 1}))
     with pytest.raises(BusError, match="not found"):
         zenoh_config(ZenohSettings(config_file="/nonexistent.json5"))
+    with pytest.raises(BusError, match="invalid zenoh configuration"):   # not JSON
+        zenoh_config(ZenohSettings(overrides={"transport/unicast/max_links": {1, 2}}))
+
+
+def test_a_port_already_taken_is_a_bus_error():
+    import socket
+
+    from common.bus import open_session
+    from common.config.base import ZenohMode
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(BusError, match="cannot open zenoh session"):
+            open_session(ZenohSettings(mode=ZenohMode.PEER, connect=(),
+                                       listen=(f"tcp/127.0.0.1:{port}",)))
+
+
+def test_a_failing_callback_is_counted_and_later_samples_still_arrive(router):
+    with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:
+        got: list[int] = []
+        raw: list[str] = []
+
+        def picky(msg: BrakeCommand, key: str) -> None:
+            if msg.header.seq == 1:
+                raise RuntimeError("a bug in the subscriber")
+            got.append(msg.header.seq)
+
+        def picky_raw(payload: bytes, key: str, rx_mono_ns: int) -> None:
+            raw.append(key)
+            if len(raw) == 2:
+                raise RuntimeError("a bug in the raw subscriber")
+
+        sub_bus.subscribe(FUSION_BRAKE_CMD, picky, instance="primary")
+        sub_bus.subscribe_raw(BRAKE_STATUS, picky_raw)
+        pub = pub_bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        status_key = pub_bus.key(BRAKE_STATUS)
+
+        def first_samples() -> bool:    # until both subscriptions have propagated
+            pub.put(cmd(0))
+            if not raw:
+                pub_bus.session.put(status_key, b"x")
+            return bool(got) and bool(raw)
+
+        wait_for(first_samples, 30, 0.05, "first samples")
+        pub.put(cmd(1))
+        pub.put(cmd(2))
+        pub_bus.session.put(status_key, b"x")
+        pub_bus.session.put(status_key, b"x")
+        wait_for(lambda: 2 in got and len(raw) >= 3, 10, 0.02, "samples after the failures")
+        assert 1 not in got
+        assert sub_bus.callback_errors.get("fusion_brake_cmd") == 1
+        assert sub_bus.callback_errors.get("brake_status") == 1
 
 
 def test_publish_subscribe_through_a_router_and_count_garbage(router):
@@ -155,3 +209,19 @@ def test_queued_subscription_keeps_samples_until_drained_and_counts_garbage(rout
         assert sub_bus.decode_errors.get("fusion_brake_cmd") == 1
         assert sub_bus.drain_queued(FUSION_BRAKE_CMD, queued) == []
         queued.undeclare()
+
+
+def test_put_bytes_publishes_the_payload_unchanged(router):
+    with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:
+        got: list[bytes] = []
+        sub_bus.subscribe_raw(FUSION_BRAKE_CMD, lambda p, k, t: got.append(p),
+                              instance="primary")
+        pub = pub_bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        data = encode(cmd(5))
+
+        def seen() -> bool:
+            pub.put_bytes(data)
+            return bool(got)
+
+        wait_for(seen, 30, 0.05, "the raw payload")
+        assert got[0] == data and decode(got[0], BrakeCommand).header.seq == 5

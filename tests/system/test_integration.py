@@ -23,6 +23,7 @@ from common.config.brake import BrakeConfig
 from common.config.loader import load_config
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
 from common.messages import BrakeState
+from services.brake.shell import TIMER_PERIOD_S
 from tests.support import Collector
 from tests.system.stack_support import brake_lines, sim_stack
 from tools.sim.latency import chain_latencies_ns, stage_breakdown_ns
@@ -111,7 +112,7 @@ def test_closed_loop_brakes_for_threats_only_and_fails_safe(router, tmp_path, va
         st.procs["fusion"].signal(signal.SIGKILL)
         killed = mono_ns()
         failsafe = statuses.wait_until(lambda m: m.state is BrakeState.FAILSAFE, 30)
-        bound_ms = cfg.brake.deadline_ms + cfg.brake.timer_period_ms
+        bound_ms = cfg.brake.deadline_ms + TIMER_PERIOD_S * 1000
         silent_ms = (failsafe.state_since_mono_ns - failsafe.last_cmd_rx_mono_ns) / 1e6
         print(f"[{variant}] FAILSAFE {silent_ms:.1f} ms after the last command (deadline "
               f"{cfg.brake.deadline_ms:.0f} ms, bound {bound_ms:.0f} ms + slack); "

@@ -91,7 +91,7 @@ def test_invalid_tables_exit_2_naming_the_problem(tmp_path, table, named):
 def test_the_tables_cpu_latency_request_is_held_for_the_run_and_a_refusal_is_said(tmp_path):
     import struct
 
-    from tools.launcher import held_cpu_latency
+    from tools.launch.main import held_cpu_latency
 
     said: list[str] = []
     stand_in = tmp_path / "cpu_dma_latency"

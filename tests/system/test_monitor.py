@@ -17,8 +17,8 @@ from tests.system.messages import (
     track,
     verified_targets,
 )
-from tools.monitoring.state import MonitorState
-from tools.monitoring.view import render_text, snapshot
+from tools.monitor.state import MonitorState
+from tools.monitor.view import render_text, snapshot
 
 MS = 1_000_000
 

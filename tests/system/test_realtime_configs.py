@@ -20,9 +20,8 @@ from tools.sim.stack import FUSION_CONFIG, with_realtime, write_configs
 @pytest.mark.parametrize(("config", "table"), [(RadarConfig, "radar"), (BrakeConfig, "brake"),
                                                (FusionConfig, "fusion")])
 def test_each_service_takes_a_realtime_table_and_rejects_bad_priorities(config, table):
-    cfg = parse_config({table: {"realtime": {"priority": 20, "freeze_gc": False}}}, config)
-    rt = getattr(cfg, table).realtime
-    assert (rt.priority, rt.zenoh_threads, rt.freeze_gc) == (20, True, False)
+    cfg = parse_config({table: {"realtime": {"priority": 20}}}, config)
+    assert getattr(cfg, table).realtime.priority == 20
     assert getattr(parse_config({}, config), table).realtime.priority == 0
     with pytest.raises(ConfigError, match="priority"):
         parse_config({table: {"realtime": {"priority": 100}}}, config)
@@ -53,7 +52,7 @@ def test_the_simulated_stack_writes_one_priority_for_radar_fusion_and_brake(tmp_
     fusion = load_config(configs.fusion, FusionConfig)
     brake = load_config(configs.brake, BrakeConfig)
     assert (radar.radar.realtime.priority, fusion.fusion.realtime.priority,
-            brake.brake.realtime.priority, brake.brake.timer_realtime_priority) == (15,) * 4
+            brake.brake.realtime.priority) == (15,) * 3
     shipped = load_config(FUSION_CONFIG, FusionConfig)
     # the rest of the shipped fusion config is unchanged
     assert msgspec.structs.replace(fusion.fusion, realtime=shipped.fusion.realtime) \

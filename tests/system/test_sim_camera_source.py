@@ -9,10 +9,10 @@ import pytest
 
 from common.calibration import Calibration
 from common.messages import Header
-from common.messages.sim import SimObject, SimWorld
 from services.camera.source import FrameSource, SourceConfigError, SourceError
 from services.camera.synthetic import SyntheticContext, make_synthetic_source
 from tools.sim.camera_source import SimCameraSource, bodies_at
+from tools.sim.messages import SimObject, SimWorld
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
 S = 1_000_000_000

@@ -1,1 +1,2 @@
-"""`aeb up`: the process table, the restart policy and the process supervisor."""
+"""`aeb up`: the process table, the restart policy, the process supervisor and the
+command (main)."""

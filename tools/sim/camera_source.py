@@ -24,10 +24,9 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.clock import wall_ns
-from common.keys import SIM_WORLD
-from common.messages.sim import SimWorld
 from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError, SourceError
 from services.camera.synthetic import SyntheticContext
+from tools.sim.messages import SIM_WORLD, SimWorld
 from tools.sim.render import Renderer
 from tools.sim.scenario import CameraLook, ObjectKind
 from tools.sim.world import Body

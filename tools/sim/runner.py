@@ -17,11 +17,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import can
+
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
-from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD, SIM_WORLD
+from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, EgoMotion, Header
-from common.messages.sim import SimObject, SimWorld
+from tools.sim.messages import SIM_WORLD, SimObject, SimWorld
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.scenario import Scenario, ScenarioKind
 from tools.sim.verdict import Sample, Verdict, judge
@@ -39,7 +41,7 @@ class Actuator(Protocol):
 
 
 class SimActuatorView:
-    """The brake engineer's simulated actuator (services/brake/sim_actuator.py), read
+    """The brake engineer's simulated actuator (tools/sim/actuator.py), read
     in-process: its first-order position and the level of the last command it got (kept
     from its event listener: the loop asks every tick)."""
 
@@ -207,7 +209,7 @@ class Simulator:
             bodies, ego_x, speed = run.world.bodies(), run.world.ego.x_m, run.world.ego.speed_mps
         try:
             self.feed.cycle(bodies, ego_x, speed)
-        except Exception as exc:   # a vanished link must not kill the loop; it is counted
+        except (OSError, can.CanError) as exc:   # a vanished link must not end the loop
             self.radar_errors += 1
             if self.radar_errors in (1, 10, 100) or self.radar_errors % 1000 == 0:
                 _log.error("radar cycle not sent (%d so far): %r", self.radar_errors, exc)

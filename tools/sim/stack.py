@@ -74,7 +74,6 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     brake.write_text(
         "# The brake service on the simulated actuator's pty (a SIMULATION of the actuator).\n"
         f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "primary"\n'
-        + (f"timer_realtime_priority = {realtime_priority}\n" if realtime_priority else "")
         + f'\n[brake.serial]\nport = "{actuator_port}"\n'
         + ("" if heartbeat_ms is None else
            f"\n[brake.actuator]\nheartbeat_ms = {heartbeat_ms}\nttl_ms = "

@@ -64,7 +64,7 @@ from services.brake.protocol import (
     decode,
     encode,
 )
-from services.brake.pty_pair import PtyPair
+from tools.sim.pty_pair import PtyPair
 
 ACTUATOR_ACCEPTS = frozenset("C")
 HISTORY = 100_000
@@ -301,6 +301,10 @@ class SimActuator:
     # ---- observation ----------------------------------------------------------------
 
     def add_listener(self, callback: Callable[[SimEvent], None]) -> None:
+        """`callback(event)` after every event, on the thread that caused it (mostly the
+        actuator's). It must not raise: an exception ends that thread (a bug of the
+        caller, reported by threading.excepthook), and the host sees its acknowledgements
+        stop."""
         with self._lock:
             self._listeners.append(callback)
 
@@ -558,10 +562,7 @@ class SimActuator:
             listeners = list(self._listeners)
         for ev in events:
             for cb in listeners:
-                try:
-                    cb(ev)
-                except Exception as exc:
-                    _log.warning(kv("sim_listener_failed", error=repr(exc)))
+                cb(ev)
 
     def _wake(self) -> None:
         with self._lock:   # never a write to a closed (and maybe reused) descriptor

@@ -26,8 +26,9 @@ from common.config.base import ZenohMode, ZenohSettings
 from common.keys import REGISTRY, KeySpec
 from common.log import setup_logging
 from common.service import stop_event_on_signals
-from tools.monitoring.state import MonitorState
-from tools.monitoring.view import render_text, snapshot
+from tools.monitor.state import MonitorState
+from tools.monitor.view import render_text, snapshot
+from tools.sim.messages import SIM_WORLD
 
 _LOOPBACK = ("127.", "localhost", "[::1]")
 _CLEAR = "\x1b[H\x1b[2J"
@@ -58,9 +59,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def subscribe_all(bus: Bus, state: MonitorState, lock: threading.Lock) -> list[Any]:
-    """One subscription per message key of the registry (every parameter a wildcard)."""
+    """One subscription per message key of the registry and the simulator's ground truth
+    (every parameter a wildcard)."""
     subs = []
-    for spec in REGISTRY.values():
+    for spec in (*REGISTRY.values(), SIM_WORLD):
         if spec.msg_type is None:
             continue
 

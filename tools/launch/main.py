@@ -21,7 +21,7 @@ from common.service import stop_event_on_signals
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import load_table, resolve_launches
 
-DEFAULT_TABLE = Path(__file__).resolve().parent.parent / "deploy" / "single-host.toml"
+DEFAULT_TABLE = Path(__file__).resolve().parents[2] / "deploy" / "single-host.toml"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

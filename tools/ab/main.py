@@ -23,9 +23,9 @@ from common.clock import wall_ns
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, KeySpec
 from common.log import setup_logging
-from common.messages import BrakeCommand, DecodeError, VerifiedTargets, decode
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, Report, render
+from tools.ab.feeder import Feeder
 from tools.ab.recording import RecordingError, read_records, write_record
 
 SPECS: dict[str, KeySpec[Any]] = {s.name: s for s in (FUSION_TARGETS, FUSION_BRAKE_CMD)}
@@ -46,25 +46,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--episodes", type=int, default=20, help="episodes to list")
     return parser.parse_args(argv)
-
-
-class Feeder:
-    """Decodes payloads and feeds the comparator; counts what does not decode."""
-
-    def __init__(self, comparator: Comparator) -> None:
-        self.comparator = comparator
-        self.undecodable = 0
-        self._lock = threading.Lock()
-
-    def feed(self, spec_name: str, payload: bytes) -> None:
-        with self._lock:
-            try:
-                if spec_name == FUSION_TARGETS.name:
-                    self.comparator.add_targets(decode(payload, VerifiedTargets))
-                elif spec_name == FUSION_BRAKE_CMD.name:
-                    self.comparator.add_command(decode(payload, BrakeCommand))
-            except DecodeError:
-                self.undecodable += 1
 
 
 def report_json(report: Report, undecodable: int) -> str:

@@ -2,23 +2,26 @@
 
 - Zenoh's callback thread: every BrakeCommand sample -> core -> serial write, right there
   (the command path: no queue, no hand-off to another thread);
-- the timer thread (`brake-timer`): wakes at the core's next due time (deadline expiry,
-  hold end, heartbeat, acknowledgement timeout) and at least every `timer_period_ms`,
-  so that silence is detected without any message arriving; it also publishes
-  BrakeStatus (at once on a change of state, and every `status_period_ms`);
+- the timer thread (`brake-timer`, one real-time priority above the command path): wakes
+  at the core's next due time (deadline expiry, hold end, heartbeat, acknowledgement
+  timeout) and at least every TIMER_PERIOD_S, so that silence is detected without any
+  message arriving; it also publishes BrakeStatus (at once on a change of state, and at
+  the key's nominal rate);
 - the serial reader thread (`brake-serial`): acknowledgements and faults from the
   actuator, port loss and reopening; it publishes the status owed for a command when the
   actuator acknowledges its line (the timer does at its next wake-up, at most
-  `timer_period_ms` later, if no acknowledgement comes first).
+  TIMER_PERIOD_S later, if no acknowledgement comes first), and builds the line most
+  likely written next (`LineAhead`), so that the command path finds it ready.
 
 The timer and the serial link start before the Zenoh session exists (`attach` comes
 later, from whatever thread opened the session), so that a silent bus from the very
 start already leads to FAILSAFE.
 """
 
+import dataclasses
 import logging
-import os
 import threading
+from collections import Counter
 from collections.abc import Callable
 
 import zenoh
@@ -29,30 +32,57 @@ from common.config.brake import AgeClock, BrakeConfig
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
-from common.realtime import ThreadRealtime, apply_process
+from common.realtime import ThreadRealtime, apply_process, set_fifo
 from services.brake.core import BrakeCore, Outgoing
-from services.brake.protocol import BadLine
+from services.brake.protocol import SEQ_MODULO, BadLine, Command, encode
 from services.brake.serial_link import SerialLink
 
 SERVICE = "brake"
 INSTANCE = "main"
 SOURCE = f"{SERVICE}/{INSTANCE}"
 MIN_WAIT_NS = 100_000
+TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
+STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
+_TIMER_PERIOD_NS = round(TIMER_PERIOD_S * 1e9)
 
 
-class BrakeService:
+class LineAhead:
+    """The actuator line of each frame the core sends. `prepare` builds, off the command
+    path, the line of the frame most likely sent next; `line` hands it out when the frame
+    is that one and builds any other on the spot. Not thread-safe: the shell's lock."""
+
+    def __init__(self) -> None:
+        self._ready: tuple[Command, bytes] | None = None
+
+    def line(self, frame: Command) -> bytes:
+        ready, self._ready = self._ready, None
+        if ready is not None and ready[0] == frame:
+            return ready[1]
+        return encode(frame)
+
+    def prepare(self, frame: Command) -> None:
+        self._ready = (frame, encode(frame))
+
+
+def next_frame(frame: Command) -> Command:
+    """The frame sent after `frame` if nothing changes: the next sequence number."""
+    return dataclasses.replace(frame, seq=(frame.seq + 1) % SEQ_MODULO)
+
+
+class BrakeShell:
     def __init__(self, cfg: BrakeConfig, log: logging.Logger) -> None:
         s = cfg.brake
         self.cfg = cfg
         self._log = log
         self._rl = RateLimitedLog(log, cfg.log.repeat_interval_s)
+        self.errors: Counter[str] = Counter()   # the shell's own faults, in the status
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
                               mono_ns())
         self.link = SerialLink(s.serial, self._on_link_up, self._on_link_down, self._on_rx, log)
-        self._period_ns = round(s.timer_period_ms * 1e6)
-        self._status_period_ns = round(s.status_period_ms * 1e6)
+        self._lines = LineAhead()
+        self._last_frame: Command | None = None   # the last line written
         self._stopping = False
         self._status_pub: TypedPublisher[BrakeStatus] | None = None
         self._subscriber: zenoh.Subscriber[None] | None = None
@@ -112,11 +142,10 @@ class BrakeService:
             if (self.core.state, self.core.command_state) != before:
                 self._status_owed(rx_mono_ns)
             else:
-                # Not from here: published at once it took a CPU from the line being
-                # delivered ("serial out" p50 0.34 -> 0.10 ms deferred). Nor a wake-up of
-                # its own (each costs 0.1-0.2 ms of CPU on a VM like CI's): the line's
-                # acknowledgement publishes it (serial reader), or the timer's next wake-up
-                # if the actuator does not answer.
+                # Not from here, nor by waking the timer for it: a status published now
+                # competes with the line for the CPU. The line's acknowledgement publishes
+                # it (serial reader), or the timer's next wake-up if the actuator does not
+                # answer.
                 self._status_owed(rx_mono_ns, wake_timer=False)
             rejection = self.core.last_rejection
             self._log_transition(before)
@@ -139,9 +168,10 @@ class BrakeService:
             if self.core.version != version:   # a plain acknowledgement changes nothing
                 self._status_owed(now)
             self._log_transition(before)
-            # the line is delivered: this thread is awake anyway, the next command is
-            # tens of milliseconds away
-            self.core.prepare_next_line()
+            if self._last_frame is not None:
+                # the line is delivered and the next command is a radar cycle away: this
+                # thread, awake anyway, builds the next line
+                self._lines.prepare(next_frame(self._last_frame))
             owed = self._publish_at_ns is not None
         if owed:
             # the actuator answered: the line is delivered, the status no longer competes
@@ -171,13 +201,16 @@ class BrakeService:
             while not self._stopping:
                 try:
                     self._tick()
-                except Exception as exc:  # the deadline check must outlive a bug: log, go on
-                    self._rl.error("timer", "timer_tick_failed", error=repr(exc))
+                except Exception as exc:  # the deadline check must outlive a bug
+                    self.errors["timer_tick_failed"] += 1
+                    self._rl.error("timer", "timer_tick_failed", error=repr(exc),
+                                   state=self.core.state.value,
+                                   count=self.errors["timer_tick_failed"])
                     self._log.debug("timer traceback", exc_info=True)
                 now = mono_ns()
-                wake = now + self._period_ns
+                wake = now + _TIMER_PERIOD_NS
                 if self._status_pub is not None:
-                    wake = min(wake, self._last_status_ns + self._status_period_ns)
+                    wake = min(wake, self._last_status_ns + STATUS_PERIOD_NS)
                     if self._publish_at_ns is not None:
                         wake = min(wake, self._publish_at_ns)
                 due = self.core.next_due_ns(now)
@@ -206,7 +239,7 @@ class BrakeService:
 
     def _status_due(self, now: int) -> bool:
         owed = self._publish_at_ns is not None and now >= self._publish_at_ns
-        return owed or now - self._last_status_ns >= self._status_period_ns
+        return owed or now - self._last_status_ns >= STATUS_PERIOD_NS
 
     def _publish_status(self, due: Callable[[int], bool]) -> None:
         """Publish BrakeStatus if `due(now)` still holds. Called without the lock, from the
@@ -224,16 +257,19 @@ class BrakeService:
                 self._publish_at_ns = None
             try:
                 publisher.put(status)
-            except Exception as exc:
+            except zenoh.ZError as exc:   # the session is closing
+                self.errors["status_publish_failed"] += 1
                 self._rl.error("status", "status_publish_failed", error=repr(exc))
 
     def _set_realtime_priority(self) -> None:
-        prio = self.cfg.brake.timer_realtime_priority
-        if prio <= 0:
+        """The deadline timer above the command path: a command callback that runs long
+        never delays the detection of silence."""
+        base = self.cfg.brake.realtime.priority
+        if base <= 0:
             return
+        prio = min(99, base + 1)
         try:
-            # pid 0 on Linux: the calling thread only
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            set_fifo(prio)
             self._log.info(kv("timer_realtime", priority=prio))
         except (OSError, AttributeError) as exc:
             self._log.warning(kv("timer_realtime_refused", priority=prio, error=exc))
@@ -249,9 +285,10 @@ class BrakeService:
                 self._cond.notify()
 
     def _write(self, out: Outgoing, rx_mono_ns: int | None) -> None:
-        if not self.link.write(out.line):
+        if not self.link.write(self._lines.line(out.frame)):
             self.core.on_link(False, mono_ns(), "write failed")
             return
+        self._last_frame = out.frame
         if out.cmd is None or rx_mono_ns is None:
             return
         written = mono_ns()
@@ -284,6 +321,6 @@ class BrakeService:
             actuator_position_pct=v.actuator_position_pct, actuator_state=v.actuator_state,
             actuator_connected=v.actuator_connected, cmd_to_serial_us=self.cmd_to_serial_us,
             radar_to_serial_us=self.radar_to_serial_us, rejected=v.rejected,
-            counters=v.counters, state_since_mono_ns=v.since_ns,
+            counters={**v.counters, **self.errors}, state_since_mono_ns=v.since_ns,
             last_cmd_rx_mono_ns=v.last_cmd_rx_ns, command_state=v.command_state,
         )

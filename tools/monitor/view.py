@@ -11,10 +11,10 @@ from common.keys import (
     FUSION_TARGETS,
     RADAR_STATUS,
     RADAR_TRACKS,
-    SIM_WORLD,
     KeySpec,
 )
-from tools.monitoring.state import MonitorState
+from tools.monitor.state import MonitorState
+from tools.sim.messages import SIM_WORLD
 
 _NS = 1_000_000_000
 MAX_ROWS = 12

@@ -1,0 +1,1 @@
+"""`aeb monitor`: what the bus carries, aggregated (state), shown (view), live (main)."""

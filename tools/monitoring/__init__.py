@@ -1,1 +1,0 @@
-"""`aeb monitor`: what the bus carries, aggregated (state) and shown (view)."""
