@@ -3,7 +3,7 @@ with 0-128 confirmed tracks, and with 1, 2 or 4 cameras streaming into fusion.
 
     python -m benchmarks.bench_fusion [--quick] [--out out/bench]
 
-Tracks: runs the real shell (services/fusion/node.py) in this process on a Zenoh session
+Tracks: runs the real shell (services/fusion/shell.py) in this process on a Zenoh session
 (peer, no endpoints: puts go nowhere, but through the whole publish path): the raw
 RadarTracks payload goes into the same callback Zenoh would call, with a rendered frame
 (SIMULATION) already decoded in the ring, and the clock stops when the BrakeCommand's put
@@ -66,11 +66,12 @@ from common.messages import (
 from common.net import free_endpoint
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
-from services.fusion.node import FusionNode
 from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.synthetic import Obstacle, Scene, render, rig_calibration_toml
+from services.fusion.shell import FusionShell
 from services.fusion.verifiers import GateResult, ParamValue, Verifier, create
+from tools.sim.rig import rig_calibration_toml
+from tools.sim.scenes import Obstacle, Scene, render
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"
 COUNTS = (0, 1, 8, 64, 128)
@@ -81,7 +82,7 @@ CAMERA_FPS = 30.0
 RADAR_PERIOD_S = 0.074
 CAMERA_TRACKS = 8
 POLICIES = ("every_frame", "before_radar")
-OBSTACLES = tuple(Obstacle(x, y, "box") for x, y in ((6, 0.5), (12, -0.6), (20, 0.2)))
+OBSTACLES = tuple(Obstacle(x, y) for x, y in ((6, 0.5), (12, -0.6), (20, 0.2)))
 
 
 def tracks_payload(n: int, seq: int, rng: np.random.Generator, scenario: str) -> bytes:
@@ -138,7 +139,7 @@ class TimedPublisher:
         self.runs_at_command = self.verifier.runs
 
 
-def build_node(bus: Bus, cal: Calibration) -> tuple[FusionNode, TimedPublisher, np.ndarray]:
+def build_node(bus: Bus, cal: Calibration) -> tuple[FusionShell, TimedPublisher, np.ndarray]:
     # Staleness bounds widened: a descheduled benchmark process must not turn a cycle
     # stale (that path is cheaper and would flatter the figures).
     settings = parse_config({"fusion": {
@@ -148,7 +149,7 @@ def build_node(bus: Bus, cal: Calibration) -> tuple[FusionNode, TimedPublisher, 
     core = FusionCore(settings, ColumnProjector(cal, ColumnGeometry()), verifier)
     log = logging.getLogger("bench")
     decoder = FrameDecoder(cal.width, cal.height, 4, 2, log)
-    node = FusionNode(bus, settings, core, decoder, log)
+    node = FusionShell(bus, settings, core, decoder, log)
     bgr = render(cal, Scene(obstacles=OBSTACLES, seed=3))
     timed = TimedPublisher(node._cmd_pub, verifier)
     node._cmd_pub = timed  # type: ignore[assignment]
@@ -294,7 +295,7 @@ def plot(results: dict[str, Any], path: Path) -> None:
 # -- cameras --------------------------------------------------------------------------
 
 def rig(names: tuple[str, ...]) -> dict[str, Calibration]:
-    """The SIMULATED rig's calibrations (services/fusion/synthetic.py)."""
+    """The SIMULATED rig's calibrations (tools/sim/rig.py)."""
     return {n: Calibration(parse_config(tomllib.loads(rig_calibration_toml(n)),
                                         CalibrationFile, n), n) for n in names}
 
@@ -357,7 +358,7 @@ def camera_case(bus: Bus, names: tuple[str, ...], policy: str, seconds: float,
     rhythm = RadarRhythm()
     decoders = [FrameDecoder.for_policy(848, 480, settings.frames, log, k, rhythm)
                 for k in keys]
-    node = FusionNode(bus, settings, core, decoders, log, None, rhythm)
+    node = FusionShell(bus, settings, core, decoders, log, None, rhythm)
     timed = TimedPublisher(node._cmd_pub, verifier)
     node._cmd_pub = timed  # type: ignore[assignment]
     jpegs = [encode_jpeg(render(cals[n], Scene(obstacles=OBSTACLES, seed=5)), 80)

@@ -20,7 +20,7 @@ from common.clock import NS_PER_MS, mono_ns
 from common.imaging import encode_jpeg
 from common.log import RateLimitedLog, kv
 from common.messages import CompressedFrame
-from services.camera.core import Backoff, Health, Offer, PublishCore
+from services.camera.core import Backoff, CameraCore, Health, Offer
 from services.camera.source import EndOfStream, Frame, FrameSource, SourceConfigError
 
 _log = logging.getLogger("camera")
@@ -51,7 +51,7 @@ class Timing:
 class FramePipeline:
     """Capture and publish threads for one source. `lock` guards core and health."""
 
-    def __init__(self, source: FrameSource, core: PublishCore, health: Health,
+    def __init__(self, source: FrameSource, core: CameraCore, health: Health,
                  backoff: Backoff, publish: Callable[[CompressedFrame], None],
                  jpeg_quality: int = 80, encode: Encoder = encode_jpeg,
                  clock: Callable[[], int] = mono_ns) -> None:

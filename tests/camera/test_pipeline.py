@@ -10,7 +10,7 @@ import numpy as np
 
 from common.imaging import decode_gray
 from common.messages import CompressedFrame
-from services.camera.core import Backoff, Health, PublishCore
+from services.camera.core import Backoff, CameraCore, Health
 from services.camera.pipeline import FramePipeline
 from services.camera.source import (
     EndOfStream,
@@ -90,7 +90,7 @@ def running(pipe: FramePipeline, src: ScriptedSource) -> Iterator[FramePipeline]
 
 def make(source: FrameSource, publish, fps: float = 1e9) -> FramePipeline:
     """A pipeline whose rate gate never decimates (the test decides what arrives when)."""
-    return FramePipeline(source, PublishCore("front", W, H, fps), Health(stall_timeout_s=5.0),
+    return FramePipeline(source, CameraCore("front", W, H, fps), Health(stall_timeout_s=5.0),
                          Backoff(0.01, 0.02), publish=publish, jpeg_quality=80)
 
 
@@ -148,7 +148,7 @@ def test_a_failing_source_is_reported_and_reopened_with_backoff():
 def test_status_names_the_failure_while_reopening():
     src = ScriptedSource()
     src.open_errors = [SourceError("camera unplugged")]
-    pipe = FramePipeline(src, PublishCore("front", W, H, 30.0), Health(1.0),
+    pipe = FramePipeline(src, CameraCore("front", W, H, 30.0), Health(1.0),
                          Backoff(30.0, 30.0), publish=lambda m: None)
     with running(pipe, src):
         def status() -> str:

@@ -19,9 +19,8 @@ from services.fusion.cameras import Camera, CameraView, camera_views, check_trac
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.main import build_core
-from services.fusion.node import FusionNode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.synthetic import rig_calibration_toml
+from services.fusion.shell import FusionShell
 from services.fusion.verifiers import GateResult
 from tests.fusion.helpers import (
     CAL,
@@ -36,7 +35,8 @@ from tests.fusion.helpers import (
     track,
 )
 from tests.fusion.test_frames import compressed
-from tests.fusion.test_node import FakeBus
+from tests.fusion.test_shell import FakeBus
+from tools.sim.rig import rig_calibration_toml
 
 ROI = Roi(10, 10, 40, 40)
 
@@ -207,7 +207,7 @@ def test_a_node_with_two_cameras_decodes_each_and_decides_on_both():
     log = logging.getLogger("test")
     decoders = [FrameDecoder(848, 480, 4, 2, log, name) for name in RIG]
     bus = FakeBus()
-    node = FusionNode(bus, core.s, core, decoders, log,  # type: ignore[arg-type]
+    node = FusionShell(bus, core.s, core, decoders, log,  # type: ignore[arg-type]
                       {n: rig_cal(n) for n in RIG})
     decoders[0].decode_now(compressed(stamp_ns=wall_ns(), seq=5), 1)
     decoders[1].decode_now(compressed(stamp_ns=wall_ns(), seq=6), 1)

@@ -18,7 +18,7 @@ def check_source(settings: cfg.CameraSettings) -> None:
 
         import_pyrealsense2()
     if isinstance(settings.source, cfg.SyntheticSource):
-        from services.camera.synthetic import load_factory
+        from services.camera.plugin import load_factory
 
         load_factory(settings.source.factory)
 
@@ -48,12 +48,12 @@ def build_source(settings: cfg.CameraSettings, cal: Calibration,
                                    width=src.width, height=src.height,
                                    fps=src.fps or round(settings.fps),
                                    timeout_ms=src.timeout_ms)
-        from services.camera.synthetic import SyntheticContext, make_synthetic_source
+        from services.camera.plugin import PluginContext, make_plugin_source
 
-        context = SyntheticContext(width=cal.width, height=cal.height,
-                                   fps=src.fps or settings.fps, calibration=cal,
-                                   camera=settings.name, options=dict(src.options), bus=bus)
-        return make_synthetic_source(src.factory, context)
+        context = PluginContext(width=cal.width, height=cal.height,
+                                fps=src.fps or settings.fps, calibration=cal,
+                                camera=settings.name, options=dict(src.options), bus=bus)
+        return make_plugin_source(src.factory, context)
     except ValueError as exc:
         if isinstance(exc, SourceConfigError):
             raise

@@ -9,7 +9,7 @@ import pytest
 from common.clock import mono_ns, wall_ns
 from common.messages import BrakeCommand, Decision, VerifiedTargets, encode
 from services.fusion.frames import FrameDecoder
-from services.fusion.node import FusionNode
+from services.fusion.shell import FusionShell
 from services.fusion.verifiers import GateResult
 from tests.fusion.helpers import FixedVerifier, cycle, make_core, track
 from tests.fusion.test_frames import compressed
@@ -24,7 +24,7 @@ class FakePublisher:
 
 
 class FakeBus:
-    """Just what FusionNode needs to publish; no Zenoh."""
+    """Just what FusionShell needs to publish; no Zenoh."""
 
     def __init__(self) -> None:
         self.log: list = []
@@ -33,14 +33,14 @@ class FakeBus:
         return FakePublisher(self.log, spec.name)
 
 
-def node_with(verifier, **fusion) -> tuple[FusionNode, FakeBus]:
+def node_with(verifier, **fusion) -> tuple[FusionShell, FakeBus]:
     bus = FakeBus()
     core = make_core(verifier, **fusion)
     decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
-    return FusionNode(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
+    return FusionShell(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
 
 
-def fresh(node: FusionNode) -> None:
+def fresh(node: FusionShell) -> None:
     node.decoder.decode_now(compressed(stamp_ns=wall_ns()), 1)
 
 
@@ -170,7 +170,7 @@ def test_the_radar_rhythm_learns_each_arrival_after_the_cycle_is_published():
     core = make_core(FixedVerifier())
     decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
     rhythm = Recording()
-    node = FusionNode(bus, core.s, core, decoder, logging.getLogger("test"),  # type: ignore[arg-type]
+    node = FusionShell(bus, core.s, core, decoder, logging.getLogger("test"),  # type: ignore[arg-type]
                       rhythm=rhythm)
     fresh(node)
     period = 74_000_000

@@ -35,7 +35,7 @@ from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
 
 
-class FusionNode:
+class FusionShell:
     """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
     single camera). `calibrations`: what each camera's CameraInfo is checked against.
     `rhythm`: told every radar cycle's arrival (decoders with decode = before_radar
@@ -202,9 +202,9 @@ class FusionNode:
         self.log.info(kv("fusion_stats", **self.stats()))
 
 
-def run_until(stop: threading.Event, node: FusionNode, interval_s: float) -> None:
+def run_until(stop: threading.Event, shell: FusionShell, interval_s: float) -> None:
     """Log statistics every interval until `stop` is set."""
     next_log = time.monotonic() + interval_s
     while not stop.wait(max(0.0, next_log - time.monotonic())):
-        node.log_stats()
+        shell.log_stats()
         next_log += interval_s
