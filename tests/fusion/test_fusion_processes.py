@@ -253,6 +253,7 @@ connect = ["{router}"]
 [fusion]
 instance = "{INSTANCE}"
 stats_interval_s = 1.0
+gate_scope = "all"                 # both threats gated, to see each camera's verdict
 [[fusion.cameras]]
 name = "front"
 calibration = "{tmp_path / 'front.toml'}"
