@@ -149,7 +149,7 @@ def build_shell(bus: Bus, cal: Calibration, gate_scope: str
     verifier = CountingVerifier(create("edge_density"))
     core = FusionCore(settings, ColumnProjector(cal, ColumnGeometry()), verifier)
     log = logging.getLogger("bench")
-    shell = FusionShell(bus, settings, core, FrameDecoder(cal.width, cal.height, 4, 2, log), log)
+    shell = FusionShell(bus, settings, core, FrameDecoder(cal.width, cal.height, log), log)
     timed = TimedPublisher(shell._cmd_pub)
     shell._cmd_pub = timed  # type: ignore[assignment]
     return shell, timed, verifier

@@ -204,7 +204,7 @@ def test_the_core_refuses_feeds_that_do_not_match_its_cameras():
 def test_a_shell_with_two_cameras_decodes_each_and_decides_on_both():
     core = rig_core(FixedVerifier(verdict=True), decision={"corridor": {"enabled": False}})
     log = logging.getLogger("test")
-    decoders = [FrameDecoder(848, 480, 4, 2, log, name) for name in RIG]
+    decoders = [FrameDecoder(848, 480, log, name) for name in RIG]
     bus = FakeBus()
     shell = FusionShell(bus, core.s, core, decoders, log,  # type: ignore[arg-type]
                       {n: rig_cal(n) for n in RIG})

@@ -9,6 +9,8 @@ import pytest
 from common.imaging import decode_gray, encode_jpeg
 from common.messages import CompressedFrame, Header, encode
 from services.fusion.frames import (
+    QUEUE_SIZE,
+    RING_SIZE,
     DecodedFrame,
     FrameDecoder,
     FrameError,
@@ -31,8 +33,8 @@ def compressed(stamp_ns: int = T0, seq: int = 0, truncate: bool = False,
                                   camera="front", width=width, height=height, jpeg=jpeg))
 
 
-def decoder(ring: int = 4, queue: int = 2) -> FrameDecoder:
-    return FrameDecoder(848, 480, ring, queue, logging.getLogger("test"))
+def decoder() -> FrameDecoder:
+    return FrameDecoder(848, 480, logging.getLogger("test"))
 
 
 def test_decoded_frames_use_the_one_decode_path():
@@ -67,14 +69,15 @@ def test_decoder_counts_unusable_frames_by_reason_and_keeps_good_ones():
 
 
 def test_ring_keeps_the_newest_frames():
-    dec = decoder(ring=3)
-    for i in range(5):
+    dec = decoder()
+    for i in range(RING_SIZE + 2):
         dec.decode_now(compressed(stamp_ns=T0 + i * 33 * MS, seq=i), i)
-    assert [f.seq for f in dec.snapshot().frames] == [2, 3, 4]
+    assert [f.seq for f in dec.snapshot().frames] == list(range(2, RING_SIZE + 2))
 
 
 def test_worker_thread_decodes_submitted_frames_and_drops_the_oldest_when_behind(monkeypatch):
-    dec = decoder(queue=2)
+    assert QUEUE_SIZE == 2 and RING_SIZE >= 3
+    dec = decoder()
     busy, gate = threading.Event(), threading.Event()
     original = dec.decode_now
 

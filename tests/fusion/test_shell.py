@@ -36,7 +36,7 @@ class FakeBus:
 def shell_with(verifier, **fusion) -> tuple[FusionShell, FakeBus]:
     bus = FakeBus()
     core = make_core(verifier, **fusion)
-    decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
+    decoder = FrameDecoder(848, 480, logging.getLogger("test"))
     return FusionShell(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
 
 
@@ -168,7 +168,7 @@ def test_the_radar_rhythm_learns_each_arrival_after_the_cycle_is_published():
 
     bus = FakeBus()
     core = make_core(FixedVerifier())
-    decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
+    decoder = FrameDecoder(848, 480, logging.getLogger("test"))
     rhythm = Recording()
     shell = FusionShell(bus, core.s, core, decoder, logging.getLogger("test"),  # type: ignore[arg-type]
                       rhythm=rhythm)
