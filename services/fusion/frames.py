@@ -185,16 +185,19 @@ class FrameDecoder:
         try:
             frame = decode_frame(payload, rx_mono_ns, self.width, self.height)
         except FrameError as exc:
-            with self._cond:
-                self._undecodable += 1
-                self.errors_by_reason[exc.reason] = self.errors_by_reason.get(exc.reason, 0) + 1
-                self._last_error = str(exc)
-                self._last_error_rx = rx_mono_ns
+            self._unusable(exc.reason, str(exc), rx_mono_ns)
             self._rl.warning(f"frame:{exc.reason}", "frame_unusable", reason=exc.reason,
                              camera=self.camera, error=str(exc))
             return
         with self._cond:
             self._ring.append(frame)
+
+    def _unusable(self, reason: str, error: str, rx_mono_ns: int) -> None:
+        with self._cond:
+            self._undecodable += 1
+            self.errors_by_reason[reason] = self.errors_by_reason.get(reason, 0) + 1
+            self._last_error = error
+            self._last_error_rx = rx_mono_ns
 
     def _next(self) -> tuple[bytes, int] | None:
         """The next frame to decode, once it is time (None: stopping)."""
@@ -219,7 +222,8 @@ class FrameDecoder:
                 return
             try:
                 self.decode_now(*item)
-            except Exception as exc:  # a decoder bug must not end frame delivery silently
+            except Exception as exc:  # a bug must not end this camera's frames: count, go on
+                self._unusable("decoder_error", f"decoder error: {exc!r}", item[1])
                 self._rl.error("frame:bug", "frame_decoder_failed", camera=self.camera,
                                error=repr(exc))
 

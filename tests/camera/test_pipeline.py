@@ -199,3 +199,17 @@ def test_frames_of_the_wrong_size_are_never_published():
         wait_for(lambda: len(published) == 1, 30)
         assert published[0].header.stamp_ns == 1005
         assert pipe.core.stats.errors.get("size_mismatch") == 1
+
+
+def test_a_bug_in_a_source_is_reported_as_the_source_down_and_the_capture_goes_on():
+    src = ScriptedSource()
+    published: list[CompressedFrame] = []
+    pipe = make(src, published.append)
+    with running(pipe, src):
+        src.script.put(KeyError("plugin bug"))
+        wait_for(lambda: src.opens == 2, 30, what="reopened after the bug")
+        with pipe.lock:
+            assert pipe.core.stats.errors.get("source_error") == 1
+            assert "read: 'plugin bug'" in pipe.health.error
+        src.push(1)
+        wait_for(lambda: len(published) == 1, 30, what="frame after the reopen")

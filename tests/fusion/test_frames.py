@@ -121,3 +121,30 @@ def test_without_alignment_the_newest_frame_is_used_if_within_the_skew():
     frames = (frame(T0 - 10 * MS, seq=1, rx_mono_ns=1), frame(T0 + 60 * MS, seq=2, rx_mono_ns=2))
     assert seq_of(select_frame(frames, T0, 100 * MS, align=False)) == 2
     assert select_frame(frames, T0 - 50 * MS, 100 * MS, align=False) is None
+
+
+def test_a_decoder_bug_is_counted_and_the_next_frames_still_decode(monkeypatch):
+    from services.fusion import frames
+
+    dec = decoder()
+    real = frames.decode_frame
+    calls = []
+
+    def buggy(payload: bytes, rx: int, width: int, height: int) -> DecodedFrame:
+        calls.append(rx)
+        if len(calls) == 1:
+            raise ZeroDivisionError("a bug")
+        return real(payload, rx, width, height)
+
+    monkeypatch.setattr(frames, "decode_frame", buggy)
+    dec.start()
+    try:
+        dec.submit(compressed(seq=0), "k", 1)
+        wait_for(lambda: dec.snapshot().undecodable == 1, 30, what="the bug counted")
+        dec.submit(compressed(seq=1), "k", 2)
+        wait_for(lambda: dec.snapshot().frames, 30, what="the next frame decoded")
+        assert [f.seq for f in dec.snapshot().frames] == [1]
+        assert dec.errors_by_reason == {"decoder_error": 1}
+        assert "ZeroDivisionError" in dec.snapshot().last_error
+    finally:
+        dec.stop()
