@@ -28,7 +28,7 @@ RING_SIZE = 4
 # frame is always worth more than a backlog.
 QUEUE_SIZE = 2
 # before_radar: the newest waiting frame is decoded this long before the next radar
-# cycle is due (a decode takes about 1 ms; the margin covers a late thread wake-up).
+# cycle is due: time for one decode and a late thread wake-up.
 DECODE_LEAD_S = 0.012
 
 
