@@ -1,4 +1,5 @@
-"""Build the configured FrameSource (`[camera.source]`, tagged by `kind`)."""
+"""The sources by `[camera.source] kind`: each built from its config, its module imported
+only when used (pyrealsense2 is an optional extra)."""
 
 from typing import TYPE_CHECKING
 
@@ -11,7 +12,7 @@ if TYPE_CHECKING:
 
 
 def check_source(settings: cfg.CameraSettings) -> None:
-    """Checks that need no bus, so that main fails fast: a synthetic factory must import,
+    """Checks that need no bus, so that main fails fast: a plugin's factory must import,
     the realsense source needs pyrealsense2. Raises SourceConfigError."""
     if isinstance(settings.source, cfg.RealSenseSource):
         from services.camera.realsense import import_pyrealsense2

@@ -1,6 +1,6 @@
 """The fusion I/O shell: each camera's frames to its decoder, radar cycles through the
-core, messages out. Exactly one BrakeCommand per RadarTracks, published before the
-targets."""
+core, messages out. Exactly one BrakeCommand per RadarTracks, published before its
+VerifiedTargets."""
 
 import logging
 import threading
