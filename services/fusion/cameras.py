@@ -10,8 +10,8 @@ see it, in configured order:
   `not_checked`);
 - **rejected** if at least one camera with a usable frame sees it and every such camera
   rejects it; the deciding camera is the one with the highest density (the closest call);
-- **not checked** (no threat, gate_scope = candidates) when a camera with a usable frame
-  sees it but the gate was not needed;
+- **not checked** when a camera with a usable frame sees it but the track is not gated
+  (the gate scope, core.py);
 - **unavailable** only if some camera would see it but none of those has a usable frame;
 - **not visible** only if no camera sees it (all project it behind themselves or outside
   their image).
@@ -85,7 +85,7 @@ class TrackCheck:
 
 def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -> TrackCheck:
     """Track `i` in every camera, combined by the rule in the module docstring. `gate`:
-    run the verifier (False: the track is no threat and the gate scope is candidates)."""
+    run the verifier (False: the gate scope does not gate this track)."""
     several = len(views) > 1
     verified: tuple[CameraView, Roi, GateResult] | None = None
     rejected: tuple[CameraView, Roi, GateResult] | None = None
