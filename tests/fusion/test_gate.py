@@ -155,15 +155,19 @@ def test_oncoming_headlights_before_a_lamp_lit_road_are_a_known_limit():
 def test_a_near_box_in_the_low_beams_is_a_known_limit_of_the_adaptive_verifier():
     # A cardboard box 7 m ahead at night: its white tape and label saturate in the low
     # beams as strips and patches each smaller than max_light, which the adaptive
-    # verifier takes for lamps and masks with their rims; what is left is under tau_dark.
-    # The paper's gate confirms it (docs/fusion.md, Verifiers: limits).
+    # verifier takes for lamps and masks with their rims; what is left is mostly under
+    # tau_dark. The paper's gate confirms it (docs/fusion.md, Verifiers: limits).
     roi = PROJECTOR.rois(np.array([[7.0, 0.0]]))[0]
     assert roi is not None
-    box = gray_of(Scene(obstacles=(Obstacle(7.0, 0.0),), night=True, seed=1))
-    a, b = create("edge_density").verify(box, roi), create("adaptive_edge_density").verify(
-        box, roi)
-    assert a.verified and b.detail["dark"] == 1.0 and b.detail["masked"] > 0.1
-    assert not b.verified
+    rejected = 0
+    for seed in range(1, 7):                          # six box textures
+        box = gray_of(Scene(obstacles=(Obstacle(7.0, 0.0),), night=True, seed=seed))
+        a = create("edge_density").verify(box, roi)
+        b = create("adaptive_edge_density").verify(box, roi)
+        assert a.verified and b.detail["dark"] == 1.0 and b.detail["masked"] > 0.1
+        assert b.density < 0.3 * a.density
+        rejected += not b.verified
+    assert rejected >= 4
 
 
 def test_registry_creates_verifiers_with_defaults_and_validates_params():

@@ -38,6 +38,7 @@ HAZE_M = 120.0
 _MIP_FACTORS = (1, 4, 16)        # texture levels: 2 cm, 8 cm, 32 cm per texel
 _SHADE_REAR, _SHADE_SIDE, _SHADE_TOP = 1.0, 0.78, 1.12
 _NOISE_BANK = 4
+_FACES = ("rear", "front", "side", "top")     # a box's faces, in a fixed order
 
 
 @dataclass(frozen=True)
@@ -294,7 +295,7 @@ class Renderer:
     def _sprite(self, body: Body, face: str) -> sprites.Sprite:
         key = (body.index, body.kind.value, face)
         if key not in self._sprites:
-            rng = np.random.default_rng((self._seed, body.index, hash(face) % 1000))
+            rng = np.random.default_rng((self._seed, body.index, _FACES.index(face)))
             colour = sprites.CAR_COLOURS[(body.index + self._seed) % len(sprites.CAR_COLOURS)]
             h = body.height_m
             if body.kind is ObjectKind.BOX:
