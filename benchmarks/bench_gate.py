@@ -2,7 +2,7 @@
 
     python -m benchmarks.bench_gate [--quick] [--out out/bench]
 
-On rendered road scenes (SIMULATION: services/fusion/synthetic.py), JPEG-encoded at the
+On rendered road scenes (SIMULATION: tools/sim/scenes.py), JPEG-encoded at the
 camera's quality and decoded once with the project's decode path, it times, per ROI at
 the paper's two sizes (134x130 = 4.3 % and 75x70 = 1.3 % of 848x480) and on the full
 frame:
@@ -37,8 +37,9 @@ from benchmarks.figures import Figure
 from common.calibration import Calibration
 from common.imaging import decode_bgr, decode_gray, encode_jpeg
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.synthetic import Obstacle, Scene, labelled_frames, render
 from services.fusion.verifiers import create
+from tools.sim.scenario import ObjectKind
+from tools.sim.scenes import Obstacle, Scene, labelled_frames, render
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"
 SIZES = {"roi 4.3% (134x130)": (134, 130), "roi 1.3% (75x70)": (75, 70),
@@ -59,14 +60,13 @@ def naive_density(bgr: np.ndarray, roi: Roi) -> float:
 def scenes(cal: Calibration, n: int, seed: int) -> list[tuple[np.ndarray, list[Obstacle]]]:
     """Frames as fusion holds them (grey, via JPEG q80) with their obstacles."""
     rng = np.random.default_rng(seed)
-    kinds = [("box", 0.6, 0.6), ("pedestrian", 0.5, 1.75), ("car", 1.7, 1.4)]
+    kinds = (ObjectKind.BOX, ObjectKind.PEDESTRIAN, ObjectKind.CAR)
     out = []
     for i in range(n):
         obstacles = []
         for _ in range(3):
-            kind, w, h = kinds[int(rng.integers(len(kinds)))]
             obstacles.append(Obstacle(float(rng.uniform(6, 25)), float(rng.uniform(-3, 3)),
-                                      kind, w, h))  # type: ignore[arg-type]
+                                      kinds[int(rng.integers(len(kinds)))]))
         jpeg = encode_jpeg(render(cal, Scene(obstacles=tuple(obstacles), seed=seed + i)), 80)
         out.append((jpeg, obstacles))
     return [(np.frombuffer(j, np.uint8), obs) for j, obs in out]

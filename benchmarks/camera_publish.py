@@ -27,8 +27,8 @@ from common.imaging import encode_jpeg
 from common.keys import CAMERA_JPEG
 from common.messages import CompressedFrame
 from common.net import free_port
-from services.camera.node import CameraNode
-from services.camera.synthetic import MovingBoxSource
+from services.camera.shell import CameraShell
+from tools.sim.moving_box import MovingBoxSource
 
 CALIBRATION = Path(__file__).resolve().parent.parent / "deploy/calibration/d435_848x480.toml"
 
@@ -40,7 +40,7 @@ def percentiles(values_us: list[float]) -> tuple[float, float]:
 
 def bench_encode(n: int, qualities: tuple[int, ...]) -> list[tuple[str, float, float, float]]:
     """(what, median us, p95 us, KB) per encoder and quality."""
-    scene = MovingBoxSource(848, 480, 30.0)
+    scene = MovingBoxSource(Calibration.load(CALIBRATION), 30.0)
     frames = [scene.render(i) for i in range(16)]
     rows = []
     cases = [(f"imaging.encode_jpeg q{q}", q, False) for q in qualities]
@@ -63,7 +63,7 @@ def bench_encode(n: int, qualities: tuple[int, ...]) -> list[tuple[str, float, f
 
 def run_camera(endpoint: str, seconds: float, encode_delay_s: float
                ) -> tuple[float, list[float], int, int, int]:
-    """Run a camera (built-in synthetic scene at 30 fps) and a subscriber for `seconds`.
+    """Run a camera (the moving-box demo scene at 30 fps) and a subscriber for `seconds`.
 
     Returns (received rate Hz, per-frame latency capture->receipt ms, published, dropped,
     received)."""
@@ -84,20 +84,20 @@ def run_camera(endpoint: str, seconds: float, encode_delay_s: float
     with Bus.open(client, "ego", "bench-sub") as sub_bus, \
             Bus.open(client, "ego", "camera/bench") as cam_bus:
         sub_bus.subscribe(CAMERA_JPEG, on_frame, camera="bench")
-        source = MovingBoxSource(cal.width, cal.height, 30.0)
-        node = CameraNode(settings, cal, source, cam_bus)
+        source = MovingBoxSource(cal, 30.0)
+        shell = CameraShell(settings, cal, source, cam_bus)
         if encode_delay_s:
             def slow(image: np.ndarray, quality: int) -> bytes:
                 time.sleep(encode_delay_s)   # simulates a slow encoder or a loaded CPU
                 return encode_jpeg(image, quality)
-            node.pipeline._encode = slow
+            shell.pipeline._encode = slow
         stop = threading.Event()
-        thread = threading.Thread(target=node.run, args=(stop,))
+        thread = threading.Thread(target=shell.run, args=(stop,))
         thread.start()
         time.sleep(seconds)
         stop.set()
         thread.join(10)
-        stats = node.core.stats
+        stats = shell.core.stats
     with lock:
         rate = (len(receipts) - 1) / (receipts[-1] - receipts[0]) if len(receipts) > 1 else 0.0
         return rate, list(latencies), stats.published, stats.dropped, len(latencies)
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     n, seconds = (100, 3.0) if args.quick else (500, 10.0)
 
     encode_rows = bench_encode(n, (60, 80, 95))
-    print(f"JPEG encode, 848x480 synthetic road scene, {n} frames")
+    print(f"JPEG encode, 848x480 rendered road scene (simulation), {n} frames")
     print(f"{'encoder':<28} {'median us':>10} {'p95 us':>10} {'KB':>7}")
     for name, p50, p95, kb in encode_rows:
         print(f"{name:<28} {p50:>10.0f} {p95:>10.0f} {kb:>7.1f}")

@@ -74,14 +74,13 @@ class FolderSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, tag_
 
 class SyntheticSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, tag_field="kind",
                       tag="synthetic"):
-    """A plugin: `factory` ("package.module:callable") returns a FrameSource.
+    """A source plugin: `factory` ("package.module:callable") returns a FrameSource.
 
-    `options` are passed to it unchanged (see services/camera/synthetic.py). The built-in
-    scene is "services.camera.synthetic:moving_box".
+    `options` are passed to it unchanged (see services/camera/plugin.py). The default is
+    the moving-box demo scene, a SIMULATION (tools/sim/moving_box.py).
     """
 
-    factory: Annotated[str, msgspec.Meta(pattern=_FACTORY)] = (
-        "services.camera.synthetic:moving_box")
+    factory: Annotated[str, msgspec.Meta(pattern=_FACTORY)] = "tools.sim.moving_box:make_source"
     fps: Fps = 0.0
     options: dict[str, Any] = msgspec.field(default_factory=dict)
 

@@ -38,13 +38,14 @@ class GateScope(enum.Enum):
 
 
 class DecodePolicy(enum.Enum):
-    """Which arriving camera frames are decoded."""
+    """Which arriving camera frames are decoded (docs/fusion.md, "Decoding")."""
 
     EVERY_FRAME = "every_frame"    # every frame, on arrival
     # Only the frames a radar cycle can use: while the radar's rhythm is steady, the
-    # newest frame waiting is decoded `decode_lead_s` before the next cycle is due (and
-    # any frame arriving after that, on arrival); frames overtaken by a newer one before
-    # then are never decoded. Radar irregular, late or silent: every frame.
+    # newest frame waiting is decoded shortly before the next cycle is due; frames
+    # overtaken by a newer one before then are never decoded. Less CPU with several
+    # cameras; a radar cycle that comes early uses the previous frame. Radar irregular,
+    # late or silent: every frame.
     BEFORE_RADAR = "before_radar"
 
 
@@ -57,12 +58,7 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # True: the frame nearest the radar cycle, with each track predicted (constant
     # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
     align: bool = True
-    ring_size: Annotated[int, msgspec.Meta(ge=1, le=64)] = 4
-    # Frames waiting for the decoder; the oldest is dropped (and counted) when full.
-    decode_queue: Annotated[int, msgspec.Meta(ge=1, le=16)] = 2
     decode: DecodePolicy = DecodePolicy.EVERY_FRAME
-    # before_radar: how long before the next radar cycle is due the newest frame is decoded.
-    decode_lead_s: Annotated[float, msgspec.Meta(gt=0, le=0.1)] = 0.012
 
 
 class CameraInput(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

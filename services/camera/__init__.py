@@ -1,2 +1,2 @@
 """Camera service: frames from a RealSense, any OpenCV capture, an image folder or a
-synthetic scene, published as JPEG with capture stamps; CameraInfo from the calibration."""
+source plugin, published as JPEG with capture stamps; CameraInfo from the calibration."""

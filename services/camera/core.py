@@ -60,7 +60,7 @@ class FrameStats:
     errors: ReasonCounter = field(default_factory=ReasonCounter)
 
 
-class PublishCore:
+class CameraCore:
     """Rate gate, single pending slot, sequence numbers and message building."""
 
     def __init__(self, camera: str, width: int, height: int, fps: float) -> None:

@@ -8,9 +8,9 @@ from common.config.camera import CameraConfig
 from common.config.loader import ConfigError
 from common.log import kv, setup_logging
 from common.service import load_service_config, service_argparser, stop_event_on_signals
-from services.camera.node import EXIT_CONFIG, CameraNode
+from services.camera.registry import build_source, check_source
+from services.camera.shell import EXIT_CONFIG, CameraShell
 from services.camera.source import SourceConfigError
-from services.camera.sources import build_source, check_source
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -35,10 +35,10 @@ def main(argv: list[str] | None = None) -> int:
             except SourceConfigError as exc:
                 print(f"error: camera.source: {exc}", file=sys.stderr)
                 return EXIT_CONFIG
-            node = CameraNode(settings, cal, source, bus)
-            code = node.run(stop)
-            if node.pipeline.fatal is not None:
-                print(f"error: camera.source: {node.pipeline.fatal}", file=sys.stderr)
+            shell = CameraShell(settings, cal, source, bus)
+            code = shell.run(stop)
+            if shell.pipeline.fatal is not None:
+                print(f"error: camera.source: {shell.pipeline.fatal}", file=sys.stderr)
     except BusError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_CONFIG

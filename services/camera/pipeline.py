@@ -6,7 +6,8 @@
   message to `publish`. While it is busy, newer frames replace the pending one (counted
   as dropped): a slow encoder or bus never builds a backlog.
 
-`publish` must not block for long (the Zenoh publisher uses congestion control DROP).
+`publish` must not block for long (the Zenoh publisher uses congestion control DROP);
+it may raise zenoh.ZError, which is counted and logged.
 """
 
 import logging
@@ -15,12 +16,13 @@ from collections import deque
 from collections.abc import Callable
 
 import numpy as np
+import zenoh
 
 from common.clock import NS_PER_MS, mono_ns
 from common.imaging import encode_jpeg
 from common.log import RateLimitedLog, kv
 from common.messages import CompressedFrame
-from services.camera.core import Backoff, Health, Offer, PublishCore
+from services.camera.core import Backoff, CameraCore, Health, Offer
 from services.camera.source import EndOfStream, Frame, FrameSource, SourceConfigError
 
 _log = logging.getLogger("camera")
@@ -51,7 +53,7 @@ class Timing:
 class FramePipeline:
     """Capture and publish threads for one source. `lock` guards core and health."""
 
-    def __init__(self, source: FrameSource, core: PublishCore, health: Health,
+    def __init__(self, source: FrameSource, core: CameraCore, health: Health,
                  backoff: Backoff, publish: Callable[[CompressedFrame], None],
                  jpeg_quality: int = 80, encode: Encoder = encode_jpeg,
                  clock: Callable[[], int] = mono_ns) -> None:
@@ -103,45 +105,41 @@ class FramePipeline:
     def _capture_loop(self) -> None:
         try:
             while not self._stopping.is_set() and not self.finished:
-                if self._open():
-                    self._read_until_failure()
+                self._stream()
         finally:
             self.source.close()
             with self.lock:
                 self.lock.notify_all()
 
-    def _open(self) -> bool:
+    def _stream(self) -> None:
+        """Open the source and read it until it ends, fails or the pipeline stops. A
+        failure is reported (the camera is down) and the source reopened after a backoff;
+        SourceConfigError is fatal."""
+        step = "open"
         try:
             self.source.open()
+            with self.lock:
+                self.health.streaming(self._clock())
+            _log.info(kv("source_open", source=self.source.describe()))
+            step = "read"
+            self._read_until_end()
         except SourceConfigError as exc:
             self._fatal(exc)
-            return False
-        except Exception as exc:
-            self._failed("open", exc)
-            return False
-        with self.lock:
-            self.health.streaming(self._clock())
-        _log.info(kv("source_open", source=self.source.describe()))
-        return True
+        except EndOfStream as exc:
+            with self.lock:
+                self.health.ended()
+            _log.info(kv("end_of_stream", detail=str(exc)))
+            self.ended.set()   # the publish thread still sends the pending frame
+        except Exception as exc:  # SourceError, or a source's bug: report it down, never die
+            if step == "read":
+                self.source.close()
+            self._failed(step, exc)
 
-    def _read_until_failure(self) -> None:
+    def _read_until_end(self) -> None:
+        """Read and offer frames until the pipeline stops. Raises what the source raises."""
         first = True
         while not self._stopping.is_set():
-            try:
-                frame = self.source.read()
-            except EndOfStream as exc:
-                with self.lock:
-                    self.health.ended()
-                _log.info(kv("end_of_stream", detail=str(exc)))
-                self.ended.set()   # the publish thread still sends the pending frame
-                return
-            except SourceConfigError as exc:
-                self._fatal(exc)
-                return
-            except Exception as exc:
-                self.source.close()
-                self._failed("read", exc)
-                return
+            frame = self.source.read()
             now = self._clock()
             with self.lock:
                 result = self.core.offer(frame, now)
@@ -161,7 +159,9 @@ class FramePipeline:
         with self.lock:
             self.core.stats.errors.add("source_error")
             self.health.failed(error, delay)
-        self._rl.warning("source_failed", "source_failed", error=error, retry_in_s=delay)
+        self._rl.warning("source_failed", "source_failed", error=error,
+                         kind=type(exc).__name__, source=self.source.describe(),
+                         retry_in_s=delay)
         self._stopping.wait(delay)
 
     def _fatal(self, exc: SourceConfigError) -> None:
@@ -189,7 +189,7 @@ class FramePipeline:
         t0 = self._clock()
         try:
             jpeg = self._encode(frame.image, self._quality)
-        except Exception as exc:
+        except ValueError as exc:
             with self.lock:
                 self.core.stats.errors.add("encode_error")
             self._rl.error("encode", "encode_failed", error=repr(exc))
@@ -199,7 +199,7 @@ class FramePipeline:
             msg = self.core.message(frame, jpeg, self._clock())
         try:
             self._publish(msg)
-        except Exception as exc:
+        except zenoh.ZError as exc:
             with self.lock:
                 self.core.stats.errors.add("publish_error")
             self._rl.error("publish", "publish_failed", error=repr(exc))

@@ -6,12 +6,12 @@ capture time and projects it into its image. A track is then checked in the came
 see it, in configured order:
 
 - **verified** if any camera verifies it; the first that does decides, and the cameras
-  after it are neither projected nor gated (their verdict could not change the outcome;
-  they are reported `not_checked`);
+  after it are not gated (their verdict could not change the outcome; they are reported
+  `not_checked`);
 - **rejected** if at least one camera with a usable frame sees it and every such camera
   rejects it; the deciding camera is the one with the highest density (the closest call);
-- **not checked** (no threat, gate_scope = candidates) when a camera with a usable frame
-  sees it but the gate was not needed;
+- **not checked** when a camera with a usable frame sees it but the track is not gated
+  (the gate scope, core.py);
 - **unavailable** only if some camera would see it but none of those has a usable frame;
 - **not visible** only if no camera sees it (all project it behind themselves or outside
   their image).
@@ -37,82 +37,36 @@ class Camera:
     projector: ColumnProjector
 
 
+@dataclass(frozen=True, slots=True)
 class CameraView:
     """One camera in one radar cycle: its frame (None: unavailable, `reason` says why),
-    each confirmed track predicted to that frame's capture time (`xy`), and its ROI.
+    each confirmed track predicted to that frame's capture time (`xy`), and its ROI
+    (None: the camera does not see it)."""
 
-    Positions and ROIs are computed on first use: a cycle without a threat sends its
-    command before any of them (numpy's calls, made for many tracks at once, cost tens
-    of microseconds each on a cold cache), and when the first camera verifies every
-    threat, the others are not projected before the command is out. `xy` is the array of
-    positions or a function that computes it."""
-
-    __slots__ = ("_project", "_rois", "_xy", "_xy_list", "frame", "name", "reason")
-
-    def __init__(self, name: str, frame: DecodedFrame | None, reason: str,
-                 xy: np.ndarray | Callable[[], np.ndarray],
-                 project: Callable[[np.ndarray], list[Roi | None]]) -> None:
-        self.name = name
-        self.frame = frame
-        self.reason = reason
-        self._xy = xy
-        self._xy_list: list[list[float]] | None = None
-        self._project = project
-        self._rois: list[Roi | None] | None = None
-
-    def _positions(self) -> np.ndarray:
-        if callable(self._xy):
-            self._xy = self._xy()
-        return self._xy
-
-    @property
-    def rois(self) -> list[Roi | None]:
-        if self._rois is None:
-            xy = self._positions()
-            self._rois = self._project(xy) if len(xy) else []
-        return self._rois
-
-    @property
-    def xy(self) -> list[list[float]]:
-        if self._xy_list is None:
-            self._xy_list = self._positions().tolist()
-        return self._xy_list
-
-
-class _Motion:
-    """The tracks' positions and velocities as arrays, built once per cycle on first use
-    and shared by the cameras."""
-
-    def __init__(self, tracks: Sequence[RadarTrack]) -> None:
-        self._tracks = tracks
-        self._pos_vel: tuple[np.ndarray, np.ndarray] | None = None
-
-    def at(self, dt_s: float) -> Callable[[], np.ndarray]:
-        """Positions predicted `dt_s` ahead, as a function computing them."""
-        def positions() -> np.ndarray:
-            if self._pos_vel is None:
-                tracks = self._tracks
-                self._pos_vel = (np.array([(t.x_m, t.y_m) for t in tracks]).reshape(-1, 2),
-                                 np.array([(t.vx_mps, t.vy_mps) for t in tracks]).reshape(-1, 2))
-            pos, vel = self._pos_vel
-            return pos + vel * dt_s if dt_s else pos
-        return positions
+    name: str
+    frame: DecodedFrame | None
+    reason: str
+    xy: list[list[float]]
+    rois: list[Roi | None]
 
 
 def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
                  tracks: Sequence[RadarTrack], radar_stamp_ns: int, max_skew_ns: int,
                  align: bool) -> list[CameraView]:
-    """Every camera's frame and (lazy) projections for one cycle. Tracks are predicted to
-    the frame's time only with `align`; a camera without a usable frame projects them as
+    """Every camera's frame and projections for one cycle. Tracks are predicted to the
+    frame's time only with `align`; a camera without a usable frame projects them as
     they are (to tell "would see it" from "not visible")."""
+    pos = np.array([(t.x_m, t.y_m) for t in tracks], dtype=np.float64).reshape(-1, 2)
+    vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks], dtype=np.float64).reshape(-1, 2)
     views = []
-    motion = _Motion(tracks)
     for cam, feed in zip(cameras, feeds, strict=True):
         frame = select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align)
         reason = "" if frame is not None else unavailable_reason(feed, radar_stamp_ns,
                                                                  max_skew_ns)
         dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
-        views.append(CameraView(cam.name, frame, reason, motion.at(dt_s), cam.projector.rois))
+        xy = pos + vel * dt_s
+        rois = cam.projector.rois(xy) if len(xy) else []
+        views.append(CameraView(cam.name, frame, reason, xy.tolist(), rois))
     return views
 
 
@@ -131,7 +85,7 @@ class TrackCheck:
 
 def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -> TrackCheck:
     """Track `i` in every camera, combined by the rule in the module docstring. `gate`:
-    run the verifier (False: the track is no threat and the gate scope is candidates)."""
+    run the verifier (False: the gate scope does not gate this track)."""
     several = len(views) > 1
     verified: tuple[CameraView, Roi, GateResult] | None = None
     rejected: tuple[CameraView, Roi, GateResult] | None = None
@@ -140,7 +94,7 @@ def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -
     per_camera: list[CameraCheck] = []
     for v in views:
         if verified is not None:
-            # Its verdict could not change the outcome: neither gated nor projected.
+            # Its verdict could not change the outcome.
             if several:
                 per_camera.append(CameraCheck(v.name, Verification.NOT_CHECKED))
             continue

@@ -8,10 +8,16 @@ frame nearest the cycle within the skew bound (frames.py), the track predicted t
 frame's time and its column projected to a ROI (roi.py); the verifier (verifiers.py) in
 the cameras that see it, combined (cameras.py); the decision. The command is the most
 severe decision (ties: the smallest TTC_eff), or a heartbeat.
+
+Which tracks are gated (`gate_scope`): `all`, every visible track; `candidates`, only
+those that can change the command. Threats are taken most severe first, then most
+urgent; a track's decision is at most its radar threat, so once the command so far is at
+least a threat's rank, neither that threat nor any after it can change the command, and
+they are reported `not_checked`.
 """
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from common.config.fusion import FusionSettings, GateScope
@@ -40,8 +46,6 @@ from services.fusion.roi import ColumnProjector
 from services.fusion.verifiers import Verifier
 
 _NO_ROI: tuple[int, ...] = ()
-
-CommandSink = Callable[[BrakeCommand], None]
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,16 +88,10 @@ class FusionCore:
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
 
     def process(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
-                now_wall_ns: int, now_mono_ns: int,
-                on_command: CommandSink | None = None) -> CycleResult:
+                now_wall_ns: int, now_mono_ns: int) -> CycleResult:
         """Decide one radar cycle. `feeds`: each camera's frames, in camera order (one
         FrameFeed for a single camera). `now_wall_ns` judges the radar's age;
         `now_mono_ns` stamps the messages' pub_mono_ns (the shell refreshes it at publish).
-
-        `on_command` receives the cycle's BrakeCommand as soon as it is decided, before
-        the gate has run on tracks that cannot change it: threats are checked most urgent
-        first, and once one of them reaches the most its radar threat allows, nothing
-        after it can be more severe. The targets are completed afterwards.
         Raises ValueError when the number of feeds is not the number of cameras.
         """
         s = self.s
@@ -110,11 +108,11 @@ class FusionCore:
         age_ns = now_wall_ns - tracks.header.stamp_ns
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
-        radar_stale = abs(age_ns) > self._radar_max_age_ns
         views: list[CameraView] = []
         reason_unavailable = ""
-        if radar_stale:
+        if abs(age_ns) > self._radar_max_age_ns:
             status = VerifierStatus.STALE_RADAR
+            targets = [self._stale_target(t, age_ns) for t in confirmed]
         else:
             views = camera_views(self.cameras, feeds, confirmed, tracks.header.stamp_ns,
                                  self._max_skew_ns, s.frames.align)
@@ -123,16 +121,11 @@ class FusionCore:
             else:
                 status = VerifierStatus.UNAVAILABLE
                 reason_unavailable = _reasons(views)
-        cycle = _Cycle(tracks, confirmed, status, reason_unavailable, age_ns, now_wall_ns,
-                       now_mono_ns, on_command)
-        if radar_stale:
-            targets = [self._stale_target(t, age_ns) for t in confirmed]
-            self._send(cycle, targets)
-        else:
-            targets = self._verify_all(cycle, views)
-        assert cycle.command is not None
+            targets = self._verify(confirmed, views, tracks.header.stamp_ns)
+        command = self._command(tracks, targets, status, reason_unavailable, age_ns,
+                                now_wall_ns, now_mono_ns, confirmed=confirmed)
         targets += [_invalid_target(t) for t in invalid]
-        header = Header(seq=cycle.command.header.seq, source=self.source,
+        header = Header(seq=command.header.seq, source=self.source,
                         stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
         verified = VerifiedTargets(
             header=header, instance=s.instance, radar_sensor=tracks.sensor,
@@ -145,7 +138,7 @@ class FusionCore:
             frames_dropped=sum(f.dropped for f in feeds),
             frames_skipped=sum(f.skipped for f in feeds),
             cameras_unavailable={v.name: v.reason for v in views if v.frame is None})
-        return CycleResult(verified, cycle.command)
+        return CycleResult(verified, command)
 
     def _kinematics(self, t: RadarTrack) -> Kinematics:
         return self.rule.kinematics(t, t.track_id in self._moving)
@@ -159,72 +152,61 @@ class FusionCore:
             Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
             reason, None, None, path_predicted=k.window is not None)
 
-    def _verify_all(self, cycle: "_Cycle", views: list[CameraView]) -> list[VerifiedTarget]:
-        rule = self.rule
-        confirmed = cycle.confirmed
-        radar_stamp_ns = cycle.tracks.header.stamp_ns
+    def _verify(self, confirmed: list[RadarTrack], views: list[CameraView],
+                radar_stamp_ns: int) -> list[VerifiedTarget]:
+        """Every confirmed track's target, in track order, gated as the module docstring
+        says."""
         kins = [self._kinematics(t) for t in confirmed]
-        threats = [rule.threat(k) for k in kins]
+        threats = [self.rule.threat(k) for k in kins]
+        ranks = [_rank(threat, k.ttc_eff_s) for (threat, _), k in zip(threats, kins, strict=True)]
         gate_all = self.s.gate_scope is GateScope.ALL
-        verify = self.verifier.verify
         # Where a track no camera sees is reported: the first camera with a frame.
         fallback = next((v for v in views if v.frame is not None), views[0])
-        out: list[VerifiedTarget | None] = [None] * len(confirmed)
+        targets: list[VerifiedTarget | None] = [None] * len(confirmed)
+        best: VerifiedTarget | None = None          # the command so far
+        best_rank = _rank(Decision.NONE, None)
+        for i in sorted(range(len(confirmed)), key=ranks.__getitem__, reverse=True):
+            can_change = threats[i][0] is not Decision.NONE and ranks[i] > best_rank
+            tgt = self._target(confirmed[i], i, kins[i], threats[i], views, fallback,
+                               radar_stamp_ns, gate_all or can_change, best)
+            if tgt.decision is not Decision.NONE and _rank_of(tgt) > best_rank:
+                best, best_rank = tgt, _rank_of(tgt)
+            targets[i] = tgt
+        return [t for t in targets if t is not None]
 
-        def evaluate(i: int) -> VerifiedTarget:
-            t, k = confirmed[i], kins[i]
-            threat, threat_reason = threats[i]
-            check = check_track(i, views, threat is not Decision.NONE or gate_all, verify)
-            verification = check.verification
-            density = check.result.density if check.result is not None else None
-            if verification is Verification.UNAVAILABLE and threat is not Decision.NONE:
-                threat_reason = f"{threat_reason}; {_reasons(views, i)}"
-            decision, reason = decide(threat, threat_reason, verification, rule.policy)
+    def _target(self, t: RadarTrack, i: int, k: Kinematics, threat: tuple[Decision, str],
+                views: list[CameraView], fallback: CameraView, radar_stamp_ns: int,
+                gate: bool, best: VerifiedTarget | None) -> VerifiedTarget:
+        """Track `i` checked in the cameras (gated iff `gate`) and decided; `best` is the
+        command so far, named when a threat is not gated because of it; `fallback` the
+        view a track no camera sees is reported in."""
+        decision, reason = threat
+        check = check_track(i, views, gate, self.verifier.verify)
+        verification = check.verification
+        density = check.result.density if check.result is not None else None
+        if verification is Verification.NOT_CHECKED and decision is not Decision.NONE \
+                and best is not None:
+            decision, reason = Decision.NONE, (f"not gated: track {best.track_id} decides "
+                                               f"the command ({reason})")
+        else:
+            if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
+                reason = f"{reason}; {_reasons(views, i)}"
+            decision, reason = decide(decision, reason, verification, self.rule.policy)
             if verification is Verification.REJECTED:
                 reason = f"{reason}; density {density:.4f}"
-            view = check.view or fallback
-            frame = view.frame
-            x, y = view.xy[i]
-            tgt = VerifiedTarget(
-                t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
-                _NO_ROI if check.roi is None or verification is Verification.UNAVAILABLE
-                else tuple(check.roi), density, k.ttc_s, k.ttc_eff_s, decision, reason,
-                frame.seq if frame is not None else None,
-                (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None,
-                check.result.detail if check.result is not None else {},
-                path_predicted=k.window is not None,
-                camera=check.view.name if check.view is not None else "",
-                cameras=check.per_camera)
-            out[i] = tgt
-            return tgt
-
-        # Threats, most severe first, then most urgent: once the best decision so far is
-        # one the next threat cannot beat, the command is known.
-        inf = float("inf")
-        urgent = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
-                        key=lambda i: (-severity(threats[i][0]), kins[i].ttc_eff_s or inf))
-        best: VerifiedTarget | None = None
-        for i in urgent:
-            if best is not None and not _could_beat(threats[i][0], kins[i].ttc_eff_s, best):
-                break
-            tgt = evaluate(i)
-            if tgt.decision is not Decision.NONE and (best is None or _more_severe(tgt, best)):
-                best = tgt
-        self._send(cycle, [best] if best is not None else [], n_targets=len(confirmed))
-        for i in range(len(confirmed)):
-            if out[i] is None:
-                evaluate(i)
-        return [t for t in out if t is not None]
-
-    def _send(self, cycle: "_Cycle", candidates: list[VerifiedTarget],
-              n_targets: int | None = None) -> None:
-        cycle.command = self._command(
-            cycle.tracks, candidates, cycle.status, cycle.reason_unavailable, cycle.age_ns,
-            cycle.now_wall_ns, cycle.now_mono_ns,
-            n_targets=len(candidates) if n_targets is None else n_targets,
-            confirmed=cycle.confirmed)
-        if cycle.on_command is not None:
-            cycle.on_command(cycle.command)
+        view = check.view or fallback
+        frame = view.frame
+        x, y = view.xy[i]
+        return VerifiedTarget(
+            t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
+            _NO_ROI if check.roi is None or verification is Verification.UNAVAILABLE
+            else tuple(check.roi), density, k.ttc_s, k.ttc_eff_s, decision, reason,
+            frame.seq if frame is not None else None,
+            (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None,
+            check.result.detail if check.result is not None else {},
+            path_predicted=k.window is not None,
+            camera=check.view.name if check.view is not None else "",
+            cameras=check.per_camera)
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:
@@ -247,18 +229,13 @@ class FusionCore:
     def _command(self, tracks: RadarTracks, targets: list[VerifiedTarget],
                  status: VerifierStatus, reason_unavailable: str, age_ns: int,
                  now_wall_ns: int, now_mono_ns: int, summary: str = "",
-                 n_targets: int = 0, confirmed: list[RadarTrack] | None = None
-                 ) -> BrakeCommand:
-        """The command from the most severe of `targets` (ties: smallest TTC_eff), and the
-        hold. `n_targets` counts every confirmed track, `confirmed` gives a held track's
-        current range and TTC."""
+                 confirmed: Sequence[RadarTrack] = ()) -> BrakeCommand:
+        """The command from the most severe of `targets` (ties: smallest TTC_eff, then the
+        first), and the hold. `confirmed` gives a held track's current range and TTC."""
         ds = self.s.decision
-        worst: VerifiedTarget | None = None
-        for tgt in targets:
-            if worst is None or _more_severe(tgt, worst):
-                worst = tgt
+        worst = max(targets, key=_rank_of, default=None)
         decision = worst.decision if worst is not None else Decision.NONE
-        n_targets = max(n_targets, len(targets))
+        n_targets = len(targets)
         if summary:
             reason = summary
         elif n_targets == 0:
@@ -281,7 +258,7 @@ class FusionCore:
             reason = f"BRAKE held {left_ms:.0f} ms more; this cycle: {decision.value}, {reason}"
             decision = Decision.BRAKE
             # The held track as the radar sees it now, if it is still there.
-            now = next((t for t in confirmed or () if t.track_id == track_id), None)
+            now = next((t for t in confirmed if t.track_id == track_id), None)
             range_m = now.range_m if now is not None else None
             ttc_s = self._kinematics(now).ttc_s if now is not None else None
         seq = self._seq
@@ -307,9 +284,8 @@ def _reasons(views: list[CameraView], track: int | None = None) -> str:
 
 
 def _finite(t: RadarTrack) -> bool:
-    # One sum instead of six checks (per track, on the critical path): a NaN or an
-    # infinity in any term makes it non-finite (inf - inf is NaN).
-    return math.isfinite(t.x_m + t.y_m + t.vx_mps + t.vy_mps + t.range_m + t.range_rate_mps)
+    return all(map(math.isfinite, (t.x_m, t.y_m, t.vx_mps, t.vy_mps, t.range_m,
+                                   t.range_rate_mps)))
 
 
 def _invalid_target(t: RadarTrack) -> VerifiedTarget:
@@ -319,39 +295,10 @@ def _invalid_target(t: RadarTrack) -> VerifiedTarget:
                           "invalid track: non-finite position, velocity or range", None, None)
 
 
-def _more_severe(a: VerifiedTarget, b: VerifiedTarget) -> bool:
-    sa, sb = severity(a.decision), severity(b.decision)
-    if sa != sb:
-        return sa > sb
-    inf = float("inf")
-    ta = a.ttc_eff_s if a.ttc_eff_s is not None else inf
-    tb = b.ttc_eff_s if b.ttc_eff_s is not None else inf
-    return ta < tb
+def _rank(decision: Decision, ttc_eff_s: float | None) -> tuple[int, float]:
+    """Orders decisions by severity, then urgency: the higher, the more severe."""
+    return severity(decision), -(ttc_eff_s if ttc_eff_s is not None else math.inf)
 
 
-def _could_beat(threat: Decision, ttc_eff_s: float | None, best: VerifiedTarget) -> bool:
-    """Could a track whose radar threat is `threat` end more severe than `best`? Its
-    decision is at most its threat."""
-    s, sb = severity(threat), severity(best.decision)
-    if s != sb:
-        return s > sb
-    inf = float("inf")
-    tb = best.ttc_eff_s if best.ttc_eff_s is not None else inf
-    return (ttc_eff_s if ttc_eff_s is not None else inf) < tb
-
-
-class _Cycle:
-    """One cycle's context while it is processed."""
-
-    def __init__(self, tracks: RadarTracks, confirmed: list[RadarTrack], status: VerifierStatus,
-                 reason_unavailable: str, age_ns: int, now_wall_ns: int, now_mono_ns: int,
-                 on_command: "CommandSink | None") -> None:
-        self.tracks = tracks
-        self.confirmed = confirmed
-        self.status = status
-        self.reason_unavailable = reason_unavailable
-        self.age_ns = age_ns
-        self.now_wall_ns = now_wall_ns
-        self.now_mono_ns = now_mono_ns
-        self.on_command = on_command
-        self.command: BrakeCommand | None = None
+def _rank_of(target: VerifiedTarget) -> tuple[int, float]:
+    return _rank(target.decision, target.ttc_eff_s)

@@ -17,7 +17,7 @@ from common.messages import Decision, RadarTrack, Verification
 
 
 def severity(d: Decision) -> int:
-    """NONE 0, WARNING 1, BRAKE 2 (identity tests: much cheaper than hashing an enum)."""
+    """NONE 0, WARNING 1, BRAKE 2."""
     return 2 if d is Decision.BRAKE else 1 if d is Decision.WARNING else 0
 
 
@@ -89,7 +89,7 @@ class LateralMotion:
 
 
 class DecisionRule:
-    """The settings' numbers, read once: this runs for every track of every cycle."""
+    """The rule, from the settings: each track's kinematics and the radar's threat."""
 
     def __init__(self, s: DecisionSettings) -> None:
         self.min_range = s.min_range_m

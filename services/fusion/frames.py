@@ -1,12 +1,10 @@
-"""Camera frames for fusion: decoded to grayscale off the critical path, in a worker
-thread per camera, into a small ring of recent frames; and the pure choice of the frame
-for a radar cycle.
+"""Camera frames for fusion: decoded to grayscale in a worker thread per camera, into a
+small ring of recent frames; and the pure choice of the frame for a radar cycle.
 
-The radar callback never waits for a JPEG decode: it takes a snapshot of the ring (a
-tuple of references, under a lock held for microseconds) and works on frames already
-decoded. Decoding goes through common.imaging.decode_gray, the project's one path.
-With `decode = "before_radar"` the worker decodes only the frames a radar cycle can use
-(services/fusion/rhythm.py); the others are counted as skipped.
+The radar callback never waits for a JPEG decode: it takes a snapshot of the ring and
+works on frames already decoded. Decoding goes through common.imaging.decode_gray, the
+project's one path. With `decode = "before_radar"` the worker decodes only the frames a
+radar cycle can use (services/fusion/rhythm.py); the others are counted as skipped.
 """
 
 import logging
@@ -22,6 +20,16 @@ from common.imaging import ImageDecodeError, decode_gray
 from common.log import RateLimitedLog
 from common.messages import CompressedFrame, DecodeError, decode
 from services.fusion.rhythm import RadarRhythm
+
+# Decoded frames kept per camera: a cycle uses the one nearest its stamp, which within the
+# skew bound is one of the last few at 30 fps.
+RING_SIZE = 4
+# Frames waiting for the decoder; when full the oldest is dropped (and counted): a newer
+# frame is always worth more than a backlog.
+QUEUE_SIZE = 2
+# before_radar: the newest waiting frame is decoded this long before the next radar
+# cycle is due: time for one decode and a late thread wake-up.
+DECODE_LEAD_S = 0.012
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,18 +116,17 @@ class FrameDecoder:
     never blocks. With `rhythm` (decode = before_radar) a frame waits undecoded until the
     next radar cycle is near, and only the newest waiting frame is decoded."""
 
-    def __init__(self, width: int, height: int, ring_size: int, queue_size: int,
-                 log: logging.Logger, camera: str = "", rhythm: RadarRhythm | None = None,
-                 lead_s: float = 0.012) -> None:
+    def __init__(self, width: int, height: int, log: logging.Logger, camera: str = "",
+                 rhythm: RadarRhythm | None = None) -> None:
         self.width = width
         self.height = height
         self.camera = camera
         self._pending: deque[tuple[bytes, int]] = deque()
         # Waiting for the radar, only the newest frame is worth keeping.
-        self._queue_size = 1 if rhythm is not None else queue_size
+        self._queue_size = 1 if rhythm is not None else QUEUE_SIZE
         self._rhythm = rhythm
-        self._lead_ns = round(lead_s * 1e9)
-        self._ring: deque[DecodedFrame] = deque(maxlen=ring_size)
+        self._lead_ns = round(DECODE_LEAD_S * 1e9)
+        self._ring: deque[DecodedFrame] = deque(maxlen=RING_SIZE)
         self._cond = threading.Condition()
         self._received = 0
         self._undecodable = 0
@@ -142,8 +149,7 @@ class FrameDecoder:
         """A decoder as `settings` ([fusion.frames]) asks; `rhythm` is used only with
         decode = before_radar."""
         use = rhythm if settings.decode is DecodePolicy.BEFORE_RADAR else None
-        return cls(width, height, settings.ring_size, settings.decode_queue, log, camera,
-                   use, settings.decode_lead_s)
+        return cls(width, height, log, camera, use)
 
     def start(self) -> None:
         self._thread.start()
@@ -179,16 +185,19 @@ class FrameDecoder:
         try:
             frame = decode_frame(payload, rx_mono_ns, self.width, self.height)
         except FrameError as exc:
-            with self._cond:
-                self._undecodable += 1
-                self.errors_by_reason[exc.reason] = self.errors_by_reason.get(exc.reason, 0) + 1
-                self._last_error = str(exc)
-                self._last_error_rx = rx_mono_ns
+            self._unusable(exc.reason, str(exc), rx_mono_ns)
             self._rl.warning(f"frame:{exc.reason}", "frame_unusable", reason=exc.reason,
                              camera=self.camera, error=str(exc))
             return
         with self._cond:
             self._ring.append(frame)
+
+    def _unusable(self, reason: str, error: str, rx_mono_ns: int) -> None:
+        with self._cond:
+            self._undecodable += 1
+            self.errors_by_reason[reason] = self.errors_by_reason.get(reason, 0) + 1
+            self._last_error = error
+            self._last_error_rx = rx_mono_ns
 
     def _next(self) -> tuple[bytes, int] | None:
         """The next frame to decode, once it is time (None: stopping)."""
@@ -213,7 +222,8 @@ class FrameDecoder:
                 return
             try:
                 self.decode_now(*item)
-            except Exception as exc:  # a decoder bug must not end frame delivery silently
+            except Exception as exc:  # a bug must not end this camera's frames: count, go on
+                self._unusable("decoder_error", f"decoder error: {exc!r}", item[1])
                 self._rl.error("frame:bug", "frame_decoder_failed", camera=self.camera,
                                error=repr(exc))
 

@@ -21,9 +21,9 @@ from common.realtime import apply_process
 from common.service import load_service_config, service_argparser, stop_event_on_signals
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
-from services.fusion.node import FusionNode, run_until
 from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector
+from services.fusion.shell import FusionShell, run_until
 from services.fusion.verifiers import VerifierConfigError, create
 
 
@@ -82,8 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         rhythm = RadarRhythm()
         decoders = [FrameDecoder.for_policy(cal.width, cal.height, s.frames, log, name, rhythm)
                     for name, cal in cals.items()]
-        node = FusionNode(bus, s, core, decoders, log, cals, rhythm)
-        node.start()
+        shell = FusionShell(bus, s, core, decoders, log, cals, rhythm)
+        shell.start()
         apply_process(s.realtime, log)
         token = bus.declare_health("fusion", s.instance)
         log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,
@@ -91,11 +91,11 @@ def main(argv: list[str] | None = None) -> int:
                     cameras=core.camera_names, decode=s.frames.decode.value,
                     calibration=",".join(c.calibration for c in s.camera_inputs)))
         try:
-            run_until(stop, node, s.stats_interval_s)
+            run_until(stop, shell, s.stats_interval_s)
         finally:
             token.undeclare()
-            node.stop()
-            node.log_stats()
+            shell.stop()
+            shell.log_stats()
     log.info(kv("fusion_stopped"))
     return 0
 

@@ -62,9 +62,6 @@ class ColumnProjector:
         self._offsets = np.array([(dy, z) for dy in ys for z in zs])
         self._lim = self._normalised_limits() * _FOV_MARGIN
         self._zero = np.zeros(3)
-        self._distorted = distorted
-        self._focal = np.array([calibration.k[0, 0], calibration.k[1, 1]])
-        self._centre = np.array([calibration.k[0, 2], calibration.k[1, 2]])
         # Clip bounds of (x0, y0, x1, y1): x1, y1 are exclusive ends.
         self._size2 = np.array([self.width, self.height, self.width, self.height], float)
         self._last_px = np.array([self.width - 0.5, self.height - 0.5])
@@ -89,25 +86,21 @@ class ColumnProjector:
         """
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         n, s = len(xy), len(self._offsets)
+        if n == 0:
+            return np.empty((0, s, 2)), np.empty((0, s), bool)
         # X_cam = R (x, y + dy, z) + t = x R[:, 0] + y R[:, 1] + (dy R[:, 1] + z R[:, 2] + t):
-        # the last term is the same for every track, computed once.
+        # the last term is the same for every track.
         cam = (xy[:, None, 0:1] * self._r0 + xy[:, None, 1:2] * self._r1
                + self._sample_cam).reshape(-1, 3)
         depth = cam[:, 2:3]
         valid = depth[:, 0] >= _MIN_DEPTH_M
-        all_valid = bool(valid.all())
-        norm = cam[:, :2] / (depth if all_valid else np.where(depth >= _MIN_DEPTH_M, depth, 1.0))
+        norm = cam[:, :2] / np.where(depth >= _MIN_DEPTH_M, depth, 1.0)
         np.clip(norm, -self._lim, self._lim, out=norm)
-        if self._distorted:
-            rays = np.concatenate([norm, np.ones((len(norm), 1))], axis=1)
-            proj, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), self._zero, self._zero,
-                                        self.cal.k, self.cal.dist)
-            uv = proj.reshape(-1, 2)
-        else:
-            # cv2.projectPoints without distortion, without its per-call overhead.
-            uv = norm * self._focal + self._centre
-        if not all_valid:
-            uv[~valid] = np.nan
+        rays = np.concatenate([norm, np.ones((len(norm), 1))], axis=1)
+        proj, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), self._zero, self._zero,
+                                    self.cal.k, self.cal.dist)
+        uv = proj.reshape(-1, 2)
+        uv[~valid] = np.nan
         return uv.reshape(n, s, 2), valid.reshape(n, s)
 
     def rois(self, xy: np.ndarray) -> list[Roi | None]:
@@ -120,14 +113,10 @@ class ColumnProjector:
         uv, valid = self.project_columns(xy)
         if len(uv) == 0:
             return []
-        if valid.all():
-            lo, hi = uv.min(axis=1), uv.max(axis=1)
-            visible = ((hi > -0.5).all(axis=1) & (lo < self._last_px).all(axis=1))
-        else:
-            lo = np.min(uv, axis=1, initial=np.inf, where=valid[:, :, None])
-            hi = np.max(uv, axis=1, initial=-np.inf, where=valid[:, :, None])
-            visible = (valid.any(axis=1) & (hi > -0.5).all(axis=1)
-                       & (lo < self._last_px).all(axis=1))
+        lo = np.min(uv, axis=1, initial=np.inf, where=valid[:, :, None])
+        hi = np.max(uv, axis=1, initial=-np.inf, where=valid[:, :, None])
+        visible = (valid.any(axis=1) & (hi > -0.5).all(axis=1)
+                   & (lo < self._last_px).all(axis=1))
         pad = self.geometry.padding_px
         box = np.concatenate([lo, hi], axis=1)
         box[~visible] = 0.0
@@ -141,8 +130,3 @@ class ColumnProjector:
             out.append(Roi(x0, y0, x1 - x0, y1 - y0) if vis else None)
         return out
 
-
-def predict_xy(x_m: float, y_m: float, vx_mps: float, vy_mps: float,
-               dt_s: float) -> tuple[float, float]:
-    """Constant-velocity prediction of a track over dt_s (negative: into the past)."""
-    return x_m + vx_mps * dt_s, y_m + vy_mps * dt_s

@@ -33,8 +33,7 @@ from services.fusion.roi import Roi
 ParamValue = float | int | str | bool
 S = TypeVar("S", bound=msgspec.Struct)
 
-# The gate runs on one small ROI per track, on the critical path; OpenCV's thread pool
-# costs more than it gains there and makes timings jittery (FACTS.md).
+# On a ROI this small, OpenCV's thread pool costs more than it gains (FACTS.md).
 cv2.setNumThreads(1)
 
 
@@ -115,16 +114,8 @@ class EdgeDensityParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
         _check_thresholds(self.low, self.high)
 
 
-def canny(patch: np.ndarray, low: float, high: float) -> np.ndarray:
-    """`cv2.Canny(patch, low, high)`, edge for edge (aperture 3, L1 gradient), in about
-    two thirds of its time on a ROI: Canny's own Sobel passes (the same 3x3 kernels,
-    replicated border) cost 2.5x one fused `spatialGradient` on a small patch."""
-    dx, dy = cv2.spatialGradient(patch, borderType=cv2.BORDER_REPLICATE)
-    return cv2.Canny(dx, dy, low, high)
-
-
 class EdgeDensity:
-    """The paper's gate, on a slice of the frame (no copy), one OpenCV thread."""
+    """The paper's gate, on a slice of the frame (no copy)."""
 
     name = "edge_density"
 
@@ -135,14 +126,9 @@ class EdgeDensity:
         return msgspec.structs.asdict(self.p)
 
     def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
-        # canny() inlined, arguments by position: this runs per ROI on the critical path,
-        # where 1-2 us of Python is 5% of the gate (docs/performance.md, section 1)
-        x, y, w, h = roi
-        p = self.p
-        dx, dy = cv2.spatialGradient(gray[y:y + h, x:x + w], None, None, 3,
-                                     cv2.BORDER_REPLICATE)
-        density = cv2.countNonZero(cv2.Canny(dx, dy, p.low, p.high)) / (w * h)
-        return GateResult(density, density >= p.tau)
+        patch = gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
+        density = cv2.countNonZero(cv2.Canny(patch, self.p.low, self.p.high)) / roi.area
+        return GateResult(density, density >= self.p.tau)
 
 
 @register("edge_density")
@@ -181,7 +167,7 @@ _MAD_TO_SIGMA = 1.0 / (0.6745 * math.sqrt(2.0))
 
 
 def _median_u8(values: np.ndarray) -> float:
-    """Median of a uint8 image by histogram (much cheaper than np.median)."""
+    """Median of a uint8 image, from its histogram."""
     hist = cv2.calcHist([values], [0], None, [256], [0, 256]).ravel()
     return float(np.searchsorted(np.cumsum(hist), values.size / 2.0))
 
@@ -224,7 +210,7 @@ class AdaptiveEdgeDensity:
         sigma = self.noise_sigma(patch) if roi.w > 1 else 0.0
         low = max(p.low, p.noise_k * sigma)
         high = max(p.high, low * self._ratio)
-        edges = canny(patch, low, high)
+        edges = cv2.Canny(patch, low, high)
         n_edges = cv2.countNonZero(edges)
         pixels = roi.area
         # One histogram of the ROI answers both "is it dark?" and "anything saturated?".

@@ -2,8 +2,11 @@
 
 from pathlib import Path
 
+import cv2
+
+from common.calibration import Calibration
 from common.imaging import encode_jpeg
-from services.camera.synthetic import MovingBoxSource
+from tools.sim.moving_box import MovingBoxSource
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"
 WIDTH, HEIGHT = 848, 480
@@ -15,14 +18,19 @@ def write_folder(folder: Path, n: int, width: int = WIDTH, height: int = HEIGHT,
     plus the named corrupt files: a truncated JPEG ("*.jpg") or bytes that are no image.
     Returns the good files in order."""
     folder.mkdir(parents=True, exist_ok=True)
-    scene = MovingBoxSource(width, height, 30.0, box_size_px=min(96, height // 2))
+    scene = MovingBoxSource(Calibration.load(CALIBRATION), 30.0, speed_mps=3.0)
+
+    def image(n: int) -> bytes:
+        return encode_jpeg(cv2.resize(scene.render(n), (width, height),
+                                      interpolation=cv2.INTER_AREA), 80)
+
     good = []
     for i in range(n):
         path = folder / f"frame{i}.jpg"
-        path.write_bytes(encode_jpeg(scene.render(10 * i), 80))
+        path.write_bytes(image(10 * i))
         good.append(path)
     for name in corrupt:
-        whole = encode_jpeg(scene.render(0), 80)
+        whole = image(0)
         (folder / name).write_bytes(whole[: len(whole) // 2] if name.endswith(".jpg")
                                     else b"this is not an image")
     return good

@@ -3,16 +3,18 @@ simulator's): a camera that stalls and fails, to exercise health and reopening."
 
 import time
 
+from services.camera.plugin import PluginContext
 from services.camera.source import Frame, SourceError
-from services.camera.synthetic import MovingBoxSource, SyntheticContext
+from tools.sim.moving_box import MovingBoxSource
 
 
 class StallingSource(MovingBoxSource):
     """Delivers `frames_per_open` frames after each open, then delivers nothing for
     `stall_s` (a hung USB camera) and fails like a device read timeout. A SIMULATION."""
 
-    def __init__(self, context: SyntheticContext) -> None:
-        super().__init__(context.width, context.height, context.fps)
+    def __init__(self, context: PluginContext) -> None:
+        assert context.calibration is not None
+        super().__init__(context.calibration, context.fps)
         self.frames_per_open = int(context.options.get("frames_per_open", 5))
         self.stall_s = float(context.options.get("stall_s", 1.0))
         self._left = 0
@@ -29,5 +31,5 @@ class StallingSource(MovingBoxSource):
         return super().read()
 
 
-def stalling(context: SyntheticContext) -> StallingSource:
+def stalling(context: PluginContext) -> StallingSource:
     return StallingSource(context)

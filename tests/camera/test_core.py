@@ -7,9 +7,9 @@ from common.calibration import Calibration
 from common.messages import CameraInfo, Header, decode, encode
 from services.camera.core import (
     Backoff,
+    CameraCore,
     Health,
     Offer,
-    PublishCore,
     RateGate,
     camera_info,
 )
@@ -47,7 +47,7 @@ def test_rate_gate_restarts_after_a_gap_without_a_burst():
 
 
 def test_slot_keeps_only_the_newest_frame_and_counts_drops():
-    core = PublishCore("front", 64, 48, fps=1000.0)
+    core = CameraCore("front", 64, 48, fps=1000.0)
     for i in range(5):
         assert core.offer(frame(1000 + i), now_mono_ns=i * 10 * MS) is Offer.PENDING
     taken = core.take()
@@ -58,7 +58,7 @@ def test_slot_keeps_only_the_newest_frame_and_counts_drops():
 
 
 def test_messages_carry_capture_stamp_and_gapless_seq_from_zero():
-    core = PublishCore("front", 64, 48, fps=30.0)
+    core = CameraCore("front", 64, 48, fps=30.0)
     msgs = []
     for i in range(3):
         core.offer(frame(5_000 + i), now_mono_ns=i * 40 * MS)
@@ -75,7 +75,7 @@ def test_messages_carry_capture_stamp_and_gapless_seq_from_zero():
 
 
 def test_decimated_frames_are_counted_and_never_reach_the_slot():
-    core = PublishCore("front", 64, 48, fps=10.0)
+    core = CameraCore("front", 64, 48, fps=10.0)
     results = [core.offer(frame(i), now_mono_ns=i * 25 * MS) for i in range(8)]
     assert [i for i, r in enumerate(results) if r is Offer.PENDING] == [0, 3, 7]
     assert core.stats.decimated == 5
@@ -91,7 +91,7 @@ def test_decimated_frames_are_counted_and_never_reach_the_slot():
     ],
 )
 def test_unusable_frames_are_rejected_and_counted(image, reason, says):
-    core = PublishCore("front", 64, 48, fps=30.0)
+    core = CameraCore("front", 64, 48, fps=30.0)
     assert core.offer(Frame(image=image, stamp_ns=1), 0) is Offer.REJECTED
     assert core.take() is None
     assert core.stats.errors.get(reason) == 1
@@ -128,7 +128,7 @@ def test_backoff_doubles_to_its_cap_and_resets():
 
 def test_camera_info_carries_the_calibration_and_counters_and_round_trips():
     cal = Calibration.load(CALIBRATION)
-    core = PublishCore("front", cal.width, cal.height, fps=30.0)
+    core = CameraCore("front", cal.width, cal.height, fps=30.0)
     core.offer(frame(1, 10, 10), 0)   # wrong size: rejected
     core.stats.errors.add("source_error")
     info = camera_info(cal, "front", 30.0, "folder", core.stats, skipped_inputs=3,
@@ -151,7 +151,7 @@ def test_camera_info_carries_the_calibration_and_counters_and_round_trips():
 
 
 def test_a_rejection_reason_is_forgotten_once_a_good_frame_arrives():
-    core = PublishCore("front", 64, 48, fps=30.0)
+    core = CameraCore("front", 64, 48, fps=30.0)
     core.offer(frame(1, w=80), 0)
     assert "80x48" in core.last_rejection
     core.offer(frame(2), 40 * MS)

@@ -9,7 +9,7 @@ import pytest
 from common.config.camera import CameraConfig, FolderSource, RealSenseSource, SyntheticSource
 from common.config.loader import load_config
 from services.camera.main import main
-from services.camera.sources import check_source
+from services.camera.registry import check_source
 from tests.camera.helpers import CALIBRATION
 
 

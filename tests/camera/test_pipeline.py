@@ -10,7 +10,7 @@ import numpy as np
 
 from common.imaging import decode_gray
 from common.messages import CompressedFrame
-from services.camera.core import Backoff, Health, PublishCore
+from services.camera.core import Backoff, CameraCore, Health
 from services.camera.pipeline import FramePipeline
 from services.camera.source import (
     EndOfStream,
@@ -90,7 +90,7 @@ def running(pipe: FramePipeline, src: ScriptedSource) -> Iterator[FramePipeline]
 
 def make(source: FrameSource, publish, fps: float = 1e9) -> FramePipeline:
     """A pipeline whose rate gate never decimates (the test decides what arrives when)."""
-    return FramePipeline(source, PublishCore("front", W, H, fps), Health(stall_timeout_s=5.0),
+    return FramePipeline(source, CameraCore("front", W, H, fps), Health(stall_timeout_s=5.0),
                          Backoff(0.01, 0.02), publish=publish, jpeg_quality=80)
 
 
@@ -148,7 +148,7 @@ def test_a_failing_source_is_reported_and_reopened_with_backoff():
 def test_status_names_the_failure_while_reopening():
     src = ScriptedSource()
     src.open_errors = [SourceError("camera unplugged")]
-    pipe = FramePipeline(src, PublishCore("front", W, H, 30.0), Health(1.0),
+    pipe = FramePipeline(src, CameraCore("front", W, H, 30.0), Health(1.0),
                          Backoff(30.0, 30.0), publish=lambda m: None)
     with running(pipe, src):
         def status() -> str:
@@ -199,3 +199,17 @@ def test_frames_of_the_wrong_size_are_never_published():
         wait_for(lambda: len(published) == 1, 30)
         assert published[0].header.stamp_ns == 1005
         assert pipe.core.stats.errors.get("size_mismatch") == 1
+
+
+def test_a_bug_in_a_source_is_reported_as_the_source_down_and_the_capture_goes_on():
+    src = ScriptedSource()
+    published: list[CompressedFrame] = []
+    pipe = make(src, published.append)
+    with running(pipe, src):
+        src.script.put(KeyError("plugin bug"))
+        wait_for(lambda: src.opens == 2, 30, what="reopened after the bug")
+        with pipe.lock:
+            assert pipe.core.stats.errors.get("source_error") == 1
+            assert "read: 'plugin bug'" in pipe.health.error
+        src.push(1)
+        wait_for(lambda: len(published) == 1, 30, what="frame after the reopen")

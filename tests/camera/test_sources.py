@@ -13,7 +13,9 @@ from common.config.camera import CameraConfig
 from common.config.loader import parse_config
 from services.camera.folder import FolderSource, natural_key
 from services.camera.opencv_capture import OpenCVSource
+from services.camera.plugin import PluginContext, load_factory
 from services.camera.realsense import RealSenseSource, import_pyrealsense2
+from services.camera.registry import build_source
 from services.camera.source import (
     EndOfStream,
     Frame,
@@ -22,9 +24,8 @@ from services.camera.source import (
     SourceConfigError,
     SourceError,
 )
-from services.camera.sources import build_source
-from services.camera.synthetic import MovingBoxSource, SyntheticContext, load_factory
 from tests.camera.helpers import CALIBRATION, write_folder
+from tools.sim.moving_box import MovingBoxSource
 
 
 class FakeTime:
@@ -186,7 +187,7 @@ def camera_config(source: dict) -> CameraConfig:
 
 
 def test_builtin_synthetic_scene_through_config_is_deterministic_and_finite():
-    cfg = camera_config({"kind": "synthetic", "options": {"frames": 3, "speed_px_s": 500}})
+    cfg = camera_config({"kind": "synthetic", "options": {"frames": 3, "speed_mps": 5.0}})
     src = build_source(cfg.camera, Calibration.load(CALIBRATION))
     assert isinstance(src, MovingBoxSource) and src.fps == 50.0
     frames = read_all(src)
@@ -199,7 +200,7 @@ def test_builtin_synthetic_scene_through_config_is_deterministic_and_finite():
 class RecordingSource(FrameSource):
     kind = "test-plugin"
 
-    def __init__(self, context: SyntheticContext) -> None:
+    def __init__(self, context: PluginContext) -> None:
         super().__init__()
         self.context = context
 
@@ -207,15 +208,15 @@ class RecordingSource(FrameSource):
         raise EndOfStream
 
 
-def make_recording_source(context: SyntheticContext) -> RecordingSource:
+def make_recording_source(context: PluginContext) -> RecordingSource:
     return RecordingSource(context)
 
 
-def not_a_source(context: SyntheticContext) -> object:
+def not_a_source(context: PluginContext) -> object:
     return "a string"
 
 
-def picky(context: SyntheticContext) -> FrameSource:
+def picky(context: PluginContext) -> FrameSource:
     raise ValueError(f"unknown scenario {context.options.get('scenario')!r}")
 
 

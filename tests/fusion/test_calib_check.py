@@ -7,16 +7,16 @@ import pytest
 from common.imaging import decode_gray, encode_jpeg
 from common.messages import encode
 from services.fusion.roi import Roi
-from services.fusion.synthetic import Obstacle, Scene, render
 from services.fusion.verifiers import create
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tools import calib_check
+from tools.sim.scenes import Obstacle, Scene, render
 
 
 @pytest.fixture(scope="module")
 def scene_jpeg(tmp_path_factory):
     path = tmp_path_factory.mktemp("calib") / "frame.jpg"
-    path.write_bytes(encode_jpeg(render(CAL, Scene(obstacles=(Obstacle(8, 0.8, "box"),),
+    path.write_bytes(encode_jpeg(render(CAL, Scene(obstacles=(Obstacle(8, 0.8),),
                                                    seed=4)), 80))
     return path
 

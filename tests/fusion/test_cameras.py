@@ -19,9 +19,8 @@ from services.fusion.cameras import Camera, CameraView, camera_views, check_trac
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.main import build_core
-from services.fusion.node import FusionNode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.synthetic import rig_calibration_toml
+from services.fusion.shell import FusionShell
 from services.fusion.verifiers import GateResult
 from tests.fusion.helpers import (
     CAL,
@@ -31,12 +30,12 @@ from tests.fusion.helpers import (
     cycle,
     feed,
     frame,
-    make_core,
     settings,
     track,
 )
 from tests.fusion.test_frames import compressed
-from tests.fusion.test_node import FakeBus
+from tests.fusion.test_shell import FakeBus
+from tools.sim.rig import rig_calibration_toml
 
 ROI = Roi(10, 10, 40, 40)
 
@@ -47,7 +46,7 @@ def view(name: str, sees: bool = True, has_frame: bool = True) -> CameraView:
     gray = np.zeros((480, 848), np.uint8)
     return CameraView(name, frame(gray=gray) if has_frame else None,
                       "" if has_frame else "no camera frame received",
-                      np.array([[10.0, 0.0]]), lambda xy: [ROI if sees else None])
+                      [[10.0, 0.0]], [ROI if sees else None])
 
 
 class ByCamera:
@@ -144,7 +143,7 @@ LEFT: dict[str, Any] = dict(x=6.0, y=6.0, vx=-5.0)     # seen by the left camera
 
 def test_each_track_is_verified_in_the_camera_that_sees_it():
     verifier = FixedVerifier(verdict=True)
-    core = rig_core(verifier, decision={"corridor": {"enabled": False}})
+    core = rig_core(verifier, gate_scope="all", decision={"corridor": {"enabled": False}})
     res = core.process(cycle(track(1, **AHEAD), track(2, **LEFT)),
                        [feed(frame(seq=11)), feed(frame(seq=22))], T0 + MS, 1)
     ahead, left = res.targets.targets
@@ -202,23 +201,23 @@ def test_the_core_refuses_feeds_that_do_not_match_its_cameras():
                    {"b": ColumnProjector(rig_cal("front"), ColumnGeometry())}, FixedVerifier())
 
 
-def test_a_node_with_two_cameras_decodes_each_and_decides_on_both():
+def test_a_shell_with_two_cameras_decodes_each_and_decides_on_both():
     core = rig_core(FixedVerifier(verdict=True), decision={"corridor": {"enabled": False}})
     log = logging.getLogger("test")
-    decoders = [FrameDecoder(848, 480, 4, 2, log, name) for name in RIG]
+    decoders = [FrameDecoder(848, 480, log, name) for name in RIG]
     bus = FakeBus()
-    node = FusionNode(bus, core.s, core, decoders, log,  # type: ignore[arg-type]
+    shell = FusionShell(bus, core.s, core, decoders, log,  # type: ignore[arg-type]
                       {n: rig_cal(n) for n in RIG})
     decoders[0].decode_now(compressed(stamp_ns=wall_ns(), seq=5), 1)
     decoders[1].decode_now(compressed(stamp_ns=wall_ns(), seq=6), 1)
     decoders[1].decode_now(compressed(stamp_ns=wall_ns(), seq=7, truncate=True), 2)
-    res = node.on_tracks_payload(encode(cycle(track(1, **AHEAD), track(2, **LEFT),
+    res = shell.on_tracks_payload(encode(cycle(track(1, **AHEAD), track(2, **LEFT),
                                               stamp_ns=wall_ns())), "k", 0)
     assert res is not None
     assert [(t.camera, t.frame_seq) for t in res.targets.targets] == [("front", 5), ("left", 6)]
     assert [name for name, _ in bus.log] == ["fusion_brake_cmd", "fusion_targets"]
     assert res.targets.frames_undecodable == 1
-    stats = node.stats()
+    stats = shell.stats()
     assert stats["frames_unusable"] == 1 and stats["frames_left"] == "0/0/1/0"
 
 
@@ -271,51 +270,18 @@ def test_calibration_override_is_refused_for_several_cameras(tmp_path):
     assert proc.returncode == 2 and "--calibration applies to a single camera" in proc.stderr
 
 
-def test_a_cycle_without_a_threat_sends_its_command_before_any_projection(monkeypatch):
-    projected: list[int] = []
-    rois = ColumnProjector.rois
-
-    def counting(self: ColumnProjector, xy: np.ndarray) -> list[Roi | None]:
-        projected.append(len(xy))
-        return rois(self, xy)
-
-    monkeypatch.setattr(ColumnProjector, "rois", counting)
-    core = make_core()
-    at_command: list[int] = []
-
-    def sink(cmd: Any) -> None:
-        at_command.append(len(projected))
-
-    receding = track(1, x=30.0, vx=4.0)              # moving away: no threat
-    result = core.process(cycle(receding), feed(frame()), T0 + 5 * MS, 1, sink)
-    assert result.command.decision is Decision.NONE
-    assert at_command == [0] and projected == [1]   # projected after, for the targets
-    projected.clear()
-    at_command.clear()
-    closing = track(2, x=8.0, vx=-8.0)               # a threat: gated before the command
-    result = core.process(cycle(receding, closing, seq=1), feed(frame()), T0 + 5 * MS, 1,
-                          sink)
-    assert result.command.decision is Decision.BRAKE and at_command == [1]
-
-
-class _CountingTracks(list):
-    """Tracks that count how often they are read."""
-
-    reads = 0
-
-    def __iter__(self):
-        self.reads += 1
-        return super().__iter__()
-
-
-def test_positions_are_built_on_first_use_once_for_every_camera():
+def test_each_camera_predicts_the_tracks_to_its_own_frame_time():
     geometry = ColumnGeometry(1.8, 1.0, 0)
     cams = [Camera(n, ColumnProjector(CAL, geometry)) for n in "ab"]
-    tracks = _CountingTracks([track(1, x=12.0, vx=-5.0), track(2, x=20.0, y=1.0)])
+    tracks = [track(1, x=12.0, vx=-5.0), track(2, x=20.0, y=1.0)]
     views = camera_views(cams, [feed(frame(T0 + 10 * MS)), feed()], tracks, T0, 50 * MS,
                          True)
-    assert tracks.reads == 0 and views[0].frame is not None and views[1].frame is None
+    assert views[0].frame is not None and views[1].frame is None
     assert views[0].xy[0] == pytest.approx([12.0 - 5.0 * 0.010, 0.0])   # predicted 10 ms
     assert views[1].xy[0] == [12.0, 0.0]             # no frame: as they are
     assert len(views[0].rois) == len(views[1].rois) == 2
-    assert tracks.reads == 2                          # x, y once, vx, vy once: shared
+    assert views[1].reason == "no camera frame received"
+    # Without alignment (the paper) the newest frame, and no prediction.
+    views = camera_views(cams, [feed(frame(T0 + 10 * MS)), feed()], tracks, T0, 50 * MS,
+                         False)
+    assert views[0].xy[0] == [12.0, 0.0]

@@ -243,7 +243,8 @@ def test_heartbeat_every_cycle_with_sequence_and_latency_chain():
 
 
 def test_the_command_is_the_most_severe_decision_then_the_smallest_ttc_eff():
-    res = run(make_core(), track(tid=1, x=9.0, vx=-2.5),     # WARNING (TTC_eff 2.6 s)
+    # gate_scope = all: every track is gated, so every target carries its own decision.
+    res = run(make_core(gate_scope="all"), track(tid=1, x=9.0, vx=-2.5),  # WARNING (2.6 s)
               track(tid=2, x=10.0, vx=-5.0),                  # BRAKE (TTC_eff 1.0 s)
               track(tid=3, x=6.0, vx=-5.0),                   # BRAKE (TTC_eff 0.2 s)
               track(tid=4, x=20.0, vx=3.0))                   # receding
@@ -283,20 +284,22 @@ def test_a_failed_cycle_still_answers_once_and_keeps_a_held_brake():
 
 
 
-def test_the_command_is_issued_before_the_gate_runs_on_tracks_that_cannot_change_it():
+def test_only_the_tracks_that_can_change_the_command_are_gated():
     verifier = FixedVerifier(verdict=True)
-    core = make_core(verifier)
-    seen: list[tuple[int, int]] = []
     tracks = (track(tid=1, x=12.0, vx=-5.0),       # BRAKE threat, TTC_eff 1.4 s
               track(tid=2, x=6.0, vx=-5.0),        # BRAKE threat, TTC_eff 0.2 s: first
               track(tid=3, x=20.0, vx=3.0))        # no threat
-    res = core.process(cycle(*tracks), feed(frame()), T0 + MS, 1,
-                       lambda cmd: seen.append((cmd.track_id, len(verifier.calls))))
-    assert seen == [(2, 1)]                        # one gate run, on the most urgent
-    assert len(verifier.calls) == 2                # the other threat is gated afterwards
-    assert [t.track_id for t in res.targets.targets] == [1, 2, 3]
-    assert res.targets.targets[0].verification is Verification.VERIFIED
-    assert res.command.track_id == 2
+    res = run(make_core(verifier), *tracks)
+    assert len(verifier.calls) == 1                # the most urgent threat, verified
+    assert res.command.decision is Decision.BRAKE and res.command.track_id == 2
+    first, urgent, receding = res.targets.targets
+    assert urgent.verification is Verification.VERIFIED
+    # Track 1's decision could not beat track 2's: not gated, and it says why.
+    assert first.verification is Verification.NOT_CHECKED and first.decision is Decision.NONE
+    assert first.reason.startswith("not gated: track 2 decides the command (TTC_eff 1.40 s")
+    assert first.roi_xywh != ()                    # its ROI is still given
+    assert receding.verification is Verification.NOT_CHECKED
+    assert receding.reason.startswith("not closing")
 
 
 def test_a_rejected_urgent_track_lets_the_next_threat_decide():
@@ -307,42 +310,59 @@ def test_a_rejected_urgent_track_lets_the_next_threat_decide():
             self.calls.append(roi)
             return GateResult(0.1, next(verdicts))
 
-    core = make_core(Scripted())
-    seen: list[int] = []
-    res = core.process(cycle(track(tid=1, x=12.0, vx=-5.0), track(tid=2, x=6.0, vx=-5.0)),
-                       feed(frame()), T0 + MS, 1, lambda cmd: seen.append(cmd.track_id))
-    assert seen == [1] and res.command.decision is Decision.BRAKE
+    verifier = Scripted()
+    res = run(make_core(verifier), track(tid=1, x=12.0, vx=-5.0), track(tid=2, x=6.0, vx=-5.0))
+    assert len(verifier.calls) == 2
+    assert res.command.decision is Decision.BRAKE and res.command.track_id == 1
     assert res.targets.targets[1].verification is Verification.REJECTED
 
 
-def test_exactly_one_command_per_cycle_whatever_the_path():
-    for now, frames, tracks in [(T0 + MS, feed(frame()), ()),
-                                (T0 + MS, feed(frame()), (track(x=20.0, vx=3.0),)),
-                                (T0 + 900 * MS, feed(frame()), (track(),)),
-                                (T0 + MS, feed(), (track(),))]:
-        sent: list[object] = []
-        make_core().process(cycle(*tracks), frames, now, 1, sent.append)
-        assert len(sent) == 1
+def test_a_threat_is_gated_only_while_it_can_beat_the_command_so_far():
+    verifier = FixedVerifier(verdict=True)
+    core = make_core(verifier, decision={"corridor": {"enabled": False}})
+    hidden = track(tid=1, x=4.0, y=-9.0, vx=-12.0)   # BRAKE threat no camera sees
+    brake = track(tid=2, x=12.0, vx=-5.0)            # BRAKE threat, TTC_eff 1.4 s
+    warn = track(tid=3, x=18.0, vx=-5.0)             # WARNING threat, TTC_eff 2.6 s
+    # The hidden track is a WARNING (policy warn), more urgent than the WARNING threat.
+    res = run(core, hidden, warn)
+    assert res.targets.targets[0].verification is Verification.NOT_VISIBLE
+    assert res.command.decision is Decision.WARNING and res.command.track_id == 1
+    assert verifier.calls == []
+    assert res.targets.targets[1].reason.startswith("not gated: track 1 decides")
+    # A BRAKE threat can still beat that WARNING: it is gated, and decides.
+    res = run(core, hidden, brake, warn, seq=1)
+    assert res.command.decision is Decision.BRAKE and res.command.track_id == 2
+    assert len(verifier.calls) == 1
 
 
-def test_the_early_command_equals_the_most_severe_of_all_targets():
+def test_the_command_does_not_depend_on_the_gate_scope():
     import random
 
     rng = random.Random(7)
 
-    class Coin(FixedVerifier):
+    class ByRoi(FixedVerifier):
+        """A verdict that depends on the ROI only, so both scopes see the same one."""
+
         def verify(self, gray, roi):
-            return GateResult(0.1, rng.random() < 0.5)
+            self.calls.append(roi)
+            return GateResult(0.1, hash(tuple(roi)) % 2 == 0)
 
     for policy in ("warn", "ignore", "radar_only"):
-        core = make_core(Coin(), decision={"hold_s": 0.0, "unverifiable_policy": policy})
-        for n in range(60):
+        scoped = {scope: make_core(ByRoi(), gate_scope=scope,
+                                   decision={"hold_s": 0.0, "unverifiable_policy": policy})
+                  for scope in ("candidates", "all")}
+        for n in range(80):
             tracks = [track(tid=i, x=rng.uniform(2.0, 27.0), y=rng.uniform(-1.5, 1.5),
                             vx=rng.uniform(-12.0, 3.0)) for i in range(rng.randint(0, 8))]
             frames = feed(frame()) if n % 5 else feed()
-            res = core.process(cycle(*tracks, seq=n), frames, T0 + MS, 1)
-            assert (res.command.decision, res.command.track_id) == most_severe(
-                res.targets.targets)
+            res = {scope: core.process(cycle(*tracks, seq=n), frames, T0 + MS, 1)
+                   for scope, core in scoped.items()}
+            cmds = [(r.command.decision, r.command.track_id, r.command.reason)
+                    for r in res.values()]
+            assert cmds[0] == cmds[1]
+            for r in res.values():
+                assert (r.command.decision, r.command.track_id) == most_severe(
+                    r.targets.targets)
 
 
 def test_tracks_with_non_finite_numbers_are_reported_and_never_decided_on():

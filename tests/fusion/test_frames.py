@@ -9,6 +9,8 @@ import pytest
 from common.imaging import decode_gray, encode_jpeg
 from common.messages import CompressedFrame, Header, encode
 from services.fusion.frames import (
+    QUEUE_SIZE,
+    RING_SIZE,
     DecodedFrame,
     FrameDecoder,
     FrameError,
@@ -31,8 +33,8 @@ def compressed(stamp_ns: int = T0, seq: int = 0, truncate: bool = False,
                                   camera="front", width=width, height=height, jpeg=jpeg))
 
 
-def decoder(ring: int = 4, queue: int = 2) -> FrameDecoder:
-    return FrameDecoder(848, 480, ring, queue, logging.getLogger("test"))
+def decoder() -> FrameDecoder:
+    return FrameDecoder(848, 480, logging.getLogger("test"))
 
 
 def test_decoded_frames_use_the_one_decode_path():
@@ -67,14 +69,15 @@ def test_decoder_counts_unusable_frames_by_reason_and_keeps_good_ones():
 
 
 def test_ring_keeps_the_newest_frames():
-    dec = decoder(ring=3)
-    for i in range(5):
+    dec = decoder()
+    for i in range(RING_SIZE + 2):
         dec.decode_now(compressed(stamp_ns=T0 + i * 33 * MS, seq=i), i)
-    assert [f.seq for f in dec.snapshot().frames] == [2, 3, 4]
+    assert [f.seq for f in dec.snapshot().frames] == list(range(2, RING_SIZE + 2))
 
 
 def test_worker_thread_decodes_submitted_frames_and_drops_the_oldest_when_behind(monkeypatch):
-    dec = decoder(queue=2)
+    assert QUEUE_SIZE == 2 and RING_SIZE >= 3
+    dec = decoder()
     busy, gate = threading.Event(), threading.Event()
     original = dec.decode_now
 
@@ -118,3 +121,30 @@ def test_without_alignment_the_newest_frame_is_used_if_within_the_skew():
     frames = (frame(T0 - 10 * MS, seq=1, rx_mono_ns=1), frame(T0 + 60 * MS, seq=2, rx_mono_ns=2))
     assert seq_of(select_frame(frames, T0, 100 * MS, align=False)) == 2
     assert select_frame(frames, T0 - 50 * MS, 100 * MS, align=False) is None
+
+
+def test_a_decoder_bug_is_counted_and_the_next_frames_still_decode(monkeypatch):
+    from services.fusion import frames
+
+    dec = decoder()
+    real = frames.decode_frame
+    calls = []
+
+    def buggy(payload: bytes, rx: int, width: int, height: int) -> DecodedFrame:
+        calls.append(rx)
+        if len(calls) == 1:
+            raise ZeroDivisionError("a bug")
+        return real(payload, rx, width, height)
+
+    monkeypatch.setattr(frames, "decode_frame", buggy)
+    dec.start()
+    try:
+        dec.submit(compressed(seq=0), "k", 1)
+        wait_for(lambda: dec.snapshot().undecodable == 1, 30, what="the bug counted")
+        dec.submit(compressed(seq=1), "k", 2)
+        wait_for(lambda: dec.snapshot().frames, 30, what="the next frame decoded")
+        assert [f.seq for f in dec.snapshot().frames] == [1]
+        assert dec.errors_by_reason == {"decoder_error": 1}
+        assert "ZeroDivisionError" in dec.snapshot().last_error
+    finally:
+        dec.stop()

@@ -26,9 +26,10 @@ from common.messages import (
     VerifierStatus,
 )
 from services.fusion.roi import Roi
-from services.fusion.synthetic import Obstacle, Scene, render, rig_calibration_toml
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
+from tools.sim.rig import rig_calibration_toml
+from tools.sim.scenes import Obstacle, Scene, render
 
 pytestmark = pytest.mark.slow
 
@@ -40,7 +41,7 @@ ROAD = (6.0, -0.5)          # plain asphalt in the images
 def write_inputs(tmp: Path, endpoint: str) -> tuple[Path, Path]:
     frames = tmp / "frames"
     frames.mkdir()
-    scene = render(CAL, Scene(obstacles=(Obstacle(*BOX, kind="box"),), seed=4))
+    scene = render(CAL, Scene(obstacles=(Obstacle(*BOX),), seed=4))
     for i in range(2):
         cv2.imwrite(str(frames / f"f{i}.png"), scene)
     camera = tmp / "camera.toml"
@@ -252,6 +253,7 @@ connect = ["{router}"]
 [fusion]
 instance = "{INSTANCE}"
 stats_interval_s = 1.0
+gate_scope = "all"                 # both threats gated, to see each camera's verdict
 [[fusion.cameras]]
 name = "front"
 calibration = "{tmp_path / 'front.toml'}"
@@ -268,7 +270,7 @@ radar_max_age_s = 1.0
 enabled = false
 """)
     ahead, left = (8.0, 0.8), (6.0, 6.0)      # a box in each camera's view only
-    scene = Scene(obstacles=(Obstacle(*ahead, kind="box"), Obstacle(*left, kind="box")), seed=4)
+    scene = Scene(obstacles=(Obstacle(*ahead), Obstacle(*left)), seed=4)
     with open_bus(router) as bus:
         watch = HealthWatch(bus)
         commands, targets = Collector(), Collector()

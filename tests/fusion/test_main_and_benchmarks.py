@@ -55,10 +55,11 @@ def test_benchmarks_run_quick_and_write_their_results(tmp_path, capsys):
     assert (tmp_path / "bench_gate.png").stat().st_size > 0
     figures = bench_fusion.run(True, tmp_path)
     fusion = json.loads((tmp_path / "bench_fusion.json").read_text())
-    assert fusion["worst 64"]["gated_mean"] == 64
+    assert fusion["gate all 64"]["gated_mean"] == 64
+    assert fusion["threats 64"]["gated_mean"] < 64
     assert (tmp_path / "bench_fusion.png").stat().st_size > 0
     assert (tmp_path / "bench_fusion_cameras.png").stat().st_size > 0
-    assert "64 tracks, worst" in capsys.readouterr().out
+    assert "64 tracks, threats" in capsys.readouterr().out
     # The cameras scale (quick: its two ends): every camera count streamed into fusion,
     # frames decoded, and the before_radar policy skipping some.
     cams = fusion["cameras"]
@@ -67,7 +68,7 @@ def test_benchmarks_run_quick_and_write_their_results(tmp_path, capsys):
         assert cams[f"{n} every_frame"]["frames_decoded_per_s"] > 10 * n
         assert cams[f"{n} before_radar"]["frames_skipped_per_s"] > 0
     names = {f.name for f in figures}
-    assert {f"fusion tracks->command, {n} tracks (worst)" for n in (1, 8, 64, 128)} <= names
+    assert {f"fusion tracks->command, {n} tracks (threats)" for n in (1, 8, 64, 128)} <= names
     assert {f"decode CPU, {n} camera(s) at 30 fps, before_radar" for n in (1, 4)} <= names
     assert all(f.group == "scale" and f.baseline_value is not None for f in figures)
 

@@ -9,13 +9,13 @@ from collections import deque
 import numpy as np
 
 from common.clock import mono_ns
-from services.fusion.frames import DecodedFrame, FrameDecoder, select_frame
+from services.fusion.frames import DECODE_LEAD_S, DecodedFrame, FrameDecoder, select_frame
 from services.fusion.rhythm import RadarRhythm
 from tests.fusion.test_frames import compressed
 from tests.support import wait_for
 
 MS = 1_000_000
-LEAD = 12 * MS
+LEAD = round(DECODE_LEAD_S * 1e9)
 
 
 def steady(period_ns: int = 74 * MS, n: int = 6, start: int = 1_000 * MS) -> RadarRhythm:
@@ -151,7 +151,7 @@ def test_the_decoder_keeps_only_the_newest_frame_while_waiting_for_the_radar():
     rhythm = steady(period_ns=400 * MS, start=now - 5 * 400 * MS)
     due = rhythm.decode_at(mono_ns(), LEAD)
     assert due is not None
-    decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"), "front", rhythm)
+    decoder = FrameDecoder(848, 480, logging.getLogger("test"), "front", rhythm)
     for seq in range(3):
         decoder.submit(compressed(seq=seq), "k", mono_ns())
     feed = decoder.snapshot()

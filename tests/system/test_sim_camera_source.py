@@ -9,8 +9,8 @@ import pytest
 
 from common.calibration import Calibration
 from common.messages import Header
+from services.camera.plugin import PluginContext, make_plugin_source
 from services.camera.source import FrameSource, SourceConfigError, SourceError
-from services.camera.synthetic import SyntheticContext, make_synthetic_source
 from tools.sim.camera_source import SimCameraSource, bodies_at
 from tools.sim.messages import SimObject, SimWorld
 
@@ -56,10 +56,10 @@ def test_empty_road_first_then_the_world_then_a_silent_simulator_fails():
 
 def test_factory_needs_the_camera_bus_and_knows_its_options():
     cal = Calibration.load(CALIBRATION)
-    ctx = SyntheticContext(848, 480, 30.0, cal)
+    ctx = PluginContext(848, 480, 30.0, cal)
     with pytest.raises(SourceConfigError, match="bus"):
-        make_synthetic_source("tools.sim.camera_source:make_source", ctx)
-    ctx = SyntheticContext(848, 480, 30.0, cal, options={"colour": 1})
+        make_plugin_source("tools.sim.camera_source:make_source", ctx)
+    ctx = PluginContext(848, 480, 30.0, cal, options={"colour": 1})
     with pytest.raises(SourceConfigError, match="colour"):
-        make_synthetic_source("tools.sim.camera_source:make_source", ctx)
+        make_plugin_source("tools.sim.camera_source:make_source", ctx)
     assert issubclass(SimCameraSource, FrameSource)

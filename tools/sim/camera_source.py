@@ -24,8 +24,8 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.clock import wall_ns
+from services.camera.plugin import PluginContext
 from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError, SourceError
-from services.camera.synthetic import SyntheticContext
 from tools.sim.messages import SIM_WORLD, SimWorld
 from tools.sim.render import Renderer
 from tools.sim.scenario import CameraLook, ObjectKind
@@ -109,7 +109,7 @@ class SimCameraSource(FrameSource):
         return Frame(image=self.frame_at(stamp), stamp_ns=stamp)
 
 
-def make_source(context: SyntheticContext) -> SimCameraSource:
+def make_source(context: PluginContext) -> SimCameraSource:
     """The camera plugin factory. Options: `stale_after_s` (default 1.0).
 
     Raises SourceConfigError without a calibration or a bus (it must run inside the

@@ -1,18 +1,29 @@
 """The simulated camera, pure: 848x480 BGR frames of the simulated world, rendered with
 the same calibration (K, distortion, radar-to-camera R and t) that fusion projects with.
 
-A SIMULATION of the camera (the real path is the RealSense/OpenCV sources). The road is
-a textured ground plane (asphalt, lane markings, shoulders, grass) mapped per pixel by
-intersecting each pixel's ray with the ground, with coarser texture levels far away so
-that distant texels do not alias into false edges, and a haze that blends the ground
-into the sky at the horizon. Cars and boxes are textured 3-D boxes; pedestrians and
-bicycles are camera-facing cut-outs. Objects are drawn far to near, so nearer ones hide
-farther ones as a camera would see them.
+A SIMULATION of the camera (the real path is the RealSense/OpenCV sources), and the
+project's one scene renderer: the closed-loop simulator's camera, the moving-box demo
+source and the test and benchmark scenes (tools/sim/scenes.py) all draw through it.
+
+The road is a textured ground plane (asphalt, lane markings, shoulders, grass) mapped per
+pixel by intersecting each pixel's ray with the ground, with coarser texture levels far
+away so that distant texels do not alias into false edges, and a haze that blends the
+ground into the sky at the horizon. Cars and boxes are textured 3-D boxes; pedestrians
+and bicycles are camera-facing cut-outs. Objects are drawn far to near, so nearer ones
+hide farther ones as a camera would see them.
+
+At night (`headlights`), `CameraLook.brightness` is the ambient light and the ego's low
+beams light the road ahead and, falling with the square of distance, the objects facing
+it; `Light`s (street lamps, oncoming headlights) are saturated blobs with a glow, and a
+lamp lights a pool of road below it: the conditions in which the paper's gate loses
+precision.
 """
 
 import ctypes
 import ctypes.util
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -27,6 +38,18 @@ HAZE_M = 120.0
 _MIP_FACTORS = (1, 4, 16)        # texture levels: 2 cm, 8 cm, 32 cm per texel
 _SHADE_REAR, _SHADE_SIDE, _SHADE_TOP = 1.0, 0.78, 1.12
 _NOISE_BANK = 4
+_FACES = ("rear", "front", "side", "top")     # a box's faces, in a fixed order
+
+
+@dataclass(frozen=True)
+class Light:
+    """A lamp or a headlight at a world-frame position, drawn saturated with a glow; a
+    light higher than 3 m (a street lamp) also lights the road below it."""
+
+    x_m: float
+    y_m: float
+    z_m: float
+    radius_m: float = 0.15
 
 
 def release_freed_memory() -> None:
@@ -58,26 +81,34 @@ class Renderer:
         self._ground_geometry()
         self._textures()
         self._sprites: dict[tuple[int, str, str], sprites.Sprite] = {}
+        self._beams: tuple[float, np.ndarray] | None = None
         self._noise: list[tuple[np.ndarray, np.ndarray]] = []
         self._frame = 0
-        self.set_look(self.look)
+        self._make_noise()
         release_freed_memory()
 
     def new_scene(self, seed: int) -> None:
-        """Forget the objects' textures: the next objects get their own, from `seed`."""
+        """Start a scene: the objects' textures and the sensor noise come from `seed`, so
+        that a scene renders the same whatever was rendered before it."""
         self._seed = seed
         self._sprites.clear()
+        self._make_noise()
 
     def set_look(self, look: CameraLook) -> None:
         """Change brightness and sensor noise (cheap: the geometry and textures stay)."""
-        if look == self.look and (self._noise or look.noise == 0):
-            return
-        self.look = look
-        # Sensor noise, the same on the three channels, added and subtracted with
-        # saturation (uint8 throughout: rendering must keep up with 30 fps).
+        if look != self.look:
+            self.look = look
+            self._make_noise()
+
+    def _make_noise(self) -> None:
+        """Sensor noise, the same on the three channels, added and subtracted with
+        saturation: a few frames drawn once and used in turn, so that rendering keeps up
+        with 30 fps."""
+        rng = np.random.default_rng((self._seed, 1))
         self._noise = []
-        for _ in range(_NOISE_BANK if look.noise > 0 else 0):
-            n = np.repeat(np.round(self._rng.normal(0, look.noise, (self.height, self.width, 1))),
+        self._frame = 0
+        for _ in range(_NOISE_BANK if self.look.noise > 0 else 0):
+            n = np.repeat(np.round(rng.normal(0, self.look.noise, (self.height, self.width, 1))),
                           3, axis=2)
             self._noise.append((np.clip(n, 0, 255).astype(np.uint8),
                                 np.clip(-n, 0, 255).astype(np.uint8)))
@@ -100,6 +131,8 @@ class Renderer:
         self.ground = hits & (dist < MAX_GROUND_M)
         gx = np.where(self.ground, gx, 0.0)
         gy = np.where(self.ground, gy, 0.0)
+        # Where each ground pixel is, in the ego's frame (beams and lamp pools at night).
+        self._ground_xy = (gx.astype(np.float32), gy.astype(np.float32))
         # Texture coordinates (texels of level 0): column from +y (left) to -y.
         col0 = ((sprites.ROAD_HALF_WIDTH_M - gy) / sprites.ROAD_RES_M).astype(np.float32)
         row0 = (gx / sprites.ROAD_RES_M).astype(np.float32)
@@ -158,29 +191,78 @@ class Renderer:
                                          self._weight[r0:r1], self._weight_bg[r0:r1])
         return img
 
-    def render(self, bodies: list[Body], ego_x_m: float) -> np.ndarray:
-        """One BGR uint8 frame of `bodies` (world frame) seen from the ego at `ego_x_m`."""
+    def render(self, bodies: list[Body], ego_x_m: float, lights: Sequence[Light] = (),
+               headlights: bool = False) -> np.ndarray:
+        """One BGR uint8 frame of `bodies` and `lights` (world frame) seen from the ego at
+        `ego_x_m`; `headlights`: a night scene lit by the ego's low beams."""
         img = self._road(ego_x_m)
+        if headlights:
+            img = np.clip(img * self._beam_gain(), 0, 255).astype(np.uint8)
         rel = [(b, np.array([b.x_m - ego_x_m, b.y_m])) for b in bodies]
         cam = self.cam_pos[:2]
         rel.sort(key=lambda item: -float(np.hypot(*(item[1] - cam))))
         for body, centre in rel:
             if centre[0] - cam[0] < 0.3:
                 continue    # behind the camera
+            lit = self._upright_gain(float(centre[0] - cam[0])) if headlights else 1.0
             self._shadow(img, body, centre)
             if body.kind in (ObjectKind.CAR, ObjectKind.BOX):
-                self._box(img, body, centre)
+                self._box(img, body, centre, lit)
             else:
-                self._cutout(img, body, centre)
+                self._cutout(img, body, centre, lit)
         brightness = self.look.brightness
-        if brightness != 1.0:
+        if brightness != 1.0 and not headlights:
             img = cv2.convertScaleAbs(img, alpha=brightness)
+        if lights:
+            img = self._lights(img, lights, ego_x_m)
         if self._noise:
             up, down = self._noise[self._frame % len(self._noise)]
             cv2.add(img, up, dst=img)
             cv2.subtract(img, down, dst=img)
             self._frame += 1
         return img
+
+    # -- night ----------------------------------------------------------------------------
+
+    def _beam_gain(self) -> np.ndarray:
+        """(H, W, 3) light on each pixel relative to day: the ambient light everywhere,
+        plus the low beams on the road ahead, which light it at a grazing angle and so
+        fall with about the cube of distance."""
+        ambient = self.look.brightness
+        if self._beams is None or self._beams[0] != ambient:
+            gx, gy = self._ground_xy
+            beam = self.ground & (gx > 0) & (np.abs(gy) < 0.25 * gx + 1.5)
+            near = np.clip((10.0 / np.maximum(gx, 1.0)) ** 3, 0.0, 1.0)
+            gain = ambient + np.where(beam, 0.7 * near, 0.0)
+            self._beams = (ambient, np.repeat(gain[..., None], 3, axis=2).astype(np.float32))
+        return self._beams[1]
+
+    def _upright_gain(self, distance_m: float) -> float:
+        """Light on a surface facing the ego `distance_m` ahead: ambient plus low beams."""
+        return self.look.brightness + min((12.0 / max(distance_m, 1.0)) ** 2, 1.5)
+
+    def _lights(self, img: np.ndarray, lights: Sequence[Light], ego_x_m: float) -> np.ndarray:
+        """Saturated lamps and headlights with glow; lamps light a pool of road below them."""
+        out = img.astype(np.float32)
+        glow = np.zeros(img.shape[:2], np.float32)
+        gx, gy = self._ground_xy
+        for light in lights:
+            x = light.x_m - ego_x_m
+            uv, in_front = self.cal.project(np.array([[x, light.y_m, light.z_m]]))
+            if not in_front[0]:
+                continue
+            radius = max(1.5, self.cal.k[0, 0] * light.radius_m / max(x - self.cam_pos[0], 0.5))
+            centre = (int(np.rint(uv[0, 0])), int(np.rint(uv[0, 1])))
+            halo = np.zeros_like(glow)
+            cv2.circle(halo, centre, int(radius * 3), 1.0, -1, cv2.LINE_AA)
+            glow += cv2.GaussianBlur(halo, (0, 0), radius * 2) * 140
+            cv2.circle(glow, centre, math.ceil(radius), 400.0, -1, cv2.LINE_AA)
+            if light.z_m > 3.0:
+                d2 = (gx - x) ** 2 + (gy - light.y_m) ** 2
+                pool = np.where(self.ground, 1.5 * np.exp(-d2 / (2 * (0.6 * light.z_m) ** 2)),
+                                0.0)
+                out *= (1.0 + pool.astype(np.float32))[..., None]
+        return np.clip(out + glow[..., None], 0, 255).astype(np.uint8)
 
     # -- objects --------------------------------------------------------------------------
 
@@ -213,7 +295,7 @@ class Renderer:
     def _sprite(self, body: Body, face: str) -> sprites.Sprite:
         key = (body.index, body.kind.value, face)
         if key not in self._sprites:
-            rng = np.random.default_rng((self._seed, body.index, hash(face) % 1000))
+            rng = np.random.default_rng((self._seed, body.index, _FACES.index(face)))
             colour = sprites.CAR_COLOURS[(body.index + self._seed) % len(sprites.CAR_COLOURS)]
             h = body.height_m
             if body.kind is ObjectKind.BOX:
@@ -228,7 +310,7 @@ class Renderer:
             self._sprites[key] = sprite
         return self._sprites[key]
 
-    def _box(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
+    def _box(self, img: np.ndarray, body: Body, centre: np.ndarray, lit: float) -> None:
         c = body.corners() - np.array([body.x_m, body.y_m]) + centre
         cam = self.cam_pos
         h = body.height_m
@@ -244,14 +326,14 @@ class Renderer:
             if quad is None:
                 continue
             shade = _SHADE_REAR if face != "side" else _SHADE_SIDE
-            self._paste(img, self._sprite(body, face).image, quad, shade)
+            self._paste(img, self._sprite(body, face).image, quad, shade * lit)
         if cam[2] > h:
             top = np.array([[c[k][0], c[k][1], h] for k in (3, 0, 1, 2)])
             quad = self._project(top)
             if quad is not None:
-                self._paste(img, self._sprite(body, "top").image, quad, _SHADE_TOP)
+                self._paste(img, self._sprite(body, "top").image, quad, _SHADE_TOP * lit)
 
-    def _cutout(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
+    def _cutout(self, img: np.ndarray, body: Body, centre: np.ndarray, lit: float) -> None:
         cam = self.cam_pos[:2]
         view = centre - cam
         view /= max(float(np.hypot(*view)), 1e-6)
@@ -287,7 +369,7 @@ class Renderer:
                           [*(centre + right * half), 0.0], [*(centre - right * half), 0.0]])
         quad = self._project(quad3)
         if quad is not None:
-            self._paste(img, image, quad, 1.0)
+            self._paste(img, image, quad, lit)
 
     def _shadow(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
         c = (body.corners() - np.array([body.x_m, body.y_m])) * 1.08 + centre

@@ -9,7 +9,7 @@ import pytest
 from common.clock import mono_ns, wall_ns
 from common.messages import BrakeCommand, Decision, VerifiedTargets, encode
 from services.fusion.frames import FrameDecoder
-from services.fusion.node import FusionNode
+from services.fusion.shell import FusionShell
 from services.fusion.verifiers import GateResult
 from tests.fusion.helpers import FixedVerifier, cycle, make_core, track
 from tests.fusion.test_frames import compressed
@@ -24,7 +24,7 @@ class FakePublisher:
 
 
 class FakeBus:
-    """Just what FusionNode needs to publish; no Zenoh."""
+    """Just what FusionShell needs to publish; no Zenoh."""
 
     def __init__(self) -> None:
         self.log: list = []
@@ -33,15 +33,15 @@ class FakeBus:
         return FakePublisher(self.log, spec.name)
 
 
-def node_with(verifier, **fusion) -> tuple[FusionNode, FakeBus]:
+def shell_with(verifier, **fusion) -> tuple[FusionShell, FakeBus]:
     bus = FakeBus()
     core = make_core(verifier, **fusion)
-    decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
-    return FusionNode(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
+    decoder = FrameDecoder(848, 480, logging.getLogger("test"))
+    return FusionShell(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
 
 
-def fresh(node: FusionNode) -> None:
-    node.decoder.decode_now(compressed(stamp_ns=wall_ns()), 1)
+def fresh(shell: FusionShell) -> None:
+    shell.decoder.decode_now(compressed(stamp_ns=wall_ns()), 1)
 
 
 def payload(*tracks, seq: int = 0) -> bytes:
@@ -49,10 +49,10 @@ def payload(*tracks, seq: int = 0) -> bytes:
 
 
 def test_command_then_targets_for_each_cycle():
-    node, bus = node_with(FixedVerifier())
-    fresh(node)
-    node.on_tracks_payload(payload(track(x=8.0, vx=-6.0), seq=0), "k", 0)
-    node.on_tracks_payload(payload(seq=1), "k", 0)
+    shell, bus = shell_with(FixedVerifier())
+    fresh(shell)
+    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0), seq=0), "k", 0)
+    shell.on_tracks_payload(payload(seq=1), "k", 0)
     kinds = [name for name, _ in bus.log]
     assert kinds == ["fusion_brake_cmd", "fusion_targets"] * 2
     first: BrakeCommand = bus.log[0][1]
@@ -64,22 +64,22 @@ def test_command_then_targets_for_each_cycle():
 def test_processing_ends_where_the_command_is_handed_to_zenoh_so_the_put_is_the_hops():
     class SlowPut(FakePublisher):
         def put(self, msg) -> None:
-            until = mono_ns() + 2_000_000          # a put taking 2 ms
+            until = mono_ns() + 200_000_000        # a put taking 200 ms
             while mono_ns() < until:
                 pass
             super().put(msg)
 
-    node, bus = node_with(FixedVerifier())
-    node._cmd_pub = SlowPut(bus.log, "fusion_brake_cmd")  # type: ignore[assignment]
-    fresh(node)
+    shell, bus = shell_with(FixedVerifier())
+    shell._cmd_pub = SlowPut(bus.log, "fusion_brake_cmd")  # type: ignore[assignment]
+    fresh(shell)
     rx = mono_ns()
-    node.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", rx)
+    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", rx)
     command, targets = bus.log[0][1], bus.log[1][1]
     assert targets.processing_ns == command.header.pub_mono_ns - rx
-    assert targets.processing_ns < 2_000_000 < mono_ns() - rx
+    assert targets.processing_ns < 200_000_000 < mono_ns() - rx
 
 
-def test_a_failure_after_the_command_never_sends_a_second_one():
+def test_a_failure_half_way_through_a_cycle_sends_one_command_and_counts_it():
     calls = []
 
     class Breaks(FixedVerifier):
@@ -87,28 +87,28 @@ def test_a_failure_after_the_command_never_sends_a_second_one():
             calls.append(roi)
             if len(calls) > 1:
                 raise RuntimeError("bug in a verifier")
-            return GateResult(0.2, True)
+            return GateResult(0.001, False)
 
-    node, bus = node_with(Breaks())
-    fresh(node)
-    # Most urgent first: verified, the command goes out; the second gate run raises.
-    node.on_tracks_payload(payload(track(tid=1, x=12.0, vx=-5.0), track(tid=2, x=6.0, vx=-5.0)),
-                           "k", 0)
-    commands = [m for name, m in bus.log if name == "fusion_brake_cmd"]
-    assert len(commands) == 1 and commands[0].track_id == 2
-    targets = [m for name, m in bus.log if name == "fusion_targets"]
-    assert len(targets) == 1 and "fusion error" in targets[0].unavailable_reason
-    assert node.counters.get("processing_error") == 1
+    shell, bus = shell_with(Breaks())
+    fresh(shell)
+    # Most urgent first: rejected, so the next threat is gated, and that gate run raises.
+    shell.on_tracks_payload(payload(track(tid=1, x=12.0, vx=-5.0),
+                                    track(tid=2, x=6.0, vx=-5.0)), "k", 0)
+    assert [name for name, _ in bus.log] == ["fusion_brake_cmd", "fusion_targets"]
+    command, targets = bus.log[0][1], bus.log[1][1]
+    assert command.decision is Decision.NONE and "bug in a verifier" in command.reason
+    assert "fusion error" in targets.unavailable_reason
+    assert shell.counters.get("processing_error") == 1
 
 
-def test_a_failure_before_the_command_sends_a_none_command_with_the_error():
+def test_a_failing_verifier_sends_a_none_command_with_the_error():
     class Broken(FixedVerifier):
         def verify(self, gray, roi):
             raise RuntimeError("boom")
 
-    node, bus = node_with(Broken())
-    fresh(node)
-    node.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", 0)
+    shell, bus = shell_with(Broken())
+    fresh(shell)
+    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", 0)
     commands = [m for name, m in bus.log if name == "fusion_brake_cmd"]
     assert len(commands) == 1 and commands[0].decision is Decision.NONE
     assert "fusion error: RuntimeError('boom')" in commands[0].reason
@@ -116,17 +116,17 @@ def test_a_failure_before_the_command_sends_a_none_command_with_the_error():
 
 @pytest.mark.parametrize("junk", [b"", b"\x01\x02", encode(track())])
 def test_a_payload_that_is_not_a_radar_cycle_is_counted_not_answered(junk):
-    node, bus = node_with(FixedVerifier())
-    assert node.on_tracks_payload(junk, "k", 0) is None
-    assert bus.log == [] and node.counters.get("radar_undecodable") == 1
+    shell, bus = shell_with(FixedVerifier())
+    assert shell.on_tracks_payload(junk, "k", 0) is None
+    assert bus.log == [] and shell.counters.get("radar_undecodable") == 1
 
 
 def test_radar_sequence_gaps_and_regressions_are_counted_and_still_answered():
-    node, bus = node_with(FixedVerifier())
+    shell, bus = shell_with(FixedVerifier())
     for seq in (5, 6, 9, 9, 3):
-        node.on_tracks_payload(payload(seq=seq), "k", 0)
-    assert node.counters.get("radar_cycles_missed") == 2
-    assert node.counters.get("radar_seq_not_increasing") == 2
+        shell.on_tracks_payload(payload(seq=seq), "k", 0)
+    assert shell.counters.get("radar_cycles_missed") == 2
+    assert shell.counters.get("radar_seq_not_increasing") == 2
     assert [m.header.seq for name, m in bus.log if name == "fusion_brake_cmd"] == [0, 1, 2, 3, 4]
 
 
@@ -151,11 +151,11 @@ def test_a_camera_calibration_other_than_ours_is_counted_and_named():
     moved = np.asarray(CAL.t) + np.array([0.0, 0.0, 0.05])
     assert calibration_differences(CAL, info(t_m=tuple(moved), width=640)) == [
         "size 640x480 != 848x480", "t differs"]
-    node, _ = node_with(FixedVerifier())
-    node.calibrations = {"front": CAL}
-    node.on_camera_info(info(), "k")
-    node.on_camera_info(info(k=(1.0,) * 9), "k")
-    assert node.counters.get("camera_calibration_mismatch") == 1
+    shell, _ = shell_with(FixedVerifier())
+    shell.calibrations = {"front": CAL}
+    shell.on_camera_info(info(), "k")
+    shell.on_camera_info(info(k=(1.0,) * 9), "k")
+    assert shell.counters.get("camera_calibration_mismatch") == 1
 
 
 def test_the_radar_rhythm_learns_each_arrival_after_the_cycle_is_published():
@@ -168,14 +168,14 @@ def test_the_radar_rhythm_learns_each_arrival_after_the_cycle_is_published():
 
     bus = FakeBus()
     core = make_core(FixedVerifier())
-    decoder = FrameDecoder(848, 480, 4, 2, logging.getLogger("test"))
+    decoder = FrameDecoder(848, 480, logging.getLogger("test"))
     rhythm = Recording()
-    node = FusionNode(bus, core.s, core, decoder, logging.getLogger("test"),  # type: ignore[arg-type]
+    shell = FusionShell(bus, core.s, core, decoder, logging.getLogger("test"),  # type: ignore[arg-type]
                       rhythm=rhythm)
-    fresh(node)
+    fresh(shell)
     period = 74_000_000
     for k in range(6):
-        node.on_tracks_payload(payload(track(x=30.0), seq=k), "k", 1_000_000_000 + k * period)
+        shell.on_tracks_payload(payload(track(x=30.0), seq=k), "k", 1_000_000_000 + k * period)
     # each cycle: command, targets, then the arrival time (off the command's path)
     assert [name for name, _ in bus.log] == ["fusion_brake_cmd", "fusion_targets",
                                              "rhythm"] * 6

@@ -13,7 +13,7 @@ from common.config.camera import CameraSettings
 from common.keys import CAMERA_INFO, CAMERA_JPEG
 from common.log import kv
 from common.messages import CameraInfo, Header
-from services.camera.core import Backoff, Health, PublishCore, camera_info
+from services.camera.core import Backoff, CameraCore, Health, camera_info
 from services.camera.pipeline import FramePipeline
 from services.camera.source import FrameSource
 
@@ -23,7 +23,7 @@ EXIT_OK = 0
 EXIT_CONFIG = 2
 
 
-class CameraNode:
+class CameraShell:
     """Wires a source, the pipeline and the bus. Use `run(stop)` from the main thread."""
 
     def __init__(self, settings: CameraSettings, cal: Calibration, source: FrameSource,
@@ -31,7 +31,7 @@ class CameraNode:
         self.settings = settings
         self.cal = cal
         self.bus = bus
-        self.core = PublishCore(settings.name, cal.width, cal.height, settings.fps)
+        self.core = CameraCore(settings.name, cal.width, cal.height, settings.fps)
         self.health = Health(settings.stall_timeout_s)
         frames = bus.publisher(CAMERA_JPEG, camera=settings.name)
         self.pipeline = FramePipeline(

@@ -1,4 +1,5 @@
-"""Build the configured FrameSource (`[camera.source]`, tagged by `kind`)."""
+"""The sources by `[camera.source] kind`: each built from its config, its module imported
+only when used (pyrealsense2 is an optional extra)."""
 
 from typing import TYPE_CHECKING
 
@@ -11,14 +12,14 @@ if TYPE_CHECKING:
 
 
 def check_source(settings: cfg.CameraSettings) -> None:
-    """Checks that need no bus, so that main fails fast: a synthetic factory must import,
+    """Checks that need no bus, so that main fails fast: a plugin's factory must import,
     the realsense source needs pyrealsense2. Raises SourceConfigError."""
     if isinstance(settings.source, cfg.RealSenseSource):
         from services.camera.realsense import import_pyrealsense2
 
         import_pyrealsense2()
     if isinstance(settings.source, cfg.SyntheticSource):
-        from services.camera.synthetic import load_factory
+        from services.camera.plugin import load_factory
 
         load_factory(settings.source.factory)
 
@@ -48,12 +49,12 @@ def build_source(settings: cfg.CameraSettings, cal: Calibration,
                                    width=src.width, height=src.height,
                                    fps=src.fps or round(settings.fps),
                                    timeout_ms=src.timeout_ms)
-        from services.camera.synthetic import SyntheticContext, make_synthetic_source
+        from services.camera.plugin import PluginContext, make_plugin_source
 
-        context = SyntheticContext(width=cal.width, height=cal.height,
-                                   fps=src.fps or settings.fps, calibration=cal,
-                                   camera=settings.name, options=dict(src.options), bus=bus)
-        return make_synthetic_source(src.factory, context)
+        context = PluginContext(width=cal.width, height=cal.height,
+                                fps=src.fps or settings.fps, calibration=cal,
+                                camera=settings.name, options=dict(src.options), bus=bus)
+        return make_plugin_source(src.factory, context)
     except ValueError as exc:
         if isinstance(exc, SourceConfigError):
             raise

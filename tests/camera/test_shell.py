@@ -1,11 +1,11 @@
-"""CameraNode.run's exits: a finite source with exit_at_end, and an unusable source."""
+"""CameraShell.run's exits: a finite source with exit_at_end, and an unusable source."""
 
 import threading
 
 from common.calibration import Calibration
 from common.config.camera import CameraSettings, FolderSource
 from services.camera.folder import FolderSource as FolderFrames
-from services.camera.node import CameraNode
+from services.camera.shell import CameraShell
 from services.camera.source import Frame, FrameSource, SourceConfigError
 from tests.camera.helpers import CALIBRATION, write_folder
 from tests.support import open_bus
@@ -19,15 +19,15 @@ class Unusable(FrameSource):
         raise AssertionError("never read")
 
 
-def run_node(router: str, settings: CameraSettings, source: FrameSource) -> tuple[int, CameraNode]:
+def run_node(router: str, settings: CameraSettings, source: FrameSource) -> tuple[int, CameraShell]:
     cal = Calibration.load(CALIBRATION)
     with open_bus(router, source="camera/front") as bus:
-        node = CameraNode(settings, cal, source, bus)
+        node = CameraShell(settings, cal, source, bus)
         result: list[int] = []
         thread = threading.Thread(target=lambda: result.append(node.run(threading.Event())))
         thread.start()
         thread.join(60)
-        assert result, "CameraNode.run did not return"
+        assert result, "CameraShell.run did not return"
         return result[0], node
 
 

@@ -1,6 +1,6 @@
 """The fusion I/O shell: each camera's frames to its decoder, radar cycles through the
-core, messages out. Exactly one BrakeCommand per RadarTracks, published before the
-targets."""
+core, messages out. Exactly one BrakeCommand per RadarTracks, published before its
+VerifiedTargets."""
 
 import logging
 import threading
@@ -20,7 +20,6 @@ from common.counters import ReasonCounter
 from common.keys import CAMERA_INFO, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import RateLimitedLog, kv
 from common.messages import (
-    BrakeCommand,
     CameraInfo,
     Decision,
     DecodeError,
@@ -35,7 +34,7 @@ from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
 
 
-class FusionNode:
+class FusionShell:
     """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
     single camera). `calibrations`: what each camera's CameraInfo is checked against.
     `rhythm`: told every radar cycle's arrival (decoders with decode = before_radar
@@ -58,7 +57,6 @@ class FusionNode:
         self._rl = RateLimitedLog(log)
         self._lock = threading.Lock()
         self._last_radar_seq: int | None = None
-        self._decided_ns = 0
         self._proc_us: deque[float] = deque(maxlen=512)
         self._subs: list[zenoh.Subscriber[None]] = []
         if isinstance(calibrations, Calibration):
@@ -120,35 +118,26 @@ class FusionNode:
         return self.handle(tracks, rx_mono_ns)
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
-        """Process one cycle: the BrakeCommand is published the moment the core has
-        decided it, the targets when every track is done; the radar's rhythm (for the
-        frame decoders) is updated last, off the command's path."""
+        """Process one cycle and publish its BrakeCommand, then its VerifiedTargets; the
+        radar's rhythm (for the frame decoders) is updated last, off the command's path."""
         with self._lock:
             self._check_order(tracks)
             feeds = [d.snapshot() for d in self.decoders]
-            sent: list[BrakeCommand] = []
-
-            def publish(cmd: BrakeCommand) -> None:
-                # decided when handed to Zenoh: the put itself is the hop's, as the radar's
-                # put is (processing_ns ends where the command's pub_mono_ns begins)
-                self._decided_ns = mono_ns()
-                self._cmd_pub.put(msgspec.structs.replace(
-                    cmd, header=msgspec.structs.replace(cmd.header,
-                                                        pub_mono_ns=self._decided_ns)))
-                sent.append(cmd)
-
             try:
-                result = self.core.process(tracks, feeds, wall_ns(), mono_ns(), publish)
-            except Exception as exc:  # one command per cycle even when a bug bites
+                result = self.core.process(tracks, feeds, wall_ns(), mono_ns())
+            except Exception as exc:  # one command per radar cycle, even when a bug bites
                 self.counters.add("processing_error")
                 self._rl.error("core", "fusion_cycle_failed", radar_seq=tracks.header.seq,
                                error=repr(exc))
                 result = self.core.failed_cycle(tracks, repr(exc), wall_ns(), mono_ns())
-                if sent:   # the command went out before the failure: never a second one
-                    result = CycleResult(result.targets, sent[0])
-                else:
-                    publish(result.command)
-            processing_ns = self._decided_ns - rx_mono_ns
+            # Processing ends where the command is handed to Zenoh: the put itself belongs
+            # to the hop, as the radar's put does.
+            decided_ns = mono_ns()
+            command = msgspec.structs.replace(
+                result.command,
+                header=msgspec.structs.replace(result.command.header, pub_mono_ns=decided_ns))
+            self._cmd_pub.put(command)
+            processing_ns = decided_ns - rx_mono_ns
             targets = msgspec.structs.replace(
                 result.targets, processing_ns=processing_ns,
                 header=msgspec.structs.replace(result.targets.header, pub_mono_ns=mono_ns()))
@@ -156,9 +145,8 @@ class FusionNode:
             self._count(result)
             self._proc_us.append(processing_ns / 1e3)
         if self.rhythm is not None:
-            # the arrival time is given: updating it now or earlier is the same
             self.rhythm.on_cycle(rx_mono_ns)
-        return CycleResult(targets, result.command)
+        return CycleResult(targets, command)
 
     def _check_order(self, tracks: RadarTracks) -> None:
         seq = tracks.header.seq
@@ -202,9 +190,9 @@ class FusionNode:
         self.log.info(kv("fusion_stats", **self.stats()))
 
 
-def run_until(stop: threading.Event, node: FusionNode, interval_s: float) -> None:
+def run_until(stop: threading.Event, shell: FusionShell, interval_s: float) -> None:
     """Log statistics every interval until `stop` is set."""
     next_log = time.monotonic() + interval_s
     while not stop.wait(max(0.0, next_log - time.monotonic())):
-        node.log_stats()
+        shell.log_stats()
         next_log += interval_s
