@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from common.config.radar import MergeSettings, PrefilterSettings
 from common.messages.radar import OutputMode
-from services.radar.ars408.codec import SCALAR_MAX_FRAMES, decode_columns, decode_rows
+from services.radar.ars408.codec import decode_columns
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
 from services.radar.cycle import ListRole, RawCycle
 from services.radar.neighbours import pairs_within_self
@@ -217,10 +217,6 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
     datas = _present(cycle.general)
     if not datas:
         return GeneralFrames(_NO_DETECTIONS, _NO_IDS, _NO_IDS, None, rejected)
-    if len(datas) <= SCALAR_MAX_FRAMES:
-        few = _decode_general_few(general_spec, datas)
-        if few is not None:
-            return few
     cols = decode_columns(general_spec, datas)
     rejected.update(cols.rejected)
     ids = cols.raw[0]
@@ -241,23 +237,6 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         rows = np.full(len(keys), -2, dtype=np.int64)
         rows[keep] = np.arange(f.shape[1])
     return GeneralFrames(Detections(f, i), ids, keys, rows, rejected)
-
-
-def _decode_general_few(spec: MessageSpec, datas: list[bytes]) -> GeneralFrames | None:
-    """decode_general for a few frames, all valid with distinct IDs (the usual cycle):
-    decoded on lists, three numpy calls instead of about twelve (a radar cycle starts
-    on cold caches, where each costs tens of microseconds; with one object all of it is
-    on the chain). None for anything else: the array path decides."""
-    rows = decode_rows(spec, datas)
-    ids = rows.raw[0]
-    if not all(rows.valid) or len(set(ids)) < len(ids):
-        return None
-    n = len(ids)
-    f = np.array([rows.phys[k] for k in _GENERAL_F], dtype=np.float64)
-    unknown = ([UNKNOWN] * n for _ in range(OBJ_CLASS, INVALID_STATE + 1))   # not sent yet
-    i = np.array([*(rows.raw[k] for k in _GENERAL_I), *unknown], dtype=np.int64)
-    id_array = i[RADAR_ID].copy()
-    return GeneralFrames(Detections(f, i), id_array, id_array, None, {})
 
 
 def attach_extras(cycle: RawCycle, g: GeneralFrames, quality: bool = True) -> None:
@@ -303,9 +282,7 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     """Paper's prefilter: forward only, min < range <= max, RCS above the threshold; plus
     the optional existence-probability and cluster-validity filters."""
     if not len(det):
-        return det          # an empty cycle (nothing ahead): no numpy call at all
-    if len(det) <= PREFILTER_LISTS_MAX:
-        return _prefilter_lists(det, s)
+        return det
     x, y = det.x, det.y
     r2 = x * x + y * y
     keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (det.rcs > s.min_rcs_dbsm)
@@ -318,30 +295,6 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     if s.drop_cluster_invalid_states:
         keep &= ~np.isin(det.ints[INVALID_STATE], np.asarray(s.drop_cluster_invalid_states))
     return det.take(keep)
-
-
-# Up to this many detections the prefilter decides on Python lists: one numpy call when
-# everything passes instead of about twelve (see services/radar/tracker.py, _LISTS_MAX).
-PREFILTER_LISTS_MAX = 16
-
-
-def _prefilter_lists(det: Detections, s: PrefilterSettings) -> Detections:
-    """`prefilter` for a few detections: the same tests in the same order."""
-    f = det.floats.tolist()
-    ints = det.ints.tolist() if s.min_prob_of_exist > 0 or s.drop_cluster_invalid_states else []
-    lo2, hi2 = s.min_range_m**2, s.max_range_m**2
-    drop_states = set(s.drop_cluster_invalid_states)
-    keep = []
-    for j, (x, y, rcs) in enumerate(zip(f[X], f[Y], f[RCS], strict=True)):
-        r2 = x * x + y * y
-        ok = lo2 < r2 <= hi2 and rcs > s.min_rcs_dbsm and (x > 0 or not s.forward_only)
-        if ok and s.min_prob_of_exist > 0:
-            p = ints[PROB_OF_EXIST][j]
-            ok = p == UNKNOWN or p >= s.min_prob_of_exist
-        if ok and drop_states:
-            ok = ints[INVALID_STATE][j] not in drop_states
-        keep.append(ok)
-    return det if all(keep) else det.take(np.array(keep, dtype=np.bool_))
 
 
 def merge(det: Detections, s: MergeSettings) -> Detections:
