@@ -61,10 +61,10 @@ ID, HITS, MISSES, CONFIRMED, META_RADAR_ID, META_DYN_PROP, META_OBJ_CLASS = rang
 N_META = 7
 # Detection rows carried into a track's meta rows META_RADAR_ID.. (radar ID, DynProp, class)
 _DET_META = slice(RADAR_ID, OBJ_CLASS + 1)
-# Detection rows of the measurement [x, y] and [vx, vy]
+# Detection rows of the measurement [x, y] and [vx, vy]: the same rows as the state's.
 _Z_POS = slice(X, Y + 1)
 _Z_VEL = slice(VX, VY + 1)
-assert (X, Y, VX, VY) == (0, 1, 2, 3)
+assert (X, Y, VX, VY) == (0, 1, 2, 3) and (_Z_POS, _Z_VEL) == (POS, VEL)
 
 
 def greedy_pairs(ti: I, di: I, cost: F) -> tuple[I, I]:
@@ -189,7 +189,7 @@ class KalmanTracker:
     def _gated(self, ti: I, di: I, dp: F, dv: F) -> tuple[I, I, F]:
         """The pairs (track ti, detection di) with innovation dp, dv (2, k) inside the
         gate, and their Mahalanobis distance."""
-        a, b, g = self._alpha[:, ti], self._beta[:, ti], self._gamma[:, ti]
+        a, b, g = (np.take(c, ti, axis=1) for c in (self._alpha, self._beta, self._gamma))
         d2 = (a * dp * dp - 2.0 * b * dp * dv + g * dv * dv).sum(axis=0)
         ok = np.flatnonzero((d2 <= self._chi2) & ((dp * dp).sum(axis=0) <= self._cap**2))
         return ti[ok], di[ok], d2[ok]
@@ -211,9 +211,8 @@ class KalmanTracker:
         ti, di = self._candidates(det, self._innovation())
         if len(ti) == 0:
             return _EMPTY, _EMPTY
-        z, st = det.floats, self.state
-        ti, di, cost = self._gated(ti, di, z[_Z_POS][:, di] - st[POS][:, ti],
-                                   z[_Z_VEL][:, di] - st[VEL][:, ti])
+        diff = np.take(det.floats[STATE], di, axis=1) - np.take(self.state[STATE], ti, axis=1)
+        ti, di, cost = self._gated(ti, di, diff[POS], diff[VEL])
         if len(ti) == 0:
             return _EMPTY, _EMPTY
         if self.s.radar_id_bonus > 0:
@@ -230,20 +229,23 @@ class KalmanTracker:
         - x), P' = R S^-1 P, written out on each axis's block below."""
         if len(rows) == 0:
             return
-        st = self.state
-        alpha, beta, gamma = self._alpha[:, rows], self._beta[:, rows], self._gamma[:, rows]
+        alpha, beta, gamma = (np.take(c, rows, axis=1)
+                              for c in (self._alpha, self._beta, self._gamma))
         rp, rv = self._r_pos, self._r_vel
-        z = det.floats[:, drows]
+        old = np.take(self.state, rows, axis=1)
+        z = np.take(det.floats, drows, axis=1)
         zp, zv = z[_Z_POS], z[_Z_VEL]
-        dp, dv = zp - st[POS][:, rows], zv - st[VEL][:, rows]
-        p, c, v = st[VAR_P][:, rows], st[COV_PV][:, rows], st[VAR_V][:, rows]
-        st[POS, rows] = -rp * (alpha * dp - beta * dv) + zp
-        st[VEL, rows] = -rv * (gamma * dv - beta * dp) + zv
-        st[VAR_P, rows] = rp * (alpha * p - beta * c)
-        st[COV_PV, rows] = rp * (alpha * c - beta * v)
-        st[VAR_V, rows] = rv * (gamma * v - beta * c)
-        st[TRACK_RCS, rows] = z[RCS]
-        self.meta[META_RADAR_ID:, rows] = det.ints[_DET_META][:, drows]
+        dp, dv = zp - old[POS], zv - old[VEL]
+        p, c, v = old[VAR_P], old[COV_PV], old[VAR_V]
+        new = np.empty((N_STATE, len(rows)))
+        new[POS] = -rp * (alpha * dp - beta * dv) + zp
+        new[VEL] = -rv * (gamma * dv - beta * dp) + zv
+        new[VAR_P] = rp * (alpha * p - beta * c)
+        new[COV_PV] = rp * (alpha * c - beta * v)
+        new[VAR_V] = rv * (gamma * v - beta * c)
+        new[TRACK_RCS] = z[RCS]
+        self.state[:, rows] = new
+        self.meta[META_RADAR_ID:, rows] = np.take(det.ints[_DET_META], drows, axis=1)
 
     def _count(self, rows: I) -> None:
         """Hits and misses after an update of `rows`; confirmation; deletion."""
@@ -252,19 +254,22 @@ class KalmanTracker:
         s, meta = self.s, self.meta
         matched = np.zeros(len(self), dtype=np.bool_)
         matched[rows] = True
-        meta[HITS] = np.where(matched, meta[HITS] + 1, 0)
-        meta[MISSES] = np.where(matched, 0, meta[MISSES] + 1)
-        meta[CONFIRMED] |= meta[HITS] >= s.confirm_hits
+        hits, misses = meta[HITS], meta[MISSES]      # views: updated in place
+        hits += 1
+        hits *= matched                  # consecutive: a miss starts again from 0
+        misses += 1
+        misses *= ~matched
+        meta[CONFIRMED] |= hits >= s.confirm_hits
         limit = np.where(meta[CONFIRMED] > 0, s.delete_after_misses,
                          s.delete_tentative_after_misses)
-        keep = meta[MISSES] < limit
+        keep = misses < limit
         if not keep.all():
             self.state = np.compress(keep, self.state, axis=1)
             self.meta = np.compress(keep, meta, axis=1)
 
     def _birth(self, det: Detections, drows: I) -> None:
         k = len(drows)
-        fd = det.floats[:, drows]
+        fd = np.take(det.floats, drows, axis=1)
         new = np.empty((N_STATE, k))
         new[STATE] = fd[STATE]
         new[VAR_P] = self._r_pos      # P0 = R
@@ -275,7 +280,7 @@ class KalmanTracker:
         meta[ID] = np.arange(self.next_id, self.next_id + k)
         meta[HITS] = 1
         meta[CONFIRMED] = self.s.confirm_hits <= 1
-        meta[META_RADAR_ID:] = det.ints[_DET_META][:, drows]
+        meta[META_RADAR_ID:] = np.take(det.ints[_DET_META], drows, axis=1)
         self.next_id += k
         self.state = np.concatenate([self.state, new], axis=1)
         self.meta = np.concatenate([self.meta, meta], axis=1)
