@@ -81,7 +81,7 @@ from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTarg
 from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
 from services.brake.pty_pair import PtyPair
 from services.radar.ars408 import Frame
-from services.radar.can_links import SlcanPtyLink
+from tools.sim.can_links import SlcanPtyLink
 from tools.sim.radar_feed import CycleSent, RadarFeed
 from tools.sim.scenario import RadarLook, find_scenario, load_scenario
 from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop

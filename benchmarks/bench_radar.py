@@ -13,7 +13,7 @@ cycle costs, less disturbed by other processes taking the CPU than wall time (th
 machine is shared; wall-clock figures there move by 2-3x with its load; thread time still
 moves by up to 2x on a busy virtual machine, so compare rows of one run). Rows per scene,
 all measured in this run:
-- `pipeline`: every frame through `SensorCore.on_frame` (classify, assembly, decode,
+- `pipeline`: every frame through `RadarCore.on_frame` (classify, assembly, decode,
   prefilter, merge, Kalman tracker, messages): CPU time per cycle, and `after last
   frame`, the part spent once the cycle's last frame arrived (the latency share).
 - `baseline previous tracker`: the same, with the previous merge and tracker
@@ -63,10 +63,10 @@ from services.radar.ars408 import (
     object_cycle_frames,
 )
 from services.radar.ars408.table import MessageSpec
-from services.radar.core import SensorCore
-from services.radar.cycle import CycleAssembler, ListRole
+from services.radar.assembly import CycleAssembler, ListRole
+from services.radar.core import RadarCore
 from services.radar.detections import decode_cycle
-from services.radar.service import RadarService
+from services.radar.shell import RadarShell
 
 RECORDING = Path(__file__).resolve().parent.parent / "tests" / "data" / "ars408" / (
     "candump-2026-06-24_154259.log")
@@ -165,7 +165,7 @@ class Result:
         return float(np.percentile(self.per_cycle_ms, 95))
 
 
-def _feed_cycle(core: SensorCore, frames: Classified, t_s: float) -> tuple[float, float]:
+def _feed_cycle(core: RadarCore, frames: Classified, t_s: float) -> tuple[float, float]:
     """One cycle's frames through `core`: (CPU ms for the cycle, CPU ms after its last
     frame)."""
     clock = CPU_CLOCK
@@ -180,7 +180,7 @@ def _feed_cycle(core: SensorCore, frames: Classified, t_s: float) -> tuple[float
     return (end - start) / 1e6, (end - last) / 1e6
 
 
-def run_pipeline(cycles: list[Classified], core_type: type[SensorCore] = SensorCore
+def run_pipeline(cycles: list[Classified], core_type: type[RadarCore] = RadarCore
                  ) -> tuple[list[float], list[float]]:
     """Per-cycle CPU ms and CPU ms after the last frame, every cycle through one core."""
     s = RadarSettings()
@@ -198,7 +198,7 @@ def run_paired(cycles: list[Classified]) -> tuple[Result, Result]:
     """The current pipeline and the reference one (previous merge + tracker), each cycle
     through both, alternating which goes first: both see the same machine state."""
     s = RadarSettings()
-    cores = (SensorCore(s.sensors[0], s), ReferenceCore(s.sensors[0], s))
+    cores = (RadarCore(s.sensors[0], s), ReferenceCore(s.sensors[0], s))
     times: tuple[list[float], list[float]] = ([], [])
     after: tuple[list[float], list[float]] = ([], [])
     for k, frames in enumerate(cycles):
@@ -323,7 +323,7 @@ def replay_processing_ms(pace: Pace, cycles: int) -> list[float]:
         def serving(self) -> None:
             pass
 
-    RadarService(settings, Collect()).run(stop)
+    RadarShell(settings, Collect()).run(stop)
     return out[3:]    # the first cycles pay for imports and first numpy calls
 
 

@@ -34,7 +34,7 @@ from common.messages import (
 from services.brake.protocol import SEQ_MODULO, HostMode, command_line, level_to_wire
 from services.radar.ars408 import Kind, ObjectGeneral, classify
 from services.radar.ars408 import decode as decode_record
-from services.radar.can_links import parse_slcan_frame
+from tools.sim.can_links import parse_slcan_frame
 
 COMMAND_TTL_MS = 250
 

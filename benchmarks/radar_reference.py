@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from common.config.radar import MergeSettings, RadarSettings, SensorSettings, TrackerSettings
 from common.messages.radar import RadarTrack
-from services.radar.core import SensorCore
+from services.radar.core import RadarCore
 from services.radar.detections import (
     DYN_PROP,
     OBJ_CLASS,
@@ -324,7 +324,7 @@ class ReferenceTracker:
         return [RadarTrack(*c) for c in columns]
 
 
-class ReferenceCore(SensorCore):
+class ReferenceCore(RadarCore):
     """A radar core whose merge and tracker are the previous ones (decode, prefilter,
     cycle assembly and messages are the current code)."""
 

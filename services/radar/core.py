@@ -26,8 +26,8 @@ from services.radar.ars408.records import (
     Version,
 )
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
+from services.radar.assembly import CycleAssembler, ListRole, RawCycle
 from services.radar.configure import ConfigWriter
-from services.radar.cycle import CycleAssembler, ListRole, RawCycle
 from services.radar.detections import (
     Detections,
     GeneralFrames,
@@ -106,7 +106,7 @@ def radar_state_message(f: RadarStateFrame) -> RadarState:
     )
 
 
-class SensorCore:
+class RadarCore:
     """One radar (one SensorID). Frames rejected by this radar's pipeline are counted in
     `rejected` by reason (``wrong_dlc:<message>``, ``out_of_range:<signal>``, cycle
     assembly reasons, ...)."""

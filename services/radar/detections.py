@@ -19,7 +19,7 @@ from common.config.radar import MergeSettings, PrefilterSettings
 from common.messages.radar import OutputMode
 from services.radar.ars408.codec import decode_columns
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
-from services.radar.cycle import ListRole, RawCycle
+from services.radar.assembly import ListRole, RawCycle
 from services.radar.neighbours import pairs_within_self
 
 F = npt.NDArray[np.float64]

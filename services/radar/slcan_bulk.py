@@ -6,7 +6,7 @@ behind the ones before, and the receive timeout is a 1 ms polling loop (its idle
 `BulkSlcanBus` keeps python-can's slcan commands, parsing and Message objects and
 replaces only the read: one `select` with the caller's whole timeout, then one `read` of
 everything available, split into lines. The radar opens it for `interface = "slcan"`
-(services/radar/can_io.py); `[radar.can] options = { bulk_read = false }` falls back to
+(services/radar/ports.py); `[radar.can] options = { bulk_read = false }` falls back to
 python-can's own reader.
 
 Lines that are not valid (bad hex, a length that disagrees with the DLC, bytes that are

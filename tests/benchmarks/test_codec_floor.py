@@ -6,9 +6,9 @@ from benchmarks.floor_relay import CycleEnd
 from common.messages import RadarTracks, decode
 from services.brake.protocol import Command, HostMode
 from services.brake.protocol import decode as decode_line
-from services.radar.ars408.cycles import object_cycle_frames
 from services.radar.ars408.records import ObjectGeneral
-from services.radar.can_links import slcan_line
+from services.radar.ars408.transmissions import object_cycle_frames
+from tools.sim.can_links import slcan_line
 
 OBJECTS = [
     ObjectGeneral(id=3, dist_long_m=30.0, dist_lat_m=0.4, vrel_long_mps=-6.0,

@@ -8,7 +8,7 @@ from services.radar.ars408 import (
     ObjectQuality,
     object_cycle_frames,
 )
-from services.radar.core import SensorCore
+from services.radar.core import RadarCore
 from services.radar.detections import PROB_OF_EXIST
 from tests.can_support import feed
 
@@ -25,7 +25,7 @@ def frames(k: int):
 
 
 def test_tracking_runs_when_the_general_frames_are_in():
-    core = SensorCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
+    core = RadarCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
     cycle = frames(0)
     assert feed(core, cycle[:3]) == []          # status + 2 general
     assert len(core.tracker) == 2               # tracked already, before 4 more frames
@@ -37,7 +37,7 @@ def test_tracking_runs_when_the_general_frames_are_in():
 
 def test_a_prefilter_on_quality_waits_for_the_quality_frames():
     s = RadarSettings(cycle=KNOWN, prefilter=PrefilterSettings(min_prob_of_exist=5))
-    core = SensorCore(s.sensors[0], s)
+    core = RadarCore(s.sensors[0], s)
     cycle = frames(0)
     assert feed(core, cycle[:5]) == [] and len(core.tracker) == 0
     [result] = feed(core, cycle[5:])
@@ -46,7 +46,7 @@ def test_a_prefilter_on_quality_waits_for_the_quality_frames():
 
 
 def test_a_cycle_closed_by_the_next_status_is_tracked_once():
-    core = SensorCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
+    core = RadarCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
     first = frames(0)
     feed(core, first[:4])                        # extended frames never come
     steps = core.tracker.last_t
@@ -57,7 +57,7 @@ def test_a_cycle_closed_by_the_next_status_is_tracked_once():
 
 
 def test_quality_frames_are_decoded_before_the_extended_frames_arrive():
-    core = SensorCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
+    core = RadarCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
     cycle = frames(0)
     assert feed(core, cycle[:5]) == []           # status, 2 general, 2 quality
     tracked = core._tracked                      # white box: nothing else shows the order
@@ -69,7 +69,7 @@ def test_quality_frames_are_decoded_before_the_extended_frames_arrive():
 
 def test_a_quality_list_decoded_before_the_cycle_ends_counts_its_rejections_once():
     """One quality frame for an object the general list does not have."""
-    core = SensorCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
+    core = RadarCore(RadarSettings().sensors[0], RadarSettings(cycle=KNOWN))
     objs = [ObjectGeneral(4, 12.0, 0.2, -1.0, 0.0, 0, 20.0),
             ObjectGeneral(6, 18.0, -2.0, 0.0, 0.0, 1, 5.0)]
     qual = [ObjectQuality(4, 1, 1, 1, 1, 2, 3), ObjectQuality(5, 1, 1, 1, 1, 2, 3)]

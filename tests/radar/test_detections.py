@@ -15,7 +15,7 @@ from services.radar.ars408 import (
     ObjectQuality,
     encode,
 )
-from services.radar.cycle import RawCycle
+from services.radar.assembly import RawCycle
 from services.radar.detections import (
     INVALID_STATE,
     OBJ_CLASS,

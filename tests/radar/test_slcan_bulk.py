@@ -11,12 +11,12 @@ import pytest
 
 from common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
 from services.radar.ars408 import Frame, ObjectGeneral, object_cycle_frames
-from services.radar.can_io import open_port
-from services.radar.can_links import SlcanPtyLink, slcan_line
-from services.radar.service import RadarService
+from services.radar.ports import open_port
+from services.radar.shell import RadarShell
 from services.radar.slcan_bulk import MAX_LINE, BulkSlcanBus
-from tests.radar.test_service import Output, running  # noqa: F401 (fixture)
+from tests.radar.test_shell import Output, running  # noqa: F401 (fixture)
 from tests.support import wait_for
+from tools.sim.can_links import SlcanPtyLink, slcan_line
 
 
 @pytest.fixture
@@ -126,7 +126,7 @@ def test_the_service_reports_dropped_lines_in_its_status(running):  # noqa: F811
         settings = RadarSettings(can=settings.can, cycle=type(settings.cycle)(
             expect_quality=Expect.NO, expect_extended=Expect.NO))
         out = Output()
-        running(RadarService(settings, out))
+        running(RadarShell(settings, out))
         link.wait_open(10)
         link.send_raw(b"tXYZ8001122334455667\r")
         for k in range(3):

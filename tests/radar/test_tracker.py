@@ -9,7 +9,7 @@ from common.config.radar import CycleSettings, Expect, RadarSettings, TrackerSet
 from services.radar.ars408 import ClusterGeneral, ObjectGeneral, cluster_cycle_frames
 from services.radar.ars408.codec import encode
 from services.radar.ars408.records import ObjectListStatus
-from services.radar.core import SensorCore
+from services.radar.core import RadarCore
 from services.radar.detections import Detections
 from services.radar.tracker import KalmanTracker
 from tests.can_support import feed
@@ -35,7 +35,7 @@ def run(cycles, s=None, t0=100.0):
     """Each cycle a list of (x, y, vx, vy) in cluster mode; returns the published tracks
     per cycle."""
     s = s or settings()
-    core = SensorCore(s.sensors[0], s)
+    core = RadarCore(s.sensors[0], s)
     out = []
     for k, dets in enumerate(cycles):
         frames = cluster_cycle_frames([cluster(i, *d) for i, d in enumerate(dets)], k)
@@ -139,7 +139,7 @@ def test_several_returns_from_one_object_merge_into_one_track():
 
 def test_radar_ids_help_but_are_not_trusted_when_they_swap():
     s = settings()
-    core = SensorCore(s.sensors[0], s)
+    core = RadarCore(s.sensors[0], s)
     a_id, b_id = 1, 2
     history = []
     for k in range(12):

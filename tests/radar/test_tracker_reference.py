@@ -9,7 +9,7 @@ from benchmarks.bench_radar import CYCLE_S, SCENES, scale_scene, scene_cycles
 from benchmarks.radar_reference import ReferenceCore
 from common.config.radar import RadarSettings
 from services.radar.ars408 import classify
-from services.radar.core import CycleResult, SensorCore
+from services.radar.core import CycleResult, RadarCore
 from tests.can_support import recording_frames
 
 _EXACT = ("track_id", "confirmed", "hits", "misses", "radar_object_id", "dyn_prop",
@@ -31,7 +31,7 @@ def assert_same_results(new: list[CycleResult], old: list[CycleResult]) -> None:
                     f"cycle {k} track {ta.track_id} {f}"
 
 
-def run(core_type: type[SensorCore], cycles) -> list[CycleResult]:
+def run(core_type: type[RadarCore], cycles) -> list[CycleResult]:
     s = RadarSettings()
     core = core_type(s.sensors[0], s)
     out: list[CycleResult] = []
@@ -44,7 +44,7 @@ def run(core_type: type[SensorCore], cycles) -> list[CycleResult]:
 @pytest.mark.parametrize("scene", [*SCENES, scale_scene(500)], ids=lambda s: s.name)
 def test_same_tracks_as_the_previous_tracker_on_the_benchmark_scenes(scene):
     cycles = scene_cycles(scene, 25, seed=7)
-    new = run(SensorCore, cycles)
+    new = run(RadarCore, cycles)
     assert sum(len(r.tracks) for r in new) > 25      # the scenes are really tracked
     assert_same_results(new, run(ReferenceCore, cycles))
 
@@ -52,7 +52,7 @@ def test_same_tracks_as_the_previous_tracker_on_the_benchmark_scenes(scene):
 def test_same_tracks_as_the_previous_tracker_on_the_recording():
     frames = [(classify(f.arb_id)[0], f.data, t) for f, t in recording_frames()]  # type: ignore[index]
 
-    def replay(core_type: type[SensorCore]) -> list[CycleResult]:
+    def replay(core_type: type[RadarCore]) -> list[CycleResult]:
         s = RadarSettings()
         core = core_type(s.sensors[0], s)
         out: list[CycleResult] = []
@@ -60,6 +60,6 @@ def test_same_tracks_as_the_previous_tracker_on_the_recording():
             out += core.on_frame(spec, data, t, 0, 0)
         return out + core.flush()
 
-    new = replay(SensorCore)
+    new = replay(RadarCore)
     assert any(t.confirmed for r in new for t in r.tracks)
     assert_same_results(new, replay(ReferenceCore))

@@ -15,8 +15,8 @@ import pytest
 
 from common.bus import Bus
 from services.brake.sim_actuator import SimActuator
-from services.radar.can_links import SlcanPtyLink
 from tests.support import START_TIMEOUT_S, HealthWatch, ServiceProcess, open_bus, python_module
+from tools.sim.can_links import SlcanPtyLink
 from tools.sim.radar_feed import FrameSink, PythonCanSink, RadarFeed
 from tools.sim.runner import SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook

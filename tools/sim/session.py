@@ -117,7 +117,7 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     bus or a pty cannot be opened.
     """
     from services.brake.sim_actuator import SimActuator
-    from services.radar.can_links import SlcanPtyLink
+    from tools.sim.can_links import SlcanPtyLink
 
     run_dir = out / "run"
     run_dir.mkdir(parents=True, exist_ok=True)

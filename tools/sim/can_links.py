@@ -8,7 +8,7 @@ radar behind it. The service opens `link.path` with python-can's ``slcan`` inter
 (use option ``sleep_after_open = 0``: python-can otherwise sleeps 2 s after opening)::
 
     from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-    from services.radar.can_links import SlcanPtyLink, replay_log
+    from tools.sim.can_links import SlcanPtyLink, replay_log
 
     with SlcanPtyLink() as link:
         # [radar.can] interface = "slcan", channel = link.path,

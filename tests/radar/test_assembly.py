@@ -3,7 +3,7 @@ their last frame; incomplete ones are counted and still emitted."""
 
 from common.config.radar import CycleSettings, Expect
 from common.messages.radar import OutputMode
-from services.radar.cycle import ClosedBy, CycleAssembler, ListRole
+from services.radar.assembly import ClosedBy, CycleAssembler, ListRole
 
 OBJ = OutputMode.OBJECTS
 CL = OutputMode.CLUSTERS

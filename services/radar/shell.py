@@ -23,9 +23,9 @@ from common.messages.radar import BusState, RadarStatus, RadarTracks
 from common.messages.vehicle import EgoMotion
 from services.radar.ars408.codec import Frame
 from services.radar.ars408.table import classify
-from services.radar.can_io import CanPort, describe, open_port
-from services.radar.core import CycleResult, SensorCore
+from services.radar.core import CycleResult, RadarCore
 from services.radar.ego import EgoMotionForwarder
+from services.radar.ports import CanPort, describe, open_port
 
 _log = logging.getLogger("radar")
 
@@ -43,7 +43,7 @@ class RadarOutput(Protocol):
         """Called once, when the bus first opened: the service now serves."""
 
 
-class RadarService:
+class RadarShell:
     """Rejections that belong to no single radar are counted in `bus_rejected`
     (``error_frame``, ``remote_frame``, ``extended_id``, ``unknown_id``, ``host_frame``,
     ``unconfigured_sensor_id``, ``internal_error``, ``bus_failure``, and lines the slcan
@@ -61,7 +61,7 @@ class RadarService:
         self.output = output
         self._factory = port_factory or (lambda: open_port(settings.can, settings.replay))
         self.interface, self.channel = describe(settings.can, settings.replay)
-        self.cores = {s.sensor_id: SensorCore(s, settings) for s in settings.sensors}
+        self.cores = {s.sensor_id: RadarCore(s, settings) for s in settings.sensors}
         self.bus_rejected = ReasonCounter()
         self.ego = EgoMotionForwarder(settings.ego_motion, list(self.cores))
         self.ego_sent: dict[int, int] = dict.fromkeys(self.cores, 0)
@@ -222,7 +222,7 @@ class RadarService:
         if results:
             self._publish_results(core, results, mono_ns() - mono)
 
-    def _publish_results(self, core: SensorCore, results: list[CycleResult],
+    def _publish_results(self, core: RadarCore, results: list[CycleResult],
                          processing_ns: int) -> None:
         name = core.sensor.name
         for r in results:
@@ -310,7 +310,7 @@ class RadarService:
             if key != self._status_key.get(sid) or mono >= self._status_due[sid]:
                 self._publish_status(core, mono, wall)
 
-    def _frames_per_s(self, core: SensorCore, mono: int) -> float:
+    def _frames_per_s(self, core: RadarCore, mono: int) -> float:
         sid = core.sensor.sensor_id
         frames, at, rate = self._fps_sample.get(sid, (0, mono, 0.0))
         if mono - at >= NS_PER_S // 2:
@@ -319,7 +319,7 @@ class RadarService:
         self._fps_sample[sid] = (frames, at, rate)
         return rate
 
-    def _publish_status(self, core: SensorCore, mono: int, wall: int) -> None:
+    def _publish_status(self, core: RadarCore, mono: int, wall: int) -> None:
         sid = core.sensor.sensor_id
         bus = {f"bus:{k}": v for k, v in self.bus_rejected.snapshot().items()}
         ego = {f"ego_motion:{k}": v for k, v in self.ego.rejected.snapshot().items()}
