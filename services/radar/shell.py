@@ -29,7 +29,10 @@ from services.radar.ports import CanPort, describe, open_port
 
 _log = logging.getLogger("radar")
 
+# Timeouts, status, 0x200 re-sends and bus state are looked at every 10 ms while frames
+# flow; an idle bus wakes the loop at least every 50 ms for them.
 _HOUSEKEEPING_NS = 10_000_000
+_RECEIVE_TIMEOUT_S = 0.05
 
 
 class RadarOutput(Protocol):
@@ -97,7 +100,7 @@ class RadarShell:
                 backoff = min(2 * backoff, can_cfg.reopen_backoff_max_s)
             try:
                 port = self._factory()
-            except Exception as exc:   # python-can raises many types for a missing device
+            except (can.CanError, OSError, ValueError) as exc:
                 self._set_bus_state(BusState.REOPENING, mono_ns())
                 self._rl.warning("open", "can_open_failed", interface=self.interface,
                                  channel=self.channel, error=repr(exc), retry_s=backoff)
@@ -142,14 +145,13 @@ class RadarShell:
             self._port_errors.pop(id(port), None)
             try:
                 port.shutdown()
-            except Exception as exc:
+            except (can.CanError, OSError) as exc:   # a lost bus often cannot say goodbye
                 _log.debug(kv("can_shutdown_failed", error=repr(exc)))
 
     def _serve(self, port: CanPort, stop: threading.Event) -> bool:
-        timeout = self.settings.can.receive_timeout_s
         next_housekeeping = 0
         while not stop.is_set():
-            msg = port.recv(timeout)
+            msg = port.recv(_RECEIVE_TIMEOUT_S)
             mono, wall = mono_ns(), wall_ns()
             if msg is not None:
                 self._on_message(msg, wall, mono)
@@ -213,10 +215,13 @@ class RadarShell:
         t_s = msg.timestamp if msg.timestamp > 0 else mono / NS_PER_S
         try:
             results = core.on_frame(spec, bytes(msg.data), t_s, wall, mono)
-        except Exception:
-            # A bug must not stop the radar for the following cycles: count, log, go on.
+        except Exception as exc:
+            # A bug in one frame's processing must not stop the radar's next cycles, which
+            # feed the brake decision: count it, log it with its frame, go on.
             self.bus_rejected.add("internal_error")
-            if self._rl.error("internal", "core_failed", arb_id=hex(msg.arbitration_id)):
+            if self._rl.error("internal", "core_failed", sensor=core.sensor.name,
+                              arb_id=hex(msg.arbitration_id), data=bytes(msg.data).hex(),
+                              error=repr(exc)):
                 _log.exception("core traceback")
             return
         if results:

@@ -6,8 +6,8 @@ behind the ones before, and the receive timeout is a 1 ms polling loop (its idle
 `BulkSlcanBus` keeps python-can's slcan commands, parsing and Message objects and
 replaces only the read: one `select` with the caller's whole timeout, then one `read` of
 everything available, split into lines. The radar opens it for `interface = "slcan"`
-(services/radar/ports.py); `[radar.can] options = { bulk_read = false }` falls back to
-python-can's own reader.
+(services/radar/ports.py): with python-can's own reader the radar would use about 13% of
+a core at the radar's nominal rate instead of about 4%.
 
 Lines that are not valid (bad hex, a length that disagrees with the DLC, bytes that are
 not ASCII, a run longer than any slcan line) are dropped, counted in `line_errors` by
@@ -87,9 +87,7 @@ class BulkSlcanBus(slcanBus):
             return read_available(self.serialPortOrig, timeout)
         except PortGone as exc:
             raise can.CanOperationError(str(exc)) from exc
-        except can.CanError:
-            raise
-        except Exception as exc:   # OSError (EIO: unplugged), SerialException, ValueError
+        except (OSError, ValueError) as exc:   # EIO: unplugged; SerialException; a closed fd
             raise can.CanOperationError(f"could not read from serial device: {exc}") from exc
 
     def _split(self, chunk: bytes) -> None:

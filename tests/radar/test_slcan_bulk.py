@@ -101,22 +101,15 @@ def test_waiting_blocks_in_select_instead_of_polling(link_bus):
     assert cpu < 0.02, f"{cpu * 1e3:.1f} ms of CPU for a 300 ms wait"
 
 
-def test_open_port_uses_the_bulk_reader_unless_told_otherwise():
+def test_open_port_opens_slcan_with_the_bulk_reader():
     with SlcanPtyLink() as link:
-        base = CanSettings(interface="slcan", channel=link.path,
-                           options={"sleep_after_open": 0})
-        bulk = open_port(base, ReplaySettings())
+        settings = CanSettings(interface="slcan", channel=link.path,
+                               options={"sleep_after_open": 0})
+        bus = open_port(settings, ReplaySettings())
         try:
-            assert isinstance(bulk, BulkSlcanBus)
+            assert isinstance(bus, BulkSlcanBus)
         finally:
-            bulk.shutdown()
-        plain_settings = CanSettings(interface="slcan", channel=link.path,
-                                     options={"sleep_after_open": 0, "bulk_read": False})
-        plain = open_port(plain_settings, ReplaySettings())
-        try:
-            assert type(plain).__name__ == "slcanBus"
-        finally:
-            plain.shutdown()
+            bus.shutdown()
 
 
 def test_the_service_reports_dropped_lines_in_its_status(running):  # noqa: F811
