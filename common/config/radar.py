@@ -148,7 +148,6 @@ class TrackerSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     drop_receding: bool = False                # do not publish tracks moving away
     receding_min_mps: NonNegFloat = 0.5        # range rate above this = receding
     max_gap_s: PositiveFloat = 0.5             # a longer gap between cycles resets the tracker
-    nominal_dt_s: PositiveFloat = 0.075
 
 
 class EgoMotionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

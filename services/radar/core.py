@@ -29,7 +29,6 @@ from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
 from services.radar.assembly import CycleAssembler, ListRole, RawCycle
 from services.radar.configure import ConfigWriter
 from services.radar.detections import (
-    Detections,
     GeneralFrames,
     attach_extras,
     attach_list,
@@ -237,11 +236,8 @@ class RadarCore:
         if attached:
             attach_extras(cycle, g)
         kept = prefilter(g.det, self.settings.prefilter)
-        self._merge_and_step(kept, cycle.t_s)
+        self.tracker.step(merge(kept, self.settings.merge), cycle.t_s)
         return _Tracked(cycle, g, len(kept), attached)
-
-    def _merge_and_step(self, kept: Detections, t_s: float) -> None:
-        self.tracker.step(merge(kept, self.settings.merge), t_s)
 
     def process(self, cycle: RawCycle) -> CycleResult:
         """A finished cycle: tracked (now, or earlier when its general frames were in),
