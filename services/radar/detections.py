@@ -1,11 +1,9 @@
-"""A cycle's detections as numpy matrices: decoding a `RawCycle`, the prefilter and the
-centroid merge. Pure and vectorised.
+"""A cycle's detections: decoding a `RawCycle`, the prefilter and the centroid merge.
+Pure and vectorised.
 
-numpy calls cost microseconds each on a small CPU, whatever their size, and several
-times more on strided data, so detections are two matrices (floats and integers) with a
-row per attribute: selecting detections is two calls, not ten, and every attribute is a
-contiguous row.
-Radar frame: x forward, y left, origin at the radar; velocities are relative to the radar.
+Detections are two matrices (floats and integers) with a row per attribute and a column
+per detection. Radar frame: x forward, y left, origin at the radar; velocities are
+relative to the radar.
 """
 
 from collections import defaultdict
@@ -40,9 +38,7 @@ class Detections:
     ID, DynProp, object class (0x60D), ProbOfExist (0x60C), InvalidState (0x702); UNKNOWN
     (-1) when the radar did not send it.
 
-    One row per attribute: numpy is several times slower on strided columns, and the
-    pipeline works attribute by attribute over all detections. `f` and `i` are the
-    (m, 5) views (a detection per row)."""
+    `f` and `i` are the (m, 5) views (a detection per row)."""
 
     floats: F
     ints: I
@@ -125,11 +121,6 @@ def _signal_index(spec: MessageSpec, *attrs: str) -> list[int]:
     return [fields.index(a) for a in attrs]
 
 
-def _rows(indices: list[int]) -> npt.NDArray[np.intp]:
-    """An index array (numpy converts a list index on every call)."""
-    return np.array(indices, dtype=np.intp)
-
-
 # General frames: the float rows x, y, vx, vy, rcs and the integer id, dyn_prop, at the
 # same signal positions for objects (0x60B) and clusters (0x701).
 _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_lat_m",
@@ -137,8 +128,8 @@ _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_la
 _GENERAL_I = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "id", "dyn_prop")
 assert (_signal_index(BY_KIND[Kind.CLUSTER_GENERAL], "dist_long_m", "dist_lat_m", "vrel_long_mps",
                       "vrel_lat_mps", "rcs_dbsm", "id", "dyn_prop") == _GENERAL_F + _GENERAL_I)
-_GENERAL_F_ROWS = _rows(_GENERAL_F)
-_GENERAL_I_ROWS = _rows(_GENERAL_I)
+_GENERAL_F_ROWS = np.array(_GENERAL_F, dtype=np.intp)
+_GENERAL_I_ROWS = np.array(_GENERAL_I, dtype=np.intp)
 # Every list message carries the radar's ID as its first signal.
 assert all(spec.signals[0].attr == "id" for specs in _SPECS.values() for spec in specs if spec)
 
@@ -318,8 +309,8 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
     similar = dvx * dvx + dvy * dvy <= s.velocity_mps**2
     if not similar.any():
         return det
-    # Sparse neighbour lists and the seed walk in plain Python: numpy per-row calls
-    # would cost more than the few pairs a scene has.
+    # The seed walk is sequential (a seed takes its mates before the next seed looks),
+    # over the few similar pairs.
     neighbours: defaultdict[int, list[int]] = defaultdict(list)
     for i, j in zip(ii[similar].tolist(), jj[similar].tolist(), strict=True):
         neighbours[i].append(j)
