@@ -74,7 +74,7 @@ from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TR
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
 from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
 from services.radar.ars408 import Frame
-from services.radar.can_links import SlcanPtyLink
+from tools.sim.can_links import SlcanPtyLink
 from tools.sim.pty_pair import PtyPair
 from tools.sim.radar_feed import CycleSent, RadarFeed
 from tools.sim.scenario import RadarLook, find_scenario, load_scenario

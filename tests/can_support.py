@@ -1,8 +1,8 @@
 """CAN test support: the real ARS408 recording, feeding frames into a radar core, and a
 vcan interface when the kernel has one.
 
-The radar side of a cross-process link (slcan pty, socketcand server) lives in the
-installed package, `services.radar.can_links`, so that the simulator can use it too.
+The radar side of a cross-process link (slcan pty, socketcand server) is
+`tools.sim.can_links`, shared with the simulator.
 """
 
 import functools
@@ -15,7 +15,7 @@ import can
 
 from common.config.radar import RadarSettings
 from services.radar.ars408 import Frame, classify
-from services.radar.core import CycleResult, SensorCore
+from services.radar.core import CycleResult, RadarCore
 from tests.support import REPO
 
 RECORDING = REPO / "tests" / "data" / "ars408" / "candump-2026-06-24_154259.log"
@@ -29,7 +29,7 @@ def recording_messages() -> tuple[can.Message, ...]:
     return tuple(can.LogReader(str(RECORDING)))
 
 
-def feed(core: SensorCore, frames: Iterable[tuple[Frame, float]], mono_start: int = 0
+def feed(core: RadarCore, frames: Iterable[tuple[Frame, float]], mono_start: int = 0
          ) -> list[CycleResult]:
     """Frames (with their source time in s) through a core; mono time advances 1 us a frame."""
     out: list[CycleResult] = []
@@ -44,10 +44,10 @@ def recording_frames() -> list[tuple[Frame, float]]:
     return [(Frame(m.arbitration_id, bytes(m.data)), m.timestamp) for m in recording_messages()]
 
 
-def run_recording(settings: RadarSettings | None = None) -> tuple[SensorCore, list[CycleResult]]:
+def run_recording(settings: RadarSettings | None = None) -> tuple[RadarCore, list[CycleResult]]:
     """The whole recording through one core, flushed at the end."""
     s = settings or RadarSettings()
-    core = SensorCore(s.sensors[0], s)
+    core = RadarCore(s.sensors[0], s)
     results = feed(core, recording_frames())
     return core, results + core.flush()
 

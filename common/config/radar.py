@@ -49,7 +49,6 @@ class CanSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     channel: str = "can0"
     bitrate: Annotated[int, msgspec.Meta(ge=0)] = 500_000   # 0: leave the adapter's setting
     options: dict[str, Any] = msgspec.field(default_factory=dict)
-    receive_timeout_s: PositiveFloat = 0.05
     silent_after_s: PositiveFloat = 0.5        # no frame for this long: bus_state = silent
     error_hold_s: PositiveFloat = 1.0          # bus_state = error this long after an error frame
     reopen_backoff_initial_s: PositiveFloat = 0.1
@@ -149,7 +148,6 @@ class TrackerSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     drop_receding: bool = False                # do not publish tracks moving away
     receding_min_mps: NonNegFloat = 0.5        # range rate above this = receding
     max_gap_s: PositiveFloat = 0.5             # a longer gap between cycles resets the tracker
-    nominal_dt_s: PositiveFloat = 0.075
 
 
 class EgoMotionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

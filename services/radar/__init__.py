@@ -1,8 +1,9 @@
 """The radar service: Continental ARS408-21 on any python-can bus to confirmed tracks on Zenoh.
 
-See docs/radar.md. Modules: `ars408` (CAN database, decoder, encoder), `cycle` (cycle
-assembly), `detections` (decode, prefilter, merge), `tracker` (Kalman), `core` (one
-radar's pure pipeline), `configure` (0x200 write and confirmation), `ego` (0x300/0x301),
-`can_io` (buses and log replay), `can_links` (the radar side of a CAN link, for tests and
-the simulator), `service` (the I/O shell), `main` (`aeb radar`).
+See docs/radar.md. Modules: `ars408` (CAN database, decoder, encoder, transmissions),
+`assembly` (a radar cycle's frames into one RawCycle), `detections` (decode, prefilter,
+merge), `neighbours` (near pairs), `tracker` (Kalman), `core` (one radar's pure
+pipeline, `RadarCore`), `configure` (0x200 write and confirmation), `ego` (0x300/0x301),
+`ports` (opening the bus, log replay), `slcan_bulk` (the slcan reader), `shell` (the I/O
+shell, `RadarShell`), `main` (`aeb radar`).
 """

@@ -2,6 +2,12 @@
 finished cycles (tracks) and its status out. No CAN, no Zenoh, no clocks.
 
 Pipeline per cycle: assembly -> decode -> prefilter -> centroid merge -> Kalman tracker.
+
+A cycle's lists are worked on as each one completes. The radar sends N general frames,
+then N quality and N extended frames: the tracks depend on the general frames alone
+(unless a prefilter uses the quality frames), so the general list is decoded and
+tracked as soon as it is in, the quality list decoded as soon as it is in, and the
+extended list, which only annotates the object class, when the cycle is complete.
 """
 
 from collections import deque
@@ -20,10 +26,9 @@ from services.radar.ars408.records import (
     Version,
 )
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
+from services.radar.assembly import CycleAssembler, ListRole, RawCycle
 from services.radar.configure import ConfigWriter
-from services.radar.cycle import CycleAssembler, ListRole, RawCycle
 from services.radar.detections import (
-    Detections,
     GeneralFrames,
     attach_extras,
     attach_list,
@@ -33,8 +38,7 @@ from services.radar.detections import (
 )
 from services.radar.tracker import KalmanTracker
 
-# By base ID (an int hashes faster than an Enum or a MessageSpec; this lookup runs for
-# every frame): output mode, list role, the message's DLC.
+# List messages by base ID: output mode, list role, the message's DLC.
 _LIST_ROLES: dict[int, tuple[OutputMode, int, int]] = {
     BY_KIND[kind].base_id: (mode, role, BY_KIND[kind].dlc) for kind, mode, role in (
         (Kind.OBJECT_GENERAL, OutputMode.OBJECTS, ListRole.GENERAL),
@@ -70,7 +74,7 @@ class _Tracked:
     cycle: RawCycle
     general: GeneralFrames
     n_prefiltered: int
-    extras_attached: bool          # before tracking (the prefilter needs them)
+    extras_attached: bool           # before tracking (the prefilter needs them)
     quality_attached: bool = False  # after tracking, once the quality list was in
 
 
@@ -101,7 +105,7 @@ def radar_state_message(f: RadarStateFrame) -> RadarState:
     )
 
 
-class SensorCore:
+class RadarCore:
     """One radar (one SensorID). Frames rejected by this radar's pipeline are counted in
     `rejected` by reason (``wrong_dlc:<message>``, ``out_of_range:<signal>``, cycle
     assembly reasons, ...)."""
@@ -125,11 +129,10 @@ class SensorCore:
         self._last_counter: int | None = None
         self._counter_step: int | None = None
         p = settings.prefilter
-        # The prefilter needs quality frames only for these optional filters; without
-        # them a cycle is tracked as soon as its general frames are in (see on_frame).
+        # Only these optional filters need the quality frames before tracking.
         self._filter_needs_extras = p.min_prob_of_exist > 0 or bool(
             p.drop_cluster_invalid_states)
-        self._early: _Tracked | None = None
+        self._tracked: _Tracked | None = None     # the open cycle, once tracked
 
     # -- frames -------------------------------------------------------------------------
 
@@ -140,22 +143,18 @@ class SensorCore:
         time in a replay), `wall_ns` / `mono_ns` the host's receive times."""
         self.frames_total += 1
         role = _LIST_ROLES.get(spec.base_id)
-        if role is not None:   # the hot path: hundreds of frames per cycle
+        if role is not None:
             mode, list_role, dlc = role
             usable: bytes | None = data
             if not dlc <= len(data) <= 8:
                 self.rejected.add(f"wrong_dlc:{spec.dbc_name}")
                 usable = None   # arrived, so the cycle need not wait for it; marks it incomplete
-            asm = self.assembler
-            done = asm.on_list_frame(mode, list_role, usable, mono_ns)
+            done = self.assembler.on_list_frame(mode, list_role, usable, mono_ns)
             if done:
                 return [self.process(c) for c in done]
-            if asm.generals_in is not None and not self._filter_needs_extras:
-                self._track_early(asm.generals_in)
-                asm.generals_in = None
-            if asm.qualities_in is not None:
-                self._attach_quality_early(asm.qualities_in)
-                asm.qualities_in = None
+            cycle = self.assembler.open_cycle
+            if cycle is not None and cycle.has_list(list_role):
+                self._list_in(cycle, list_role)
             return []
         try:
             record = decode(spec, data)
@@ -219,19 +218,17 @@ class SensorCore:
     def _finish(self, cycles: list[RawCycle]) -> list[CycleResult]:
         return [self.process(c) for c in cycles]
 
-    def _track_early(self, cycle: RawCycle) -> None:
-        """Track the open cycle once all its general frames are in: its quality and
-        extended frames (2 N more frames, about 0.25 ms each on the bus) then arrive while
-        the work is done, and only their decoding is left after the cycle's last frame."""
-        self._early = self._track(cycle)
-
-    def _attach_quality_early(self, cycle: RawCycle) -> None:
-        """Decode a tracked cycle's quality frames once they are all in, while its
-        extended frames are still on the bus: one list less to decode after its last frame."""
-        early = self._early       # only ever tracked without its extras (see on_frame)
-        if early is not None and early.cycle is cycle and not early.quality_attached:
-            attach_list(cycle, early.general, ListRole.QUALITY)
-            early.quality_attached = True
+    def _list_in(self, cycle: RawCycle, role: int) -> None:
+        """All frames of one of the open cycle's lists are in: track the cycle once its
+        general list is (unless the prefilter waits for the quality list), decode the
+        quality list into a tracked cycle's detections."""
+        tracked = self._tracked if self._tracked is not None and \
+            self._tracked.cycle is cycle else None
+        if role == ListRole.GENERAL and tracked is None and not self._filter_needs_extras:
+            self._tracked = self._track(cycle)
+        elif role == ListRole.QUALITY and tracked is not None and not tracked.quality_attached:
+            attach_list(cycle, tracked.general, ListRole.QUALITY)
+            tracked.quality_attached = True
 
     def _track(self, cycle: RawCycle) -> _Tracked:
         g = decode_general(cycle)
@@ -239,17 +236,14 @@ class SensorCore:
         if attached:
             attach_extras(cycle, g)
         kept = prefilter(g.det, self.settings.prefilter)
-        self._merge_and_step(kept, cycle.t_s)
+        self.tracker.step(merge(kept, self.settings.merge), cycle.t_s)
         return _Tracked(cycle, g, len(kept), attached)
-
-    def _merge_and_step(self, kept: Detections, t_s: float) -> None:
-        self.tracker.step(merge(kept, self.settings.merge), t_s)
 
     def process(self, cycle: RawCycle) -> CycleResult:
         """A finished cycle: tracked (now, or earlier when its general frames were in),
         its extra frames decoded, its result built."""
-        early, self._early = self._early, None
-        done = early if early is not None and early.cycle is cycle else self._track(cycle)
+        tracked, self._tracked = self._tracked, None
+        done = tracked if tracked is not None and tracked.cycle is cycle else self._track(cycle)
         g = done.general
         if not done.extras_attached:
             attach_extras(cycle, g, quality=not done.quality_attached)

@@ -1,11 +1,9 @@
-"""A cycle's detections as numpy matrices: decoding a `RawCycle`, the prefilter and the
-centroid merge. Pure and vectorised.
+"""A cycle's detections: decoding a `RawCycle`, the prefilter and the centroid merge.
+Pure and vectorised.
 
-numpy calls cost microseconds each on a small CPU, whatever their size, and several
-times more on strided data, so detections are two matrices (floats and integers) with a
-row per attribute: selecting detections is two calls, not ten, and every attribute is a
-contiguous row.
-Radar frame: x forward, y left, origin at the radar; velocities are relative to the radar.
+Detections are two matrices (floats and integers) with a row per attribute and a column
+per detection. Radar frame: x forward, y left, origin at the radar; velocities are
+relative to the radar.
 """
 
 from collections import defaultdict
@@ -17,9 +15,9 @@ import numpy.typing as npt
 
 from common.config.radar import MergeSettings, PrefilterSettings
 from common.messages.radar import OutputMode
-from services.radar.ars408.codec import SCALAR_MAX_FRAMES, decode_columns, decode_rows
+from services.radar.ars408.codec import decode_columns
 from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
-from services.radar.cycle import ListRole, RawCycle
+from services.radar.assembly import ListRole, RawCycle
 from services.radar.neighbours import pairs_within_self
 
 F = npt.NDArray[np.float64]
@@ -40,9 +38,7 @@ class Detections:
     ID, DynProp, object class (0x60D), ProbOfExist (0x60C), InvalidState (0x702); UNKNOWN
     (-1) when the radar did not send it.
 
-    One row per attribute: numpy is several times slower on strided columns, and the
-    pipeline works attribute by attribute over all detections. `f` and `i` are the
-    (m, 5) views (a detection per row)."""
+    `f` and `i` are the (m, 5) views (a detection per row)."""
 
     floats: F
     ints: I
@@ -125,11 +121,6 @@ def _signal_index(spec: MessageSpec, *attrs: str) -> list[int]:
     return [fields.index(a) for a in attrs]
 
 
-def _rows(indices: list[int]) -> npt.NDArray[np.intp]:
-    """An index array (numpy converts a list index on every call)."""
-    return np.array(indices, dtype=np.intp)
-
-
 # General frames: the float rows x, y, vx, vy, rcs and the integer id, dyn_prop, at the
 # same signal positions for objects (0x60B) and clusters (0x701).
 _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_lat_m",
@@ -137,8 +128,8 @@ _GENERAL_F = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "dist_long_m", "dist_la
 _GENERAL_I = _signal_index(BY_KIND[Kind.OBJECT_GENERAL], "id", "dyn_prop")
 assert (_signal_index(BY_KIND[Kind.CLUSTER_GENERAL], "dist_long_m", "dist_lat_m", "vrel_long_mps",
                       "vrel_lat_mps", "rcs_dbsm", "id", "dyn_prop") == _GENERAL_F + _GENERAL_I)
-_GENERAL_F_ROWS = _rows(_GENERAL_F)
-_GENERAL_I_ROWS = _rows(_GENERAL_I)
+_GENERAL_F_ROWS = np.array(_GENERAL_F, dtype=np.intp)
+_GENERAL_I_ROWS = np.array(_GENERAL_I, dtype=np.intp)
 # Every list message carries the radar's ID as its first signal.
 assert all(spec.signals[0].attr == "id" for specs in _SPECS.values() for spec in specs if spec)
 
@@ -217,10 +208,6 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
     datas = _present(cycle.general)
     if not datas:
         return GeneralFrames(_NO_DETECTIONS, _NO_IDS, _NO_IDS, None, rejected)
-    if len(datas) <= SCALAR_MAX_FRAMES:
-        few = _decode_general_few(general_spec, datas)
-        if few is not None:
-            return few
     cols = decode_columns(general_spec, datas)
     rejected.update(cols.rejected)
     ids = cols.raw[0]
@@ -241,23 +228,6 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         rows = np.full(len(keys), -2, dtype=np.int64)
         rows[keep] = np.arange(f.shape[1])
     return GeneralFrames(Detections(f, i), ids, keys, rows, rejected)
-
-
-def _decode_general_few(spec: MessageSpec, datas: list[bytes]) -> GeneralFrames | None:
-    """decode_general for a few frames, all valid with distinct IDs (the usual cycle):
-    decoded on lists, three numpy calls instead of about twelve (a radar cycle starts
-    on cold caches, where each costs tens of microseconds; with one object all of it is
-    on the chain). None for anything else: the array path decides."""
-    rows = decode_rows(spec, datas)
-    ids = rows.raw[0]
-    if not all(rows.valid) or len(set(ids)) < len(ids):
-        return None
-    n = len(ids)
-    f = np.array([rows.phys[k] for k in _GENERAL_F], dtype=np.float64)
-    unknown = ([UNKNOWN] * n for _ in range(OBJ_CLASS, INVALID_STATE + 1))   # not sent yet
-    i = np.array([*(rows.raw[k] for k in _GENERAL_I), *unknown], dtype=np.int64)
-    id_array = i[RADAR_ID].copy()
-    return GeneralFrames(Detections(f, i), id_array, id_array, None, {})
 
 
 def attach_extras(cycle: RawCycle, g: GeneralFrames, quality: bool = True) -> None:
@@ -303,9 +273,7 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     """Paper's prefilter: forward only, min < range <= max, RCS above the threshold; plus
     the optional existence-probability and cluster-validity filters."""
     if not len(det):
-        return det          # an empty cycle (nothing ahead): no numpy call at all
-    if len(det) <= PREFILTER_LISTS_MAX:
-        return _prefilter_lists(det, s)
+        return det
     x, y = det.x, det.y
     r2 = x * x + y * y
     keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (det.rcs > s.min_rcs_dbsm)
@@ -318,30 +286,6 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     if s.drop_cluster_invalid_states:
         keep &= ~np.isin(det.ints[INVALID_STATE], np.asarray(s.drop_cluster_invalid_states))
     return det.take(keep)
-
-
-# Up to this many detections the prefilter decides on Python lists: one numpy call when
-# everything passes instead of about twelve (see services/radar/tracker.py, _LISTS_MAX).
-PREFILTER_LISTS_MAX = 16
-
-
-def _prefilter_lists(det: Detections, s: PrefilterSettings) -> Detections:
-    """`prefilter` for a few detections: the same tests in the same order."""
-    f = det.floats.tolist()
-    ints = det.ints.tolist() if s.min_prob_of_exist > 0 or s.drop_cluster_invalid_states else []
-    lo2, hi2 = s.min_range_m**2, s.max_range_m**2
-    drop_states = set(s.drop_cluster_invalid_states)
-    keep = []
-    for j, (x, y, rcs) in enumerate(zip(f[X], f[Y], f[RCS], strict=True)):
-        r2 = x * x + y * y
-        ok = lo2 < r2 <= hi2 and rcs > s.min_rcs_dbsm and (x > 0 or not s.forward_only)
-        if ok and s.min_prob_of_exist > 0:
-            p = ints[PROB_OF_EXIST][j]
-            ok = p == UNKNOWN or p >= s.min_prob_of_exist
-        if ok and drop_states:
-            ok = ints[INVALID_STATE][j] not in drop_states
-        keep.append(ok)
-    return det if all(keep) else det.take(np.array(keep, dtype=np.bool_))
 
 
 def merge(det: Detections, s: MergeSettings) -> Detections:
@@ -365,8 +309,8 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
     similar = dvx * dvx + dvy * dvy <= s.velocity_mps**2
     if not similar.any():
         return det
-    # Sparse neighbour lists and the seed walk in plain Python: numpy per-row calls
-    # would cost more than the few pairs a scene has.
+    # The seed walk is sequential (a seed takes its mates before the next seed looks),
+    # over the few similar pairs.
     neighbours: defaultdict[int, list[int]] = defaultdict(list)
     for i, j in zip(ii[similar].tolist(), jj[similar].tolist(), strict=True):
         neighbours[i].append(j)

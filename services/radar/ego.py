@@ -9,7 +9,7 @@ from common.config.radar import EgoMotionSettings
 from common.counters import ReasonCounter
 from common.messages.vehicle import EgoMotion
 from services.radar.ars408.codec import EncodeError, Frame
-from services.radar.ars408.cycles import ego_motion_frames
+from services.radar.ars408.transmissions import ego_motion_frames
 
 
 class EgoMotionForwarder:

@@ -15,8 +15,8 @@ from common.log import kv, setup_logging
 from common.messages.radar import RadarStatus, RadarTracks
 from common.realtime import ThreadRealtime, apply_process
 from common.service import load_service_config, service_argparser, stop_event_on_signals
-from services.radar.can_io import ConfigurationError, check_settings
-from services.radar.service import RadarService
+from services.radar.ports import ConfigurationError, check_settings
+from services.radar.shell import RadarShell
 
 
 class ZenohRadarOutput:
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     with bus:
-        service = RadarService(cfg.radar, ZenohRadarOutput(bus, sensors))
+        service = RadarShell(cfg.radar, ZenohRadarOutput(bus, sensors))
         if cfg.radar.ego_motion.forward:
             bus.subscribe(EGO_MOTION, lambda msg, key: service.on_ego_motion(msg))
         log.info(kv("radar_start", sensors=",".join(sensors),

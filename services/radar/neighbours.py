@@ -1,11 +1,9 @@
-"""Near pairs between point sets, without a dense n x m matrix.
+"""Near pairs within one point set, and candidate pairs between two, without testing
+every pair when there are many.
 
-numpy calls cost microseconds each on a small CPU whatever their size, so at the sizes of
-a radar cycle (tens to hundreds of points) the number of calls decides, not the number
-of candidate pairs: a sort on x and a window per point (`pairs_within`,
-`pairs_within_self`) beats finer structures up to a few hundred points. The tracker's
-gate, with hundreds of tracks and detections in one window, uses a strip grid
-(`candidates_in_boxes`): it yields about a quarter of the window's candidates.
+`pairs_within_self` (the merge's neighbours) sorts the points on x and looks at a window
+per point; `candidates_in_boxes` (the tracker's gate) buckets points into strips along x
+sorted by y, so that a box around a point is three runs of the sorted keys.
 """
 
 import numpy as np
@@ -14,8 +12,7 @@ import numpy.typing as npt
 F = npt.NDArray[np.float64]
 I = npt.NDArray[np.int64]  # noqa: E741
 
-# Up to this many candidate pairs a dense matrix is cheaper: fewer numpy calls, and a
-# call costs more than a few thousand elements.
+# Up to this many points squared, testing every pair costs less than sorting first.
 _DENSE_MAX = 4096
 # Windows are widened by this much so that rounding in a window bound never loses a pair
 # that the exact test keeps (quantised radar positions sit exactly on bounds).
@@ -34,45 +31,20 @@ def _expand(lo: I, counts: I, owner: I, total: int) -> tuple[I, I]:
     return i, first + np.arange(total)
 
 
-def pairs_within(ax: F, ay: F, bx: F, by: F, radius: float) -> tuple[I, I]:
-    """Index pairs (i into a, j into b) whose Euclidean distance is at most `radius`.
-
-    Candidates come from a window on b sorted by x, so the cost grows with the number
-    of near pairs, not with n * m (a dense 250 x 250 distance matrix costs milliseconds
-    on a small CPU; this costs tens of microseconds).
-    """
-    if len(ax) == 0 or len(bx) == 0:
-        return _empty()
-    if len(ax) * len(bx) <= _DENSE_MAX:
-        dx = ax[:, None] - bx[None, :]
-        dy = ay[:, None] - by[None, :]
-        i, j = np.nonzero(dx * dx + dy * dy <= radius * radius)
-        return i, j
-    order = np.argsort(bx, kind="stable")
-    xs = bx[order]
-    lo = np.searchsorted(xs, ax - (radius + _EPS), "left")
-    counts = np.searchsorted(xs, ax + (radius + _EPS), "right") - lo
-    total = int(counts.sum())
-    if total == 0:
-        return _empty()
-    i, p = _expand(lo, counts, np.arange(len(ax)), total)
-    j = order[p]
-    dx = ax[i] - bx[j]
-    dy = ay[i] - by[j]
-    keep = dx * dx + dy * dy <= radius * radius
-    return i[keep], j[keep]
-
-
 def pairs_within_self(x: F, y: F, radius: float) -> tuple[I, I]:
     """Index pairs (i, j) of one point set, each unordered pair once, whose distance is
-    at most `radius` (half the candidates of `pairs_within(x, y, x, y, r)`)."""
+    at most `radius`.
+
+    Candidates come from a window on the points sorted by x, so the cost grows with the
+    number of near pairs, not with n * n."""
     n = len(x)
     if n < 2:
         return _empty()
     if n * n <= _DENSE_MAX:
-        i, j = pairs_within(x, y, x, y, radius)
-        upper = i < j
-        return i[upper], j[upper]
+        dx = x[:, None] - x[None, :]
+        dy = y[:, None] - y[None, :]
+        i, j = np.nonzero(np.triu(dx * dx + dy * dy <= radius * radius, k=1))
+        return i, j
     order = np.argsort(x, kind="stable")
     xs, ys = x[order], y[order]
     counts = np.searchsorted(xs, xs + (radius + _EPS), "right") - np.arange(1, n + 1)

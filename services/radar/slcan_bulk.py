@@ -1,13 +1,12 @@
 """python-can's `slcan` interface, reading every byte the adapter has at once.
 
-python-can 4.6's slcanBus reads the serial port one byte per call (a select and a read
-per byte): about 0.2 ms of Python per 26-byte frame, so a cycle's last frames queue
-behind the ones before, and the receive timeout is a 1 ms polling loop (its idle CPU).
-`BulkSlcanBus` keeps python-can's slcan commands, parsing and Message objects and
-replaces only the read: one `select` with the caller's whole timeout, then one `read` of
-everything available, split into lines. The radar opens it for `interface = "slcan"`
-(services/radar/can_io.py); `[radar.can] options = { bulk_read = false }` falls back to
-python-can's own reader.
+python-can 4.6's slcanBus reads the serial port one byte per call and waits for data by
+polling: a cycle's last frames queue behind the bytes of the ones before, and an idle bus
+keeps waking the reader. With it the radar service would not stay within its CPU budget
+(docs/performance.md). `BulkSlcanBus` keeps python-can's slcan commands, parsing and
+Message objects and replaces only the read: one `select` with the caller's whole
+timeout, then one `read` of everything available, split into lines. The radar opens it
+for `interface = "slcan"` (services/radar/ports.py).
 
 Lines that are not valid (bad hex, a length that disagrees with the DLC, bytes that are
 not ASCII, a run longer than any slcan line) are dropped, counted in `line_errors` by
@@ -87,9 +86,7 @@ class BulkSlcanBus(slcanBus):
             return read_available(self.serialPortOrig, timeout)
         except PortGone as exc:
             raise can.CanOperationError(str(exc)) from exc
-        except can.CanError:
-            raise
-        except Exception as exc:   # OSError (EIO: unplugged), SerialException, ValueError
+        except (OSError, ValueError) as exc:   # EIO: unplugged; SerialException; a closed fd
             raise can.CanOperationError(f"could not read from serial device: {exc}") from exc
 
     def _split(self, chunk: bytes) -> None:

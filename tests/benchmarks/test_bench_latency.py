@@ -12,8 +12,8 @@ from benchmarks.bench_brake import LineTimes
 from benchmarks.floor_relay import FRAMES_PER_OBJECT
 from benchmarks.latency_chain import floor_chains
 from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-from services.radar.can_links import SlcanPtyLink
 from tests.support import wait_for
+from tools.sim.can_links import SlcanPtyLink
 from tools.sim.pty_pair import PtyPair
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.scenario import RadarLook

@@ -16,7 +16,7 @@ from benchmarks.latency_chain import (
     zenoh_ns,
 )
 from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-from services.radar.can_links import slcan_line
+from tools.sim.can_links import slcan_line
 
 US = 1_000
 

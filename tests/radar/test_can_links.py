@@ -6,7 +6,8 @@ import can
 import pytest
 
 from services.radar.ars408 import Frame, ObjectGeneral, object_cycle_frames
-from services.radar.can_links import (
+from tests.can_support import RECORDING, RECORDING_FRAMES
+from tools.sim.can_links import (
     SlcanPtyLink,
     SocketcandServer,
     parse_slcan_frame,
@@ -14,7 +15,6 @@ from services.radar.can_links import (
     replay_log,
     slcan_line,
 )
-from tests.can_support import RECORDING, RECORDING_FRAMES
 
 CYCLE = object_cycle_frames([ObjectGeneral(1, 12.0, 0.4, -3.0, 0.0, 0, 10.0)], 7)
 

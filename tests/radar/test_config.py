@@ -7,7 +7,7 @@ import pytest
 
 from common.config.loader import ConfigError, load_config, parse_config
 from common.config.radar import Pace, RadarConfig
-from services.radar.can_io import ConfigurationError, check_settings
+from services.radar.ports import ConfigurationError, check_settings
 from tests.support import REPO
 
 

@@ -6,14 +6,16 @@ import pytest
 from common.config.radar import MergeSettings, PrefilterSettings
 from common.messages.radar import OutputMode
 from services.radar.ars408 import (
+    BY_KIND,
     ClusterGeneral,
     ClusterQuality,
+    Kind,
     ObjectExtended,
     ObjectGeneral,
     ObjectQuality,
     encode,
 )
-from services.radar.cycle import RawCycle
+from services.radar.assembly import RawCycle
 from services.radar.detections import (
     INVALID_STATE,
     OBJ_CLASS,
@@ -24,7 +26,7 @@ from services.radar.detections import (
     merge,
     prefilter,
 )
-from services.radar.neighbours import pairs_within, pairs_within_self
+from services.radar.neighbours import pairs_within_self
 
 
 def raw_cycle(mode, general, quality=(), extended=()):
@@ -136,15 +138,10 @@ def test_merge_can_be_disabled():
     assert len(merge(det, MergeSettings(enabled=False))) == 2
 
 
-@pytest.mark.parametrize("n", [5, 200])      # the dense path and the sorted-window path
-def test_pair_searches_find_exactly_the_near_pairs(n):
+@pytest.mark.parametrize("n", [5, 200])      # every pair tested, and the sorted window
+def test_the_pair_search_finds_exactly_the_near_pairs(n):
     rng = np.random.default_rng(n)
     ax, ay = rng.uniform(0, 20, n), rng.uniform(-5, 5, n)
-    bx, by = rng.uniform(0, 20, n + 3), rng.uniform(-5, 5, n + 3)
-    d = np.hypot(ax[:, None] - bx[None, :], ay[:, None] - by[None, :])
-    i, j = pairs_within(ax, ay, bx, by, 2.0)
-    assert sorted(zip(i.tolist(), j.tolist(), strict=True)) == sorted(
-        zip(*[a.tolist() for a in np.nonzero(d <= 2.0)], strict=True))
     i, j = pairs_within_self(ax, ay, 2.0)
     d = np.hypot(ax[:, None] - ax[None, :], ay[:, None] - ay[None, :])
     expect = {(a, b) for a, b in zip(*[v.tolist() for v in np.nonzero(d <= 2.0)], strict=True)
@@ -153,57 +150,81 @@ def test_pair_searches_find_exactly_the_near_pairs(n):
         == expect and len(i) == len(expect)
 
 
+def kept_by_the_rule(det: Detections, s: PrefilterSettings) -> list[int]:
+    """The prefilter's rule read detection by detection."""
+    out = []
+    for j, (x, y, rcs) in enumerate(zip(det.x.tolist(), det.y.tolist(), det.rcs.tolist(),
+                                        strict=True)):
+        p, state = int(det.ints[PROB_OF_EXIST, j]), int(det.ints[INVALID_STATE, j])
+        if (s.min_range_m**2 < x * x + y * y <= s.max_range_m**2 and rcs > s.min_rcs_dbsm
+                and (x > 0 or not s.forward_only)
+                and (s.min_prob_of_exist == 0 or p == UNKNOWN or p >= s.min_prob_of_exist)
+                and state not in s.drop_cluster_invalid_states):
+            out.append(j)
+    return out
+
+
 @pytest.mark.parametrize("settings", [
     PrefilterSettings(),
     PrefilterSettings(forward_only=False, min_range_m=2.0, max_range_m=40.0, min_rcs_dbsm=0.0),
     PrefilterSettings(min_prob_of_exist=4, drop_cluster_invalid_states=(1, 6, 7)),
 ])
-def test_a_few_detections_are_prefiltered_on_lists_exactly_as_on_arrays(settings, monkeypatch):
-    import services.radar.detections as detections_module
-
-    rng = np.random.default_rng(9)
-    for _ in range(300):
-        n = int(rng.integers(1, detections_module.PREFILTER_LISTS_MAX + 1))
+@pytest.mark.parametrize("n", [1, 3, 16, 250])
+def test_the_prefilter_keeps_what_its_rule_keeps_at_every_size(settings, n):
+    rng = np.random.default_rng(9 + n)
+    for _ in range(30):
         det = Detections.of(rng.uniform(-10, 60, n).round(1), rng.uniform(-30, 30, n),
                             rng.uniform(-5, 5, n), 0.0, rng.uniform(-30, 30, n).round(),
                             radar_id=np.arange(n), prob_of_exist=rng.integers(-1, 8, n),
                             invalid_state=rng.integers(-1, 9, n))
-        on_lists = prefilter(det, settings)
-        monkeypatch.setattr(detections_module, "PREFILTER_LISTS_MAX", 0)
-        on_arrays = prefilter(det, settings)
-        monkeypatch.undo()
-        assert np.array_equal(on_lists.floats, on_arrays.floats)
-        assert np.array_equal(on_lists.ints, on_arrays.ints)
+        kept = prefilter(det, settings)
+        expect = kept_by_the_rule(det, settings)
+        assert kept.radar_id.tolist() == expect
+        assert np.array_equal(kept.floats, det.floats[:, expect])
 
 
 @pytest.mark.parametrize("mode", [OutputMode.OBJECTS, OutputMode.CLUSTERS])
-def test_a_few_general_frames_decode_on_lists_exactly_as_on_arrays(mode, monkeypatch):
-    import services.radar.detections as detections_module
-    from services.radar.ars408 import ClusterGeneral
+@pytest.mark.parametrize("n", [1, 4, 100])
+def test_general_frames_decode_as_their_frames_one_by_one(mode, n):
+    """Each valid frame a detection, in order; out-of-range frames dropped and counted;
+    in object mode a repeated ID is a fault (the first frame of the ID wins, even a
+    rejected one), in cluster mode a detection."""
+    from services.radar.ars408 import FrameError, decode
     from services.radar.detections import decode_general
 
-    rng = np.random.default_rng(4)
+    rng = np.random.default_rng(4 + n)
     make = ObjectGeneral if mode is OutputMode.OBJECTS else ClusterGeneral
-    on_lists = 0
-    for _ in range(400):
-        n = int(rng.integers(1, 5))
-        ids = rng.integers(0, 6, n)                # now and then a repeated ID
+    spec = BY_KIND[Kind.OBJECT_GENERAL if mode is OutputMode.OBJECTS else Kind.CLUSTER_GENERAL]
+    for _ in range(50):
+        ids = rng.integers(0, n + 2, n)            # now and then a repeated ID
         frames: list[bytes | None] = [
             data(make(int(k), round(float(rng.uniform(1, 100)), 1),
                       round(float(rng.uniform(-20, 20)), 1), -2.0, 0.5, int(rng.integers(0, 7)),
                       float(rng.integers(-10, 30)))) for k in ids]
-        if rng.random() < 0.2:
-            frames[0] = bytes(8)                   # out of range: the array path decides
-        cycle = raw_cycle(mode, frames)
-        few = decode_general(cycle)
-        monkeypatch.setattr(detections_module, "SCALAR_MAX_FRAMES", 0)
-        many = decode_general(cycle)
-        monkeypatch.undo()
-        assert np.array_equal(few.det.floats, many.det.floats)
-        assert np.array_equal(few.det.ints, many.det.ints)
-        assert np.array_equal(few.ids, many.ids) and np.array_equal(few.keys, many.keys)
-        assert (few.rows is None) == (many.rows is None) and few.rejected == many.rejected
-        if few.rows is not None and many.rows is not None:
-            assert np.array_equal(few.rows, many.rows)
-        on_lists += few.rows is None and not few.rejected
-    assert on_lists > 100
+        if rng.random() < 0.3:
+            frames[int(rng.integers(0, n))] = bytes(8)        # DistLong -500 m
+        expect: list = []
+        rejected: dict[str, int] = {}
+        seen: set[int] = set()
+        for d in frames:
+            assert d is not None
+            first = d[0] not in seen
+            seen.add(d[0])                          # the ID byte
+            try:
+                r = decode(spec, d)
+            except FrameError as exc:
+                key = f"{exc.reason}:{spec.signals[1].dbc_name}"
+                rejected[key] = rejected.get(key, 0) + 1
+                continue
+            if mode is OutputMode.OBJECTS and not first:
+                key = f"duplicate_id:{spec.dbc_name}"
+                rejected[key] = rejected.get(key, 0) + 1
+                continue
+            expect.append(r)
+        g = decode_general(raw_cycle(mode, frames))
+        assert g.rejected == rejected
+        assert g.det.radar_id.tolist() == [r.id for r in expect]
+        assert g.det.i[:, 1].tolist() == [r.dyn_prop for r in expect]
+        assert np.array_equal(g.det.f[:, :5], np.array(
+            [[r.dist_long_m, r.dist_lat_m, r.vrel_long_mps, r.vrel_lat_mps, r.rcs_dbsm]
+             for r in expect]).reshape(-1, 5))

@@ -17,9 +17,9 @@ import pytest
 from common.keys import RADAR_STATUS, RADAR_TRACKS
 from common.messages import RadarTracks, decode
 from services.radar.ars408 import decode_frame
-from services.radar.can_links import SlcanPtyLink, bus_sink, replay_log
 from tests.can_support import RECORDING, VcanUnavailable, vcan_interface
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
+from tools.sim.can_links import SlcanPtyLink, bus_sink, replay_log
 
 pytestmark = pytest.mark.slow
 

@@ -11,12 +11,12 @@ import pytest
 
 from common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
 from services.radar.ars408 import Frame, ObjectGeneral, object_cycle_frames
-from services.radar.can_io import open_port
-from services.radar.can_links import SlcanPtyLink, slcan_line
-from services.radar.service import RadarService
+from services.radar.ports import open_port
+from services.radar.shell import RadarShell
 from services.radar.slcan_bulk import MAX_LINE, BulkSlcanBus
-from tests.radar.test_service import Output, running  # noqa: F401 (fixture)
+from tests.radar.test_shell import Output, running  # noqa: F401 (fixture)
 from tests.support import wait_for
+from tools.sim.can_links import SlcanPtyLink, slcan_line
 
 
 @pytest.fixture
@@ -101,22 +101,15 @@ def test_waiting_blocks_in_select_instead_of_polling(link_bus):
     assert cpu < 0.02, f"{cpu * 1e3:.1f} ms of CPU for a 300 ms wait"
 
 
-def test_open_port_uses_the_bulk_reader_unless_told_otherwise():
+def test_open_port_opens_slcan_with_the_bulk_reader():
     with SlcanPtyLink() as link:
-        base = CanSettings(interface="slcan", channel=link.path,
-                           options={"sleep_after_open": 0})
-        bulk = open_port(base, ReplaySettings())
+        settings = CanSettings(interface="slcan", channel=link.path,
+                               options={"sleep_after_open": 0})
+        bus = open_port(settings, ReplaySettings())
         try:
-            assert isinstance(bulk, BulkSlcanBus)
+            assert isinstance(bus, BulkSlcanBus)
         finally:
-            bulk.shutdown()
-        plain_settings = CanSettings(interface="slcan", channel=link.path,
-                                     options={"sleep_after_open": 0, "bulk_read": False})
-        plain = open_port(plain_settings, ReplaySettings())
-        try:
-            assert type(plain).__name__ == "slcanBus"
-        finally:
-            plain.shutdown()
+            bus.shutdown()
 
 
 def test_the_service_reports_dropped_lines_in_its_status(running):  # noqa: F811
@@ -126,7 +119,7 @@ def test_the_service_reports_dropped_lines_in_its_status(running):  # noqa: F811
         settings = RadarSettings(can=settings.can, cycle=type(settings.cycle)(
             expect_quality=Expect.NO, expect_extended=Expect.NO))
         out = Output()
-        running(RadarService(settings, out))
+        running(RadarShell(settings, out))
         link.wait_open(10)
         link.send_raw(b"tXYZ8001122334455667\r")
         for k in range(3):

@@ -9,7 +9,7 @@ from common.config.radar import CycleSettings, Expect, RadarSettings, TrackerSet
 from services.radar.ars408 import ClusterGeneral, ObjectGeneral, cluster_cycle_frames
 from services.radar.ars408.codec import encode
 from services.radar.ars408.records import ObjectListStatus
-from services.radar.core import SensorCore
+from services.radar.core import RadarCore
 from services.radar.detections import Detections
 from services.radar.tracker import KalmanTracker
 from tests.can_support import feed
@@ -35,7 +35,7 @@ def run(cycles, s=None, t0=100.0):
     """Each cycle a list of (x, y, vx, vy) in cluster mode; returns the published tracks
     per cycle."""
     s = s or settings()
-    core = SensorCore(s.sensors[0], s)
+    core = RadarCore(s.sensors[0], s)
     out = []
     for k, dets in enumerate(cycles):
         frames = cluster_cycle_frames([cluster(i, *d) for i, d in enumerate(dets)], k)
@@ -139,7 +139,7 @@ def test_several_returns_from_one_object_merge_into_one_track():
 
 def test_radar_ids_help_but_are_not_trusted_when_they_swap():
     s = settings()
-    core = SensorCore(s.sensors[0], s)
+    core = RadarCore(s.sensors[0], s)
     a_id, b_id = 1, 2
     history = []
     for k in range(12):
@@ -193,123 +193,10 @@ def test_tracks_are_valid_messages():
     assert again == msg and msg.radar_object_id == 0
 
 
-def test_a_few_tracks_give_the_same_messages_and_classes_from_lists_as_from_arrays(
-        monkeypatch):
-    import copy
-    import math
-
-    import services.radar.tracker as tracker_module
-
-    rng = np.random.default_rng(11)
-    tracker = KalmanTracker(TrackerSettings())
-    lists_seen = annotated = 0
-    for k in range(300):
-        # a handful of targets that come and go, plus ghosts, with radar IDs and classes
-        n = int(rng.integers(0, 7))
-        det = Detections.of(rng.uniform(1, 60, n).round(1), rng.uniform(-6, 6, n).round(1),
-                            rng.uniform(-10, 3, n), rng.uniform(-1, 1, n),
-                            radar_id=rng.permutation(8)[:n], dyn_prop=1,
-                            obj_class=rng.integers(0, 7, n))
-        if k % 3 == 0 and n:
-            det = Detections.of(np.full(n, 20.0), np.zeros(n), radar_id=[7] * n,
-                                obj_class=rng.integers(0, 7, n))   # one ID, several classes
-        tracker.step(det, 100.0 + k * DT)
-        other = copy.deepcopy(tracker)
-        tracker.annotate_class(det)                          # lists (few tracks)
-        monkeypatch.setattr(tracker_module, "_LISTS_MAX", 0)
-        other.annotate_class(det)                            # arrays
-        from_arrays = tracker.tracks()
-        monkeypatch.undo()
-        assert np.array_equal(tracker.meta, other.meta)
-        from_lists = tracker.tracks()
-        lists_seen += 0 < len(tracker) <= tracker_module._LISTS_MAX
-        annotated += bool(len(tracker)) and bool(len(det))
-        assert len(from_lists) == len(from_arrays)
-        for a, b in zip(from_lists, from_arrays, strict=True):
-            # every field the same; the range by math.hypot may differ in the last bit
-            assert a.range_m == b.range_m or math.isclose(a.range_m, b.range_m, rel_tol=1e-15)
-            assert math.isclose(a.range_rate_mps, b.range_rate_mps, rel_tol=1e-14, abs_tol=1e-15)
-            assert msgspec.structs.replace(a, range_m=0.0, range_rate_mps=0.0) == \
-                msgspec.structs.replace(b, range_m=0.0, range_rate_mps=0.0)
-    assert lists_seen > 200 and annotated > 150
-
-
-@pytest.mark.parametrize("bonus", [3.0, 0.0])
-def test_a_step_on_lists_tracks_like_a_step_on_arrays(monkeypatch, bonus):
-    """The list path of a few tracks against the array path, cycle by cycle, on noisy
-    scenes with close targets (contested pairs), ghosts, dropouts, swapped radar IDs and
-    a gap that resets the tracker. Only the covariance prediction may round differently
-    (a matrix product on arrays), so states agree to 1e-9 and everything else exactly."""
-    import services.radar.tracker as tracker_module
-
-    rng = np.random.default_rng(5 + int(bonus))
-    s = TrackerSettings(radar_id_bonus=bonus)
-    on_lists, on_arrays = KalmanTracker(s), KalmanTracker(s)
-    targets = [(15.0, 0.0, -4.0, 0.0), (15.6, 0.4, -4.2, 0.1), (30.0, -2.0, -1.0, 0.5),
-               (8.0, 3.0, 0.0, -1.0)]
-    lists_cycles = 0
-    contested: list[int] = []
-    greedy = tracker_module._greedy_lists
-
-    def counting(pairs):
-        tracks = [i for _, i, _ in pairs]
-        contested.append(len(tracks) != len(set(tracks)))
-        return greedy(pairs)
-
-    monkeypatch.setattr(tracker_module, "_greedy_lists", counting)
-    t = 100.0
-    for k in range(400):
-        t += DT if k != 200 else 1.0            # one gap longer than max_gap_s
-        rows = []
-        for i, (x, y, vx, vy) in enumerate(targets):
-            if rng.random() < 0.1:
-                continue                          # dropout
-            x, y = x + vx * DT * (k % 60), y + vy * DT * (k % 60)
-            rows.append((x + rng.normal(0, 0.2), y + rng.normal(0, 0.2),
-                         vx + rng.normal(0, 0.1), vy + rng.normal(0, 0.1),
-                         i if rng.random() > 0.1 else 7 - i))   # the radar swaps IDs
-        for _ in range(int(rng.integers(0, 3))):                 # ghosts
-            rows.append((rng.uniform(2, 60), rng.uniform(-8, 8), rng.uniform(-8, 2), 0.0,
-                         int(rng.integers(8, 40))))
-        if k % 50 == 49:                                         # a crowd: arrays again
-            rows += [(40 + j, -5 + j * 0.5, 0.0, 0.0, 50 + j) for j in range(20)]
-        if k % 97 == 96:
-            rows = []                                            # nothing: all coast
-        cols = np.array(rows, dtype=float).reshape(-1, 5).T
-        det = Detections.of(cols[0], cols[1], cols[2], cols[3], rcs=10.0,
-                            radar_id=cols[4].astype(np.int64), dyn_prop=1, obj_class=2)
-        lists_cycles += len(on_lists) <= tracker_module._LISTS_MAX >= len(det)
-        on_lists.step(det, t)
-        monkeypatch.setattr(tracker_module, "_LISTS_MAX", -1)
-        on_arrays.step(det, t)
-        monkeypatch.setattr(tracker_module, "_LISTS_MAX", 16)
-        assert np.array_equal(on_lists.meta, on_arrays.meta), f"cycle {k}"
-        assert np.allclose(on_lists.state, on_arrays.state, rtol=1e-9, atol=1e-9), f"cycle {k}"
-        assert on_lists.next_id == on_arrays.next_id and on_lists.resets == on_arrays.resets
-    assert lists_cycles > 300 and on_lists.resets == 1
-    assert sum(contested) > 20, "no track with two candidates: the greedy order is untested"
-
-
-def test_greedy_on_lists_takes_the_same_pairs_as_on_arrays_ties_included():
-    from services.radar.tracker import _greedy_lists, greedy_pairs
-
-    rng = np.random.default_rng(2)
-    for _ in range(500):
-        n, m = int(rng.integers(1, 6)), int(rng.integers(1, 6))
-        ok = rng.random((n, m)) < 0.6
-        ti, di = np.nonzero(ok)
-        cost = rng.integers(0, 3, len(ti)).astype(float)      # many equal costs
-        rows, drows = greedy_pairs(ti, di, cost)
-        pairs = [(float(c), int(i), int(j)) for c, i, j in zip(cost, ti, di, strict=True)]
-        assert sorted(_greedy_lists(pairs)) == sorted(zip(rows.tolist(), drows.tolist(),
-                                                          strict=True))
-
-
-def test_an_empty_road_costs_the_tracker_nothing_but_the_clock():
+def test_an_empty_road_leaves_the_tracker_as_it_was_but_the_clock():
     tracker = KalmanTracker(TrackerSettings())
     state, meta = tracker.state, tracker.meta
     for k in range(3):
         tracker.step(Detections.empty(), 100.0 + k * DT)
-    # no array rebuilt (each would be a numpy call on cold caches), the time kept
     assert tracker.state is state and tracker.meta is meta and len(tracker) == 0
     assert tracker.last_t == 100.0 + 2 * DT

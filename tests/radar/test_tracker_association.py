@@ -1,13 +1,14 @@
-"""The tracker's vectorised pieces against plain reference computations: the greedy
-assignment, the gate's candidate search (dense and strip grid), and the Kalman update in
-its R S^-1 form against the textbook 4x4 equations."""
+"""The tracker against plain reference computations: the greedy assignment, the gate's
+candidate search, the Kalman update in its R S^-1 form against the textbook 4x4
+equations, and whole runs against a textbook tracker written track by track, with few
+tracks (every pair tested) and many (candidates from the strip grid)."""
 
 import numpy as np
 import pytest
 
 from common.config.radar import TrackerSettings
 from services.radar.detections import Detections
-from services.radar.neighbours import candidates_in_boxes, pairs_within, pairs_within_self
+from services.radar.neighbours import candidates_in_boxes, pairs_within_self
 from services.radar.tracker import KalmanTracker, greedy_pairs
 
 
@@ -56,7 +57,7 @@ def test_candidates_cover_every_pair_in_the_boxes(seed):
 
 
 @pytest.mark.parametrize("radius", [1.4, 3.0])
-def test_pair_searches_keep_pairs_exactly_on_the_radius(radius):
+def test_the_pair_search_keeps_pairs_exactly_on_the_radius(radius):
     # Points on a 0.2 m grid (positions as the radar quantises them): for these radii
     # one pair lies exactly on the radius, where a window bound x + r rounds below the
     # other point although the distance test keeps it.
@@ -67,8 +68,6 @@ def test_pair_searches_keep_pairs_exactly_on_the_radius(radius):
     expect = {(a, b) for a, b in zip(*np.nonzero(near), strict=True) if a < b}
     i, j = pairs_within_self(x, y, radius)
     assert {(min(a, b), max(a, b)) for a, b in zip(i.tolist(), j.tolist(), strict=True)} == expect
-    i, j = pairs_within(x, y, x.copy(), y.copy(), radius)
-    assert len(i) == 2 * len(expect) + len(x)
 
 
 def tracker_with_tracks(rng, n: int) -> KalmanTracker:
@@ -80,21 +79,6 @@ def tracker_with_tracks(rng, n: int) -> KalmanTracker:
         det = Detections(det.floats + rng.normal(0, 0.1, det.floats.shape), det.ints)
     tracker.predict(0.075)
     return tracker
-
-
-def test_dense_and_strip_grid_gates_find_the_same_pairs():
-    rng = np.random.default_rng(11)
-    tracker = tracker_with_tracks(rng, 120)
-    det = Detections.of(x=rng.uniform(2, 20, 150), y=rng.uniform(-10, 10, 150),
-                        vx=rng.uniform(-12, 3, 150), vy=rng.uniform(-1, 1, 150))
-    half = tracker._innovation()
-    dense = tracker._gated_dense(det)
-    sparse = tracker._gated_sparse(det, half)
-    as_set = [dict(zip(zip(t.tolist(), d.tolist(), strict=True), c.tolist(), strict=True))
-              for t, d, c in (dense, sparse)]
-    assert len(as_set[0]) > 50 and as_set[0].keys() == as_set[1].keys()
-    for key, cost in as_set[0].items():
-        assert as_set[1][key] == pytest.approx(cost, rel=1e-12)
 
 
 def test_update_equals_the_textbook_kalman_update():
@@ -125,3 +109,115 @@ def test_update_equals_the_textbook_kalman_update():
             a = 2 * axis
             assert [got[4 + axis], got[6 + axis], got[8 + axis]] == pytest.approx(
                 [p_new[a, a], p_new[a, a + 1], p_new[a + 1, a + 1]], rel=1e-9, abs=1e-15)
+
+
+class TextbookTracker:
+    """The tracker's rules with 4x4 matrices, one track at a time ([x, y, vx, vy])."""
+
+    def __init__(self, s: TrackerSettings) -> None:
+        self.s = s
+        self.r = np.diag([s.pos_x_std_m**2, s.pos_y_std_m**2, s.vel_x_std_mps**2,
+                          s.vel_y_std_mps**2])
+        self.tracks: list[dict] = []
+        self.next_id = 1
+        self.last_t: float | None = None
+        self.contested = 0          # cycles where a track or a detection had two candidates
+
+    def step(self, det: Detections, t: float) -> None:
+        s = self.s
+        if self.last_t is not None:
+            dt = t - self.last_t
+            if 0 < dt <= s.max_gap_s:
+                f = np.eye(4)
+                f[0, 2] = f[1, 3] = dt
+                q = s.accel_std_mps2**2
+                block = q * np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]])
+                qm = np.zeros((4, 4))
+                for a in (0, 1):
+                    qm[np.ix_([a, a + 2], [a, a + 2])] = block
+                for tr in self.tracks:
+                    tr["x"] = f @ tr["x"]
+                    tr["p"] = f @ tr["p"] @ f.T + qm
+            else:
+                self.tracks = []
+        self.last_t = t
+        z = det.floats[:4].T
+        rid = det.ints[0]
+        pairs = []
+        for i, tr in enumerate(self.tracks):
+            s_inv = np.linalg.inv(tr["p"] + self.r)
+            for j in range(len(det)):
+                e = z[j] - tr["x"]
+                d2 = float(e @ s_inv @ e)
+                if d2 <= s.gate_chi2 and e[0] ** 2 + e[1] ** 2 <= s.gate_max_distance_m**2:
+                    same = tr["rid"] == rid[j] and rid[j] >= 0
+                    pairs.append((d2 - s.radar_id_bonus * same, i, j))
+        tracks_in, dets_in = [i for _, i, _ in pairs], [j for _, _, j in pairs]
+        self.contested += len(set(tracks_in)) < len(pairs) or len(set(dets_in)) < len(pairs)
+        used_t, used_d = set(), set()
+        for _, i, j in sorted(pairs):
+            if i in used_t or j in used_d:
+                continue
+            used_t.add(i)
+            used_d.add(j)
+            tr = self.tracks[i]
+            gain = tr["p"] @ np.linalg.inv(tr["p"] + self.r)
+            tr["x"] = tr["x"] + gain @ (z[j] - tr["x"])
+            tr["p"] = (np.eye(4) - gain) @ tr["p"]
+            tr["rid"] = int(rid[j])
+        for i, tr in enumerate(self.tracks):
+            tr["hits"], tr["misses"] = ((tr["hits"] + 1, 0) if i in used_t
+                                        else (0, tr["misses"] + 1))
+            tr["confirmed"] |= tr["hits"] >= s.confirm_hits
+        self.tracks = [tr for tr in self.tracks if tr["misses"] < (
+            s.delete_after_misses if tr["confirmed"] else s.delete_tentative_after_misses)]
+        for j in range(len(det)):
+            if j not in used_d:
+                self.tracks.append({"id": self.next_id, "x": z[j].copy(), "p": self.r.copy(),
+                                    "rid": int(rid[j]), "hits": 1, "misses": 0,
+                                    "confirmed": s.confirm_hits <= 1})
+                self.next_id += 1
+
+
+@pytest.mark.parametrize(("n_targets", "bonus"), [(4, 3.0), (4, 0.0), (120, 3.0)])
+def test_the_tracker_tracks_as_the_textbook_does(n_targets, bonus):
+    """Noisy targets close enough to contest detections, dropouts, swapped radar IDs,
+    ghosts, a cycle with nothing and a gap that restarts the tracker."""
+    rng = np.random.default_rng(n_targets + int(bonus))
+    s = TrackerSettings(radar_id_bonus=bonus)
+    tracker, textbook = KalmanTracker(s), TextbookTracker(s)
+    spread = 20.0 if n_targets > 10 else 2.0
+    start = np.column_stack([rng.uniform(8, 8 + spread, n_targets),
+                             rng.uniform(-spread / 2, spread / 2, n_targets),
+                             rng.uniform(-4, 0, n_targets), rng.uniform(-0.5, 0.5, n_targets)])
+    t = 100.0
+    for k in range(60):
+        t += 0.075 if k != 30 else 1.0               # one gap longer than max_gap_s
+        x = start.copy()
+        x[:, :2] += x[:, 2:] * 0.075 * (k % 30)
+        seen = rng.random(n_targets) > 0.1               # dropouts
+        meas = x[seen] + rng.normal(0, [0.2, 0.2, 0.1, 0.1], (int(seen.sum()), 4))
+        ids = np.flatnonzero(seen)
+        swap = rng.random(len(ids)) < 0.1                # the radar swaps IDs now and then
+        ids[swap] = (ids[swap] + 1) % n_targets
+        ghosts = int(rng.integers(0, 3))
+        meas = np.vstack([meas, np.column_stack([rng.uniform(5, 40, ghosts),
+                                                 rng.uniform(-8, 8, ghosts),
+                                                 rng.uniform(-8, 2, ghosts), np.zeros(ghosts)])])
+        ids = np.concatenate([ids, rng.integers(200, 255, ghosts)])
+        if k == 45:
+            meas, ids = meas[:0], ids[:0]               # nothing: every track coasts
+        det = Detections.of(meas[:, 0], meas[:, 1], meas[:, 2], meas[:, 3], radar_id=ids)
+        tracker.step(det, t)
+        textbook.step(det, t)
+        got = tracker.tracks()
+        want = textbook.tracks
+        assert [(g.track_id, g.hits, g.misses, g.confirmed, g.radar_object_id) for g in got] \
+            == [(w["id"], w["hits"], w["misses"], w["confirmed"], w["rid"]) for w in want], \
+            f"cycle {k}"
+        for g, w in zip(got, want, strict=True):
+            assert [g.x_m, g.y_m, g.vx_mps, g.vy_mps] == pytest.approx(w["x"], rel=1e-9,
+                                                                        abs=1e-9)
+            assert [g.x_var_m2, g.y_var_m2] == pytest.approx(np.diag(w["p"])[:2], rel=1e-9)
+    assert tracker.resets == 1 and textbook.contested > 10
+    assert sum(t.confirmed for t in tracker.tracks()) >= n_targets // 2

@@ -14,9 +14,9 @@ import can
 import pytest
 
 from common.bus import Bus
-from services.radar.can_links import SlcanPtyLink
 from tests.support import START_TIMEOUT_S, HealthWatch, ServiceProcess, open_bus, python_module
 from tools.sim.actuator import SimActuator
+from tools.sim.can_links import SlcanPtyLink
 from tools.sim.radar_feed import FrameSink, PythonCanSink, RadarFeed
 from tools.sim.runner import SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook

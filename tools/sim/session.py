@@ -116,8 +116,8 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     not come up or never arms, ConfigError for a bad table, BusError / OSError when the
     bus or a pty cannot be opened.
     """
-    from services.radar.can_links import SlcanPtyLink
     from tools.sim.actuator import SimActuator
+    from tools.sim.can_links import SlcanPtyLink
 
     run_dir = out / "run"
     run_dir.mkdir(parents=True, exist_ok=True)

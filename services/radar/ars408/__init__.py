@@ -15,11 +15,6 @@ from services.radar.ars408.codec import (
     decode_frame,
     encode,
 )
-from services.radar.ars408.cycles import (
-    cluster_cycle_frames,
-    ego_motion_frames,
-    object_cycle_frames,
-)
 from services.radar.ars408.records import (
     ClusterGeneral,
     ClusterListStatus,
@@ -43,6 +38,11 @@ from services.radar.ars408.table import (
     Signal,
     arbitration_id,
     classify,
+)
+from services.radar.ars408.transmissions import (
+    cluster_cycle_frames,
+    ego_motion_frames,
+    object_cycle_frames,
 )
 
 __all__ = [

@@ -1,11 +1,11 @@
-"""Decode and encode ARS408 frames from the signal table (scalar and vectorised).
+"""Decode and encode ARS408 frames from the signal table.
 
-- `decode(spec, data)`: one frame to its record (raises FrameError).
+- `decode(spec, data)`: one frame to its record (raises FrameError): the status, radar
+  state and version frames, one at a time.
 - `decode_frame(arb_id, data)`: classify the ID, then decode (raises FrameError).
 - `encode(record, sensor_id)`: a record to a `Frame` (raises EncodeError).
-- `decode_columns(spec, datas)`: many frames of one message to one numpy row per
-  signal, with a per-frame validity mask; what the cycle decoder uses (a few numpy
-  operations for all signals of all frames).
+- `decode_columns(spec, datas)`: the list frames of a cycle (general, quality, extended),
+  all of one message at once, to one numpy row per signal with a per-frame validity mask.
 """
 
 from collections.abc import Sequence
@@ -128,10 +128,10 @@ BoolArray = npt.NDArray[np.bool_]
 class Columns:
     """Many frames of one message decoded: one row per signal, plus which frames are valid.
 
-    `raw` (int64) and `phys` (float64) are (signals, frames) matrices in signal order, so
-    that a signal is a contiguous row (numpy is several times slower on strided columns);
-    `values` maps attribute names to those rows (integers from `raw`). `rejected` maps
-    ``out_of_range:<signal>`` to the number of frames it invalidated.
+    `raw` (int64) and `phys` (float64) are (signals, frames) matrices in signal order (a
+    signal is a contiguous row); `values` maps attribute names to those rows (integers
+    from `raw`). `rejected` maps ``out_of_range:<signal>`` to the number of frames it
+    invalidated.
     """
 
     __slots__ = ("_attrs", "all_valid", "phys", "raw", "rejected", "valid")
@@ -148,8 +148,7 @@ class Columns:
 
     @property
     def values(self) -> dict[str, npt.NDArray[Any]]:
-        """Every signal by attribute name (built on demand: the cycle decoder indexes
-        rows directly)."""
+        """Every signal by attribute name."""
         return {attr: self.raw[k] if is_int else self.phys[k]
                 for k, (attr, is_int) in enumerate(self._attrs)}
 
@@ -167,8 +166,7 @@ def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[
     if size == 8 * n:
         return np.frombuffer(buf, dtype=">i8").astype(np.int64)
     if size == spec_dlc * n:
-        # Every frame has the message's DLC (0x60C has 7 bytes, 0x702 5; none is
-        # shorter, the DLC check saw to it): pad the matrix, not each frame.
+        # Every frame has the message's DLC (0x60C has 7 bytes, 0x702 5).
         padded = np.zeros((n, 8), dtype=np.uint8)
         padded[:, :spec_dlc] = np.frombuffer(buf, dtype=np.uint8).reshape(n, spec_dlc)
         return padded.view(">i8").ravel().astype(np.int64)
@@ -176,53 +174,8 @@ def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[
     return np.frombuffer(buf, dtype=">i8").astype(np.int64)
 
 
-class Rows(NamedTuple):
-    """`decode_rows`' result: what Columns holds, as Python lists (a row per signal)."""
-
-    raw: list[list[int]]
-    phys: list[list[float]]
-    valid: list[bool]
-    rejected: dict[str, int]
-
-
-def decode_rows(spec: MessageSpec, datas: Sequence[bytes | bytearray]) -> Rows:
-    """`decode_columns` for a few DLC-checked frames, as lists, with no numpy call:
-    Python arithmetic on each frame's word, the same IEEE operations in the same order
-    as numpy's, so the same values."""
-    lay = _layout(spec)
-    n = len(datas)
-    raw = [[0] * n for _ in lay.scalar]
-    phys = [[0.0] * n for _ in lay.scalar]
-    valid = [True] * n
-    rejected: dict[str, int] = {}
-    for j, data in enumerate(datas):
-        word = int.from_bytes(data, "big") << (8 * (8 - len(data)))
-        first_bad = ""
-        for k, (shift, mask, scale, offset, bounds) in enumerate(lay.scalar):
-            r = (word >> shift) & mask
-            p = r * scale + offset
-            raw[k][j] = r
-            phys[k][j] = p
-            if bounds is not None and not first_bad and not bounds[0] <= p <= bounds[1]:
-                first_bad = spec.signals[k].dbc_name      # a frame counts once, here
-        if first_bad:
-            valid[j] = False
-            key = f"out_of_range:{first_bad}"
-            rejected[key] = rejected.get(key, 0) + 1
-    return Rows(raw, phys, valid, rejected)
-
-
-def _columns_one_by_one(spec: MessageSpec, lay: "_Layout",
-                        datas: Sequence[bytes | bytearray]) -> Columns:
-    """`decode_columns` for a few frames: `decode_rows`, and one array per result."""
-    rows = decode_rows(spec, datas)
-    return Columns(lay.attrs, np.array(rows.valid, dtype=np.bool_), all(rows.valid),
-                   rows.rejected, np.array(rows.raw, dtype=np.int64),
-                   np.array(rows.phys, dtype=np.float64))
-
-
 class _Layout(NamedTuple):
-    """A message's signals as column vectors, to decode every signal in one numpy
+    """A message's signals as column vectors, so that every signal decodes in one matrix
     operation; `checked` lists the rows that have a valid range."""
 
     attrs: tuple[tuple[str, bool], ...]
@@ -233,8 +186,6 @@ class _Layout(NamedTuple):
     checked: npt.NDArray[np.intp]
     lo: npt.NDArray[np.float64]
     hi: npt.NDArray[np.float64]
-    # per signal, for a frame at a time: shift, mask, scale, offset, (lo, hi) or None
-    scalar: tuple[tuple[int, int, float, float, tuple[float, float] | None], ...]
 
 
 _layouts: dict[str, _Layout] = {}
@@ -254,37 +205,20 @@ def _layout(spec: MessageSpec) -> _Layout:
             checked=np.array(checked, dtype=np.intp),
             lo=np.array([[sigs[k].valid[0] - _EPS] for k in checked]),   # type: ignore[index]
             hi=np.array([[sigs[k].valid[1] + _EPS] for k in checked]),   # type: ignore[index]
-            scalar=tuple(
-                (s.shift, s.mask, float(s.scale), float(s.offset),
-                 None if s.valid is None else (s.valid[0] - _EPS, s.valid[1] + _EPS))
-                for s in sigs),
         )
     return found
 
 
-# Up to this many frames, `decode_columns` decodes frame by frame in Python and makes
-# three numpy calls instead of about twelve: the same cost in a hot loop, but a radar
-# service wakes once per cycle with cold caches, where each numpy call costs tens of
-# microseconds (a 1 to 3 frame list: 250 -> 160 us after a 40 ms sleep, interleaved).
-SCALAR_MAX_FRAMES = 4
-
-
 def decode_columns(spec: MessageSpec, datas: Sequence[bytes | bytearray]) -> Columns:
-    """Vectorised `decode` of DLC-checked payloads of one message.
-
-    Every signal is decoded at once as a (signals, n) matrix: numpy costs microseconds
-    per call whatever the size, so the number of calls, not of values, sets the cost.
-    Up to SCALAR_MAX_FRAMES frames are decoded one by one (the same values, bit for bit).
-    """
+    """`decode` of many DLC-checked payloads of one message at once: every signal of
+    every frame as one (signals, n) matrix operation."""
     lay = _layout(spec)
-    if 0 < len(datas) <= SCALAR_MAX_FRAMES:
-        return _columns_one_by_one(spec, lay, datas)
     w = words(datas, spec.dlc)
     raw = (w >> lay.shifts) & lay.masks
     phys = raw * lay.scales + lay.offsets
     rejected: dict[str, int] = {}
     if len(lay.checked):
-        checked = phys[lay.checked] if len(lay.checked) < len(phys) else phys
+        checked = phys[lay.checked]
         ok = (checked >= lay.lo) & (checked <= lay.hi)
         valid = cast(BoolArray, ok.all(axis=0))
         all_valid = bool(valid.all())

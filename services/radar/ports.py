@@ -14,8 +14,6 @@ from services.radar.slcan_bulk import BulkSlcanBus
 
 REPLAY = "replay"
 SLCAN = "slcan"
-# `[radar.can] options = { bulk_read = false }`: python-can's own byte-by-byte slcan reader
-BULK_READ = "bulk_read"
 _LOOP_GAP_S = 0.075   # time inserted between the end of a log and its restart (one cycle)
 
 
@@ -46,23 +44,23 @@ def check_settings(c: CanSettings, r: ReplaySettings) -> None:
 
 
 def open_port(c: CanSettings, r: ReplaySettings) -> CanPort:
-    """Open the configured bus. Raises whatever python-can raises when the device is not
-    there (CanError, OSError, ...): the service retries with backoff.
+    """Open the configured bus. Raises can.CanError, OSError (pyserial's SerialException
+    included) or ValueError when the device is not there or refuses the settings, as
+    python-can does: the shell retries with backoff.
 
     `slcan` opens services.radar.slcan_bulk.BulkSlcanBus (python-can's slcan with a bulk
-    read) unless the options say ``bulk_read = false``."""
+    read)."""
     if c.interface == REPLAY:
         return ReplayPort(r.file, pace=r.pace, loop=r.loop)
     kwargs = dict(c.options)
     if c.bitrate:
         kwargs.setdefault("bitrate", c.bitrate)
-    if c.interface == SLCAN and kwargs.pop(BULK_READ, True):
+    if c.interface == SLCAN:
         # python-can's configuration sources still apply, as in can.Bus
         config = can.util.load_config(
             config={"interface": SLCAN, "channel": c.channel, **kwargs})
         config.pop("interface", None)
         return BulkSlcanBus(config.pop("channel", c.channel), **config)
-    kwargs.pop(BULK_READ, None)
     bus: CanPort = can.Bus(interface=c.interface, channel=c.channel, **kwargs)
     return bus
 

@@ -8,7 +8,7 @@ radar behind it. The service opens `link.path` with python-can's ``slcan`` inter
 (use option ``sleep_after_open = 0``: python-can otherwise sleeps 2 s after opening)::
 
     from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-    from services.radar.can_links import SlcanPtyLink, replay_log
+    from tools.sim.can_links import SlcanPtyLink, replay_log
 
     with SlcanPtyLink() as link:
         # [radar.can] interface = "slcan", channel = link.path,
@@ -35,6 +35,7 @@ the `with` block) ends the link: the service sees its bus vanish.
 """
 
 import contextlib
+import logging
 import os
 import select
 import socket
@@ -49,6 +50,8 @@ import can
 from services.radar.ars408.codec import Frame
 
 FrameCallback = Callable[[Frame], None]
+
+_log = logging.getLogger("sim.can_links")
 
 # python-can's socketcand client matches each handshake reply with one recv(): a frame
 # sent right after the last "< ok >" could arrive glued to it. Wait this long first.
@@ -75,7 +78,9 @@ class _Link:
             try:
                 self._on_frame(frame)
             except Exception:
-                self.callback_errors += 1   # the link must keep reading whatever happens
+                # The caller's callback must not stop the link's reader: count and log it.
+                self.callback_errors += 1
+                _log.exception("can link: on_frame failed for 0x%03X", frame.arb_id)
 
     def received(self) -> list[Frame]:
         """Every frame the service wrote so far."""

@@ -23,13 +23,16 @@ from common.messages.radar import BusState, RadarStatus, RadarTracks
 from common.messages.vehicle import EgoMotion
 from services.radar.ars408.codec import Frame
 from services.radar.ars408.table import classify
-from services.radar.can_io import CanPort, describe, open_port
-from services.radar.core import CycleResult, SensorCore
+from services.radar.core import CycleResult, RadarCore
 from services.radar.ego import EgoMotionForwarder
+from services.radar.ports import CanPort, describe, open_port
 
 _log = logging.getLogger("radar")
 
+# Timeouts, status, 0x200 re-sends and bus state are looked at every 10 ms while frames
+# flow; an idle bus wakes the loop at least every 50 ms for them.
 _HOUSEKEEPING_NS = 10_000_000
+_RECEIVE_TIMEOUT_S = 0.05
 
 
 class RadarOutput(Protocol):
@@ -43,7 +46,7 @@ class RadarOutput(Protocol):
         """Called once, when the bus first opened: the service now serves."""
 
 
-class RadarService:
+class RadarShell:
     """Rejections that belong to no single radar are counted in `bus_rejected`
     (``error_frame``, ``remote_frame``, ``extended_id``, ``unknown_id``, ``host_frame``,
     ``unconfigured_sensor_id``, ``internal_error``, ``bus_failure``, and lines the slcan
@@ -61,7 +64,7 @@ class RadarService:
         self.output = output
         self._factory = port_factory or (lambda: open_port(settings.can, settings.replay))
         self.interface, self.channel = describe(settings.can, settings.replay)
-        self.cores = {s.sensor_id: SensorCore(s, settings) for s in settings.sensors}
+        self.cores = {s.sensor_id: RadarCore(s, settings) for s in settings.sensors}
         self.bus_rejected = ReasonCounter()
         self.ego = EgoMotionForwarder(settings.ego_motion, list(self.cores))
         self.ego_sent: dict[int, int] = dict.fromkeys(self.cores, 0)
@@ -97,7 +100,7 @@ class RadarService:
                 backoff = min(2 * backoff, can_cfg.reopen_backoff_max_s)
             try:
                 port = self._factory()
-            except Exception as exc:   # python-can raises many types for a missing device
+            except (can.CanError, OSError, ValueError) as exc:
                 self._set_bus_state(BusState.REOPENING, mono_ns())
                 self._rl.warning("open", "can_open_failed", interface=self.interface,
                                  channel=self.channel, error=repr(exc), retry_s=backoff)
@@ -142,14 +145,13 @@ class RadarService:
             self._port_errors.pop(id(port), None)
             try:
                 port.shutdown()
-            except Exception as exc:
+            except (can.CanError, OSError) as exc:   # a lost bus often cannot say goodbye
                 _log.debug(kv("can_shutdown_failed", error=repr(exc)))
 
     def _serve(self, port: CanPort, stop: threading.Event) -> bool:
-        timeout = self.settings.can.receive_timeout_s
         next_housekeeping = 0
         while not stop.is_set():
-            msg = port.recv(timeout)
+            msg = port.recv(_RECEIVE_TIMEOUT_S)
             mono, wall = mono_ns(), wall_ns()
             if msg is not None:
                 self._on_message(msg, wall, mono)
@@ -213,16 +215,19 @@ class RadarService:
         t_s = msg.timestamp if msg.timestamp > 0 else mono / NS_PER_S
         try:
             results = core.on_frame(spec, bytes(msg.data), t_s, wall, mono)
-        except Exception:
-            # A bug must not stop the radar for the following cycles: count, log, go on.
+        except Exception as exc:
+            # A bug in one frame's processing must not stop the radar's next cycles, which
+            # feed the brake decision: count it, log it with its frame, go on.
             self.bus_rejected.add("internal_error")
-            if self._rl.error("internal", "core_failed", arb_id=hex(msg.arbitration_id)):
+            if self._rl.error("internal", "core_failed", sensor=core.sensor.name,
+                              arb_id=hex(msg.arbitration_id), data=bytes(msg.data).hex(),
+                              error=repr(exc)):
                 _log.exception("core traceback")
             return
         if results:
             self._publish_results(core, results, mono_ns() - mono)
 
-    def _publish_results(self, core: SensorCore, results: list[CycleResult],
+    def _publish_results(self, core: RadarCore, results: list[CycleResult],
                          processing_ns: int) -> None:
         name = core.sensor.name
         for r in results:
@@ -310,7 +315,7 @@ class RadarService:
             if key != self._status_key.get(sid) or mono >= self._status_due[sid]:
                 self._publish_status(core, mono, wall)
 
-    def _frames_per_s(self, core: SensorCore, mono: int) -> float:
+    def _frames_per_s(self, core: RadarCore, mono: int) -> float:
         sid = core.sensor.sensor_id
         frames, at, rate = self._fps_sample.get(sid, (0, mono, 0.0))
         if mono - at >= NS_PER_S // 2:
@@ -319,7 +324,7 @@ class RadarService:
         self._fps_sample[sid] = (frames, at, rate)
         return rate
 
-    def _publish_status(self, core: SensorCore, mono: int, wall: int) -> None:
+    def _publish_status(self, core: RadarCore, mono: int, wall: int) -> None:
         sid = core.sensor.sensor_id
         bus = {f"bus:{k}": v for k, v in self.bus_rejected.snapshot().items()}
         ego = {f"ego_motion:{k}": v for k, v in self.ego.rejected.snapshot().items()}

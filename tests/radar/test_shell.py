@@ -34,10 +34,10 @@ from services.radar.ars408 import (
     encode,
     object_cycle_frames,
 )
-from services.radar.can_links import SlcanPtyLink
-from services.radar.service import RadarService
+from services.radar.shell import RadarShell
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.support import Collector, wait_for
+from tools.sim.can_links import SlcanPtyLink
 
 FAST_REOPEN = CanSettings(interface="slcan", channel="unused", reopen_backoff_initial_s=0.01,
                           reopen_backoff_max_s=0.05, silent_after_s=0.3)
@@ -111,7 +111,7 @@ class ScriptedPort:
 def running() -> Iterator:
     threads: list[tuple[threading.Thread, threading.Event]] = []
 
-    def start(service: RadarService) -> threading.Event:
+    def start(service: RadarShell) -> threading.Event:
         stop = threading.Event()
         t = threading.Thread(target=service.run, args=(stop,), daemon=True)
         t.start()
@@ -130,7 +130,7 @@ def test_replay_as_fast_as_possible_publishes_every_cycle_then_ends():
                       replay=ReplaySettings(file=str(RECORDING), pace=Pace.FAST,
                                             exit_at_end=True))
     out = Output()
-    assert RadarService(s, out).run(threading.Event()) == 0
+    assert RadarShell(s, out).run(threading.Event()) == 0
     tracks = out.got_tracks.messages
     assert len(tracks) == RECORDING_CYCLES and all(m.complete for m in tracks)
     assert [m.header.seq for m in tracks] == list(range(RECORDING_CYCLES))
@@ -160,7 +160,7 @@ def test_bad_input_is_counted_and_never_stops_the_service(running):
     script = cycle_messages(0) + bad + broken_cycle + cycle_messages(2) + cycle_messages(3)
     out = Output()
     s = RadarSettings(can=FAST_REOPEN, cycle=NO_EXTRAS)
-    running(RadarService(s, out, lambda: ScriptedPort(script)))
+    running(RadarShell(s, out, lambda: ScriptedPort(script)))
     out.got_tracks.wait_count(4, 10)
     assert [m.complete for m in out.got_tracks.messages] == [True, False, True, True]
     assert out.got_tracks.messages[1].n_detections == 1
@@ -189,7 +189,7 @@ def test_lost_bus_is_reopened_with_backoff(running):
 
     out = Output()
     s = RadarSettings(can=FAST_REOPEN, cycle=NO_EXTRAS)
-    running(RadarService(s, out, factory))
+    running(RadarShell(s, out, factory))
     out.got_tracks.wait_count(3, 10)
     wait_for(lambda: out.last_status().bus_reopens == 2, 10, what="two reopens")
     states = [m.bus_state for m in out.got_status.messages]
@@ -206,7 +206,7 @@ def test_two_radars_on_one_bus_publish_under_their_own_names(running):
     s = RadarSettings(can=FAST_REOPEN, cycle=NO_EXTRAS,
                       sensors=(SensorSettings("front", 0), SensorSettings("left", 1)))
     out = Output()
-    running(RadarService(s, out, lambda: ScriptedPort(script)))
+    running(RadarShell(s, out, lambda: ScriptedPort(script)))
     out.got_tracks.wait_count(6, 10)
     by_sensor: dict[str, list] = {}
     for m, key in out.got_tracks.items:
@@ -267,7 +267,7 @@ class PtyRadar:
 def test_configuration_written_and_confirmed_from_0x201_over_slcan(running):
     with PtyRadar(answer_output_type=1) as radar:
         out = Output()
-        running(RadarService(radar.settings(), out))
+        running(RadarShell(radar.settings(), out))
         cfg = radar.link.wait_frame(lambda f: f.arb_id == 0x200, 30)
         record = decode_frame(*cfg)[2]
         assert record.output_type_valid and record.output_type == 1
@@ -281,7 +281,7 @@ def test_configuration_written_and_confirmed_from_0x201_over_slcan(running):
 def test_configuration_the_radar_does_not_take_is_reported_not_ready(running):
     with PtyRadar(answer_output_type=2) as radar:
         out = Output()
-        running(RadarService(radar.settings(confirm_timeout_s=0.2, attempts=2), out))
+        running(RadarShell(radar.settings(confirm_timeout_s=0.2, attempts=2), out))
         status = out.status_where(lambda st: "differs" in st.not_ready_reason)
         assert not status.ready
         assert "output_type=clusters (want objects)" in status.not_ready_reason
@@ -292,7 +292,7 @@ def test_configuration_the_radar_does_not_take_is_reported_not_ready(running):
 def test_radar_error_bits_make_it_not_ready(running):
     with PtyRadar(answer_output_type=1, temperature_error=1) as radar:
         out = Output()
-        running(RadarService(radar.settings(), out))
+        running(RadarShell(radar.settings(), out))
         out.status_where(lambda st: st.not_ready_reason == "radar reports temperature error")
         assert out.last_status().radar_state.temperature_error
 
@@ -303,7 +303,7 @@ def test_ego_motion_is_forwarded_as_0x300_and_0x301(running):
                                           options={"sleep_after_open": 0}),
                           ego_motion=EgoMotionSettings(forward=True, min_interval_s=0.0))
         out = Output()
-        service = RadarService(s, out)
+        service = RadarShell(s, out)
         running(service)
         radar.link.wait_open(30)
         wait_for(lambda: out.served.is_set(), 30)
@@ -329,7 +329,7 @@ def test_ego_motion_is_forwarded_as_0x300_and_0x301(running):
 def test_disabled_ego_motion_sends_nothing():
     out = Output()
     port = ScriptedPort([])
-    service = RadarService(RadarSettings(can=FAST_REOPEN), out, lambda: port)
+    service = RadarShell(RadarSettings(can=FAST_REOPEN), out, lambda: port)
     service.on_ego_motion(EgoMotion(header=Header(seq=0, source="sim", stamp_ns=wall_ns(),
                                                   pub_mono_ns=0), speed_mps=3.0,
                                     yaw_rate_dps=0.0))
@@ -344,7 +344,7 @@ def test_unplugged_slcan_adapter_is_reported_and_retried(running):
                 interface="slcan", channel=radar.link.path, options={"sleep_after_open": 0},
                 reopen_backoff_initial_s=0.01, reopen_backoff_max_s=0.05))
         out = Output()
-        running(RadarService(s, out))
+        running(RadarShell(s, out))
         out.got_tracks.wait_count(3, 30)
     # The link is closed: the service's reads fail and the device is gone.
     status = out.status_where(lambda st: st.bus_state is BusState.REOPENING)

@@ -3,7 +3,7 @@ their last frame; incomplete ones are counted and still emitted."""
 
 from common.config.radar import CycleSettings, Expect
 from common.messages.radar import OutputMode
-from services.radar.cycle import ClosedBy, CycleAssembler, ListRole
+from services.radar.assembly import ClosedBy, CycleAssembler, ListRole
 
 OBJ = OutputMode.OBJECTS
 CL = OutputMode.CLUSTERS
@@ -133,25 +133,18 @@ def test_cluster_cycles_never_wait_for_extended_frames():
     assert c.complete and c.mode is CL and c.last_frame_mono_ns == 4
 
 
-def test_the_quality_list_is_announced_once_in_while_extended_frames_are_awaited():
+def test_the_open_cycle_shows_its_lists_as_they_complete():
     asm = CycleAssembler(CycleSettings(expect_quality=Expect.YES, expect_extended=Expect.YES))
+    assert asm.open_cycle is None
     asm.on_status(OBJ, 2, 1, 0.0, 0, 0)
-    for i, role in enumerate((G, G, Q)):
-        asm.on_list_frame(OBJ, role, D, i)
-        assert asm.qualities_in is None
-    asm.on_list_frame(OBJ, Q, D, 3)
-    assert asm.qualities_in is not None and asm.qualities_in.meas_counter == 1
-    asm.qualities_in = None                          # the caller took it
-    asm.on_list_frame(OBJ, E, D, 4)
-    assert asm.qualities_in is None and len(asm.on_list_frame(OBJ, E, D, 5)) == 1
-
-
-def test_a_last_quality_frame_that_completes_the_cycle_is_not_announced():
-    asm = CycleAssembler(CycleSettings(expect_quality=Expect.YES))
-    trace = cycle(asm, 2, 1, mode=CL)                # clusters: no extended list
-    assert emitted(trace)[0][0] == (Q, 1) and asm.qualities_in is None
+    c = asm.open_cycle
+    assert c is not None and c.meas_counter == 1
+    lists_in = []
+    for i, role in enumerate((G, G, Q, Q, E)):
+        assert asm.on_list_frame(OBJ, role, D, i) == []
+        lists_in.append([r for r in (G, Q, E) if c.has_list(r)])
+    assert lists_in == [[], [G], [G], [G, Q], [G, Q]]
+    [done] = asm.on_list_frame(OBJ, E, D, 5)
+    assert done is c and asm.open_cycle is None      # emitted: no longer open
     asm.on_status(OBJ, 1, 2, 0.0, 0, 0)
-    asm.on_list_frame(OBJ, G, D, 1)
-    asm.on_list_frame(OBJ, Q, D, 2)
-    asm.on_status(OBJ, 1, 3, 0.0, 0, 0)              # the next status clears it
-    assert asm.qualities_in is None
+    assert asm.open_cycle is not None and asm.open_cycle.meas_counter == 2

@@ -20,7 +20,7 @@ from common.messages.radar import OutputMode
 
 
 class ListRole:
-    """Index of a list frame's kind within a cycle (small ints: the per-frame path is hot)."""
+    """Index of a list frame's kind within a cycle (RawCycle.lists)."""
 
     GENERAL = 0
     QUALITY = 1
@@ -76,6 +76,10 @@ class RawCycle:
     def frames_for(self, role: int) -> list[bytes | None]:
         return self.lists[role]
 
+    def has_list(self, role: int) -> bool:
+        """Every announced frame of list `role` arrived."""
+        return len(self.lists[role]) == self.announced
+
     def all_arrived(self, quality: bool | None, extended: bool | None) -> bool:
         """All announced frames arrived, counting unknown expectations as expected."""
         n = self.announced
@@ -107,12 +111,11 @@ class CycleAssembler:
         self._current: RawCycle | None = None
         self._emitted = False
         self._learned: dict[tuple[OutputMode, int], bool] = {}
-        # Set when the open cycle's last general frame arrived and the cycle still waits
-        # for other frames; the caller may start tracking it and clears it.
-        self.generals_in: RawCycle | None = None
-        # Likewise when the open cycle's last quality frame arrived (the extended frames,
-        # if any, still to come): the caller may decode them and clears it.
-        self.qualities_in: RawCycle | None = None
+
+    @property
+    def open_cycle(self) -> RawCycle | None:
+        """The cycle being assembled, not emitted yet (its lists so far)."""
+        return None if self._emitted else self._current
 
     def _expectation(self, mode: OutputMode, role: int) -> bool | None:
         if role == ListRole.EXTENDED and mode is OutputMode.CLUSTERS:
@@ -150,7 +153,6 @@ class CycleAssembler:
         """A status frame: closes the open cycle (emitted if it was not yet) and opens a
         new one, emitted at once when it announces nothing."""
         out = self._close(ClosedBy.NEXT_STATUS)
-        self.generals_in = self.qualities_in = None
         self._current = RawCycle(
             mode=mode, meas_counter=meas_counter, announced=announced, t_s=t_s,
             stamp_wall_ns=wall_ns, start_mono_ns=mono_ns, last_frame_mono_ns=mono_ns,
@@ -190,13 +192,7 @@ class CycleAssembler:
         if cycle.awaited[role]:
             cycle.remaining -= 1
             if cycle.remaining == 0:
-                self.generals_in = self.qualities_in = None
                 return self._close(ClosedBy.COMPLETE)
-        if len(frames) == cycle.announced:
-            if role == ListRole.GENERAL:
-                self.generals_in = cycle
-            elif role == ListRole.QUALITY:
-                self.qualities_in = cycle
         return []
 
     def poll(self, mono_ns: int) -> list[RawCycle]:
