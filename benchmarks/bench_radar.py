@@ -259,6 +259,7 @@ def cantools_decoder() -> Callable[[MessageSpec, bytes], object] | None:
     from services.radar.ars408.dbc import DBC_PATH
 
     db = cantools.database.load_file(str(DBC_PATH))
+    assert isinstance(db, cantools.database.can.Database)
     by_id = {m.frame_id: m for m in db.messages}
 
     def decode_one(spec: MessageSpec, data: bytes) -> object:
