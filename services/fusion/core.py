@@ -1,7 +1,7 @@
-"""The fusion core: one radar cycle and the decoded frames in, VerifiedTargets and
-exactly one BrakeCommand out. Pure: no Zenoh, no clocks (the shell passes the time), no
-threads; its state is the brake hold, the sequence number and each track's recent
-sideways motion (for path prediction).
+"""The fusion core: one radar cycle and the decoded frames in, exactly one BrakeCommand
+and the cycle's VerifiedTargets out. Pure: no Zenoh, no clocks (the shell passes the
+time), no threads; its state is the brake hold, the sequence number and each track's
+recent sideways motion (for path prediction).
 
 Per confirmed track: kinematics and the radar's threat (decision.py); per camera, the
 frame nearest the cycle within the skew bound (frames.py), the track predicted to that
@@ -9,16 +9,16 @@ frame's time and its column projected to a ROI (roi.py); the verifier (verifiers
 the cameras that see it, combined (cameras.py); the decision. The command is the most
 severe decision (ties: the smallest TTC_eff), or a heartbeat.
 
-Which tracks are gated (`gate_scope`): `all`, every visible track; `candidates`, only
-those that can change the command. Threats are taken most severe first, then most
-urgent; a track's decision is at most its radar threat, so once the command so far is at
-least a threat's rank, neither that threat nor any after it can change the command, and
-they are reported `not_checked`.
+A cycle is two steps. `decide` settles the command: threats are checked most severe
+first, then most urgent; a track's decision is at most its radar threat, so once the
+command so far ranks at least as high as the next threat, nothing after it can change the
+command. `report` then describes every confirmed track: the remaining threats are gated
+too, and with `gate_scope = "all"` every visible track. `process` is both.
 """
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from common.config.fusion import FusionSettings, GateScope
 from common.messages import (
@@ -52,6 +52,28 @@ _NO_ROI: tuple[int, ...] = ()
 class CycleResult:
     targets: VerifiedTargets
     command: BrakeCommand
+
+
+@dataclass(slots=True)
+class DecidedCycle:
+    """A radar cycle whose command is decided: what `report` needs to describe it.
+    `checked` holds the targets of the tracks the command needed, by confirmed index."""
+
+    tracks: RadarTracks
+    feeds: tuple[FrameFeed, ...]
+    confirmed: list[RadarTrack]
+    invalid: list[RadarTrack]
+    status: VerifierStatus
+    reason_unavailable: str
+    age_ns: int
+    now_mono_ns: int
+    command: BrakeCommand
+    kins: list[Kinematics] = field(default_factory=list)
+    threats: list[tuple[Decision, str]] = field(default_factory=list)
+    threat_order: list[int] = field(default_factory=list)     # confirmed indices
+    threat_views: list[CameraView] = field(default_factory=list)
+    checked: dict[int, VerifiedTarget] = field(default_factory=dict)
+    cameras_unavailable: dict[str, str] = field(default_factory=dict)
 
 
 class FusionCore:
@@ -89,12 +111,18 @@ class FusionCore:
 
     def process(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
                 now_wall_ns: int, now_mono_ns: int) -> CycleResult:
-        """Decide one radar cycle. `feeds`: each camera's frames, in camera order (one
-        FrameFeed for a single camera). `now_wall_ns` judges the radar's age;
-        `now_mono_ns` stamps the messages' pub_mono_ns (the shell refreshes it at publish).
-        Raises ValueError when the number of feeds is not the number of cameras.
-        """
-        s = self.s
+        """One radar cycle, decided and reported (`decide`, then `report`).
+        Raises ValueError when the number of feeds is not the number of cameras."""
+        decided = self.decide(tracks, feeds, now_wall_ns, now_mono_ns)
+        return CycleResult(self.report(decided), decided.command)
+
+    def decide(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
+               now_wall_ns: int, now_mono_ns: int) -> DecidedCycle:
+        """The cycle's BrakeCommand (`.command`), checking only the tracks it depends on.
+        `feeds`: each camera's frames, in camera order (one FrameFeed for a single
+        camera). `now_wall_ns` judges the radar's age; `now_mono_ns` stamps the messages'
+        pub_mono_ns (the shell refreshes it at publish).
+        Raises ValueError when the number of feeds is not the number of cameras."""
         feeds = (feeds,) if isinstance(feeds, FrameFeed) else tuple(feeds)
         if len(feeds) != len(self.cameras):
             raise ValueError(f"{len(feeds)} frame feeds for {len(self.cameras)} cameras")
@@ -108,37 +136,79 @@ class FusionCore:
         age_ns = now_wall_ns - tracks.header.stamp_ns
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
-        views: list[CameraView] = []
-        reason_unavailable = ""
         if abs(age_ns) > self._radar_max_age_ns:
-            status = VerifierStatus.STALE_RADAR
-            targets = [self._stale_target(t, age_ns) for t in confirmed]
+            stale = {i: self._stale_target(t, age_ns) for i, t in enumerate(confirmed)}
+            command = self._command(tracks, list(stale.values()), VerifierStatus.STALE_RADAR,
+                                    "", age_ns, now_wall_ns, now_mono_ns,
+                                    confirmed=confirmed)
+            return DecidedCycle(tracks, feeds, confirmed, invalid, VerifierStatus.STALE_RADAR,
+                                "", age_ns, now_mono_ns, command, checked=stale)
+        kins = [self._kinematics(t) for t in confirmed]
+        threats = [self.rule.threat(k) for k in kins]
+        ranks = [_rank(threat, k.ttc_eff_s) for (threat, _), k in zip(threats, kins, strict=True)]
+        order = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
+                       key=ranks.__getitem__, reverse=True)
+        views = camera_views(self.cameras, feeds, [confirmed[i] for i in order],
+                             tracks.header.stamp_ns, self._max_skew_ns, self.s.frames.align)
+        reason_unavailable = ""
+        if any(v.frame is not None for v in views):
+            status = VerifierStatus.OK
         else:
-            views = camera_views(self.cameras, feeds, confirmed, tracks.header.stamp_ns,
-                                 self._max_skew_ns, s.frames.align)
-            if any(v.frame is not None for v in views):
-                status = VerifierStatus.OK
-            else:
-                status = VerifierStatus.UNAVAILABLE
-                reason_unavailable = _reasons(views)
-            targets = self._verify(confirmed, views, tracks.header.stamp_ns)
-        command = self._command(tracks, targets, status, reason_unavailable, age_ns,
-                                now_wall_ns, now_mono_ns, confirmed=confirmed)
-        targets += [_invalid_target(t) for t in invalid]
-        header = Header(seq=command.header.seq, source=self.source,
-                        stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
-        verified = VerifiedTargets(
-            header=header, instance=s.instance, radar_sensor=tracks.sensor,
-            radar_seq=tracks.header.seq, verifier=self.verifier.name,
-            verifier_params=self.verifier_params, verifier_status=status,
-            targets=tuple(targets), processing_ns=0, camera=self.camera_names,
-            unavailable_reason=reason_unavailable, radar_age_ms=age_ns / 1e6,
+            status = VerifierStatus.UNAVAILABLE
+            reason_unavailable = _reasons(views)
+        checked: dict[int, VerifiedTarget] = {}
+        best_rank = _rank(Decision.NONE, None)
+        for j, i in enumerate(order):
+            if ranks[i] <= best_rank:
+                break                    # neither this threat nor any after it can win
+            tgt = self._target(confirmed[i], kins[i], threats[i], views, j,
+                               tracks.header.stamp_ns, gate=True)
+            checked[i] = tgt
+            if tgt.decision is not Decision.NONE:
+                best_rank = max(best_rank, _rank_of(tgt))
+        command = self._command(tracks, list(checked.values()), status, reason_unavailable,
+                                age_ns, now_wall_ns, now_mono_ns, confirmed=confirmed)
+        return DecidedCycle(
+            tracks, feeds, confirmed, invalid, status, reason_unavailable, age_ns,
+            now_mono_ns, command, kins, threats, order, views, checked,
+            {v.name: v.reason for v in views if v.frame is None})
+
+    def report(self, cycle: DecidedCycle) -> VerifiedTargets:
+        """Every confirmed track of a decided cycle as a target, in track order, then the
+        invalid ones: the threats the command did not need are gated now, the other tracks
+        only with `gate_scope = "all"`."""
+        targets = dict(cycle.checked)
+        stamp_ns = cycle.tracks.header.stamp_ns
+        if cycle.status is not VerifierStatus.STALE_RADAR:
+            for j, i in enumerate(cycle.threat_order):
+                if i not in targets:
+                    targets[i] = self._target(cycle.confirmed[i], cycle.kins[i],
+                                              cycle.threats[i], cycle.threat_views, j,
+                                              stamp_ns, gate=True)
+            others = [i for i in range(len(cycle.confirmed)) if i not in targets]
+            views = camera_views(self.cameras, cycle.feeds,
+                                 [cycle.confirmed[i] for i in others], stamp_ns,
+                                 self._max_skew_ns, self.s.frames.align)
+            gate_all = self.s.gate_scope is GateScope.ALL
+            for j, i in enumerate(others):
+                targets[i] = self._target(cycle.confirmed[i], cycle.kins[i], cycle.threats[i],
+                                          views, j, stamp_ns, gate=gate_all)
+        feeds = cycle.feeds
+        header = Header(seq=cycle.command.header.seq, source=self.source, stamp_ns=stamp_ns,
+                        pub_mono_ns=cycle.now_mono_ns)
+        return VerifiedTargets(
+            header=header, instance=self.s.instance, radar_sensor=cycle.tracks.sensor,
+            radar_seq=cycle.tracks.header.seq, verifier=self.verifier.name,
+            verifier_params=self.verifier_params, verifier_status=cycle.status,
+            targets=(*(targets[i] for i in range(len(cycle.confirmed))),
+                     *(_invalid_target(t) for t in cycle.invalid)),
+            processing_ns=0, camera=self.camera_names,
+            unavailable_reason=cycle.reason_unavailable, radar_age_ms=cycle.age_ns / 1e6,
             frames_received=sum(f.received for f in feeds),
             frames_undecodable=sum(f.undecodable for f in feeds),
             frames_dropped=sum(f.dropped for f in feeds),
             frames_skipped=sum(f.skipped for f in feeds),
-            cameras_unavailable={v.name: v.reason for v in views if v.frame is None})
-        return CycleResult(verified, command)
+            cameras_unavailable=cycle.cameras_unavailable)
 
     def _kinematics(self, t: RadarTrack) -> Kinematics:
         return self.rule.kinematics(t, t.track_id in self._moving)
@@ -152,51 +222,24 @@ class FusionCore:
             Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
             reason, None, None, path_predicted=k.window is not None)
 
-    def _verify(self, confirmed: list[RadarTrack], views: list[CameraView],
-                radar_stamp_ns: int) -> list[VerifiedTarget]:
-        """Every confirmed track's target, in track order, gated as the module docstring
-        says."""
-        kins = [self._kinematics(t) for t in confirmed]
-        threats = [self.rule.threat(k) for k in kins]
-        ranks = [_rank(threat, k.ttc_eff_s) for (threat, _), k in zip(threats, kins, strict=True)]
-        gate_all = self.s.gate_scope is GateScope.ALL
-        # Where a track no camera sees is reported: the first camera with a frame.
-        fallback = next((v for v in views if v.frame is not None), views[0])
-        targets: list[VerifiedTarget | None] = [None] * len(confirmed)
-        best: VerifiedTarget | None = None          # the command so far
-        best_rank = _rank(Decision.NONE, None)
-        for i in sorted(range(len(confirmed)), key=ranks.__getitem__, reverse=True):
-            can_change = threats[i][0] is not Decision.NONE and ranks[i] > best_rank
-            tgt = self._target(confirmed[i], i, kins[i], threats[i], views, fallback,
-                               radar_stamp_ns, gate_all or can_change, best)
-            if tgt.decision is not Decision.NONE and _rank_of(tgt) > best_rank:
-                best, best_rank = tgt, _rank_of(tgt)
-            targets[i] = tgt
-        return [t for t in targets if t is not None]
-
-    def _target(self, t: RadarTrack, i: int, k: Kinematics, threat: tuple[Decision, str],
-                views: list[CameraView], fallback: CameraView, radar_stamp_ns: int,
-                gate: bool, best: VerifiedTarget | None) -> VerifiedTarget:
-        """Track `i` checked in the cameras (gated iff `gate`) and decided; `best` is the
-        command so far, named when a threat is not gated because of it; `fallback` the
-        view a track no camera sees is reported in."""
+    def _target(self, t: RadarTrack, k: Kinematics, threat: tuple[Decision, str],
+                views: list[CameraView], j: int, radar_stamp_ns: int,
+                gate: bool) -> VerifiedTarget:
+        """Track `t`, the `j`-th of the tracks `views` were projected for, checked in the
+        cameras (gated iff `gate`) and decided."""
         decision, reason = threat
-        check = check_track(i, views, gate, self.verifier.verify)
+        check = check_track(j, views, gate, self.verifier.verify)
         verification = check.verification
         density = check.result.density if check.result is not None else None
-        if verification is Verification.NOT_CHECKED and decision is not Decision.NONE \
-                and best is not None:
-            decision, reason = Decision.NONE, (f"not gated: track {best.track_id} decides "
-                                               f"the command ({reason})")
-        else:
-            if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
-                reason = f"{reason}; {_reasons(views, i)}"
-            decision, reason = decide(decision, reason, verification, self.rule.policy)
-            if verification is Verification.REJECTED:
-                reason = f"{reason}; density {density:.4f}"
-        view = check.view or fallback
+        if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
+            reason = f"{reason}; {_reasons(views, j)}"
+        decision, reason = decide(decision, reason, verification, self.rule.policy)
+        if verification is Verification.REJECTED:
+            reason = f"{reason}; density {density:.4f}"
+        # Where a track no camera sees is reported: the first camera with a frame.
+        view = check.view or next((v for v in views if v.frame is not None), views[0])
         frame = view.frame
-        x, y = view.xy[i]
+        x, y = view.xy[j]
         return VerifiedTarget(
             t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
             _NO_ROI if check.roi is None or verification is Verification.UNAVAILABLE
@@ -210,32 +253,40 @@ class FusionCore:
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:
-        """The cycle's command when processing raised: still exactly one command (NONE, or
+        """The cycle's command when deciding raised: still exactly one command (NONE, or
         the held BRAKE), the verifier unavailable, the error as the reason."""
-        age_ns = now_wall_ns - tracks.header.stamp_ns
         reason = f"fusion error: {error}"
-        command = self._command(tracks, [], VerifierStatus.UNAVAILABLE, reason, age_ns,
-                                now_wall_ns, now_mono_ns, summary=reason)
+        command = self._command(tracks, [], VerifierStatus.UNAVAILABLE, reason,
+                                now_wall_ns - tracks.header.stamp_ns, now_wall_ns,
+                                now_mono_ns, summary=reason)
+        return CycleResult(self.failed_report(tracks, command, error, now_wall_ns, now_mono_ns),
+                           command)
+
+    def failed_report(self, tracks: RadarTracks, command: BrakeCommand, error: str,
+                      now_wall_ns: int, now_mono_ns: int) -> VerifiedTargets:
+        """The targets of a cycle whose processing raised after `command` was decided: no
+        target, the verifier unavailable, the error as the reason. Changes no state."""
+        age_ns = now_wall_ns - tracks.header.stamp_ns
         header = Header(seq=command.header.seq, source=self.source,
                         stamp_ns=tracks.header.stamp_ns, pub_mono_ns=now_mono_ns)
-        targets = VerifiedTargets(
+        return VerifiedTargets(
             header=header, instance=self.s.instance, radar_sensor=tracks.sensor,
             radar_seq=tracks.header.seq, verifier=self.verifier.name,
             verifier_params=self.verifier_params, verifier_status=VerifierStatus.UNAVAILABLE,
             targets=(), processing_ns=0, camera=self.camera_names,
-            unavailable_reason=reason, radar_age_ms=age_ns / 1e6)
-        return CycleResult(targets, command)
+            unavailable_reason=f"fusion error: {error}", radar_age_ms=age_ns / 1e6)
 
     def _command(self, tracks: RadarTracks, targets: list[VerifiedTarget],
                  status: VerifierStatus, reason_unavailable: str, age_ns: int,
                  now_wall_ns: int, now_mono_ns: int, summary: str = "",
                  confirmed: Sequence[RadarTrack] = ()) -> BrakeCommand:
         """The command from the most severe of `targets` (ties: smallest TTC_eff, then the
-        first), and the hold. `confirmed` gives a held track's current range and TTC."""
+        first), and the hold. `confirmed`: every confirmed track (counted in the reason; a
+        held track's current range and TTC)."""
         ds = self.s.decision
         worst = max(targets, key=_rank_of, default=None)
         decision = worst.decision if worst is not None else Decision.NONE
-        n_targets = len(targets)
+        n_targets = max(len(targets), len(confirmed))
         if summary:
             reason = summary
         elif n_targets == 0:

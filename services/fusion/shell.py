@@ -29,7 +29,7 @@ from common.messages import (
 )
 from common.realtime import ThreadRealtime
 from services.fusion.camera_check import calibration_differences
-from services.fusion.core import CycleResult, FusionCore
+from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
 
@@ -118,35 +118,50 @@ class FusionShell:
         return self.handle(tracks, rx_mono_ns)
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
-        """Process one cycle and publish its BrakeCommand, then its VerifiedTargets; the
-        radar's rhythm (for the frame decoders) is updated last, off the command's path."""
+        """Process one cycle: its BrakeCommand is published as soon as it is decided, then
+        its VerifiedTargets; the radar's rhythm (for the frame decoders) is updated last."""
         with self._lock:
             self._check_order(tracks)
             feeds = [d.snapshot() for d in self.decoders]
+            decided: DecidedCycle | None = None
             try:
-                result = self.core.process(tracks, feeds, wall_ns(), mono_ns())
+                decided = self.core.decide(tracks, feeds, wall_ns(), mono_ns())
+                command = decided.command
             except Exception as exc:  # one command per radar cycle, even when a bug bites
-                self.counters.add("processing_error")
-                self._rl.error("core", "fusion_cycle_failed", radar_seq=tracks.header.seq,
-                               error=repr(exc))
-                result = self.core.failed_cycle(tracks, repr(exc), wall_ns(), mono_ns())
+                self._count_failure(tracks, exc)
+                failed = self.core.failed_cycle(tracks, repr(exc), wall_ns(), mono_ns())
+                command = failed.command
             # Processing ends where the command is handed to Zenoh: the put itself belongs
             # to the hop, as the radar's put does.
             decided_ns = mono_ns()
             command = msgspec.structs.replace(
-                result.command,
-                header=msgspec.structs.replace(result.command.header, pub_mono_ns=decided_ns))
+                command, header=msgspec.structs.replace(command.header, pub_mono_ns=decided_ns))
             self._cmd_pub.put(command)
+            if decided is None:
+                targets = failed.targets
+            else:
+                try:
+                    targets = self.core.report(decided)
+                except Exception as exc:  # the command is out; the report says what failed
+                    self._count_failure(tracks, exc)
+                    targets = self.core.failed_report(tracks, command, repr(exc), wall_ns(),
+                                                      mono_ns())
             processing_ns = decided_ns - rx_mono_ns
             targets = msgspec.structs.replace(
-                result.targets, processing_ns=processing_ns,
-                header=msgspec.structs.replace(result.targets.header, pub_mono_ns=mono_ns()))
+                targets, processing_ns=processing_ns,
+                header=msgspec.structs.replace(targets.header, pub_mono_ns=mono_ns()))
             self._tgt_pub.put(targets)
+            result = CycleResult(targets, command)
             self._count(result)
             self._proc_us.append(processing_ns / 1e3)
         if self.rhythm is not None:
             self.rhythm.on_cycle(rx_mono_ns)
-        return CycleResult(targets, command)
+        return result
+
+    def _count_failure(self, tracks: RadarTracks, exc: Exception) -> None:
+        self.counters.add("processing_error")
+        self._rl.error("core", "fusion_cycle_failed", radar_seq=tracks.header.seq,
+                       error=repr(exc))
 
     def _check_order(self, tracks: RadarTracks) -> None:
         seq = tracks.header.seq

@@ -284,22 +284,23 @@ def test_a_failed_cycle_still_answers_once_and_keeps_a_held_brake():
 
 
 
-def test_only_the_tracks_that_can_change_the_command_are_gated():
+def test_the_command_is_decided_before_the_threats_that_cannot_change_it_are_gated():
     verifier = FixedVerifier(verdict=True)
+    core = make_core(verifier)
     tracks = (track(tid=1, x=12.0, vx=-5.0),       # BRAKE threat, TTC_eff 1.4 s
               track(tid=2, x=6.0, vx=-5.0),        # BRAKE threat, TTC_eff 0.2 s: first
               track(tid=3, x=20.0, vx=3.0))        # no threat
-    res = run(make_core(verifier), *tracks)
+    decided = core.decide(cycle(*tracks), feed(frame()), T0 + 5 * MS, 1)
     assert len(verifier.calls) == 1                # the most urgent threat, verified
-    assert res.command.decision is Decision.BRAKE and res.command.track_id == 2
-    first, urgent, receding = res.targets.targets
+    assert decided.command.decision is Decision.BRAKE and decided.command.track_id == 2
+    targets = core.report(decided)
+    assert len(verifier.calls) == 2                # the other threat, for the report
+    first, urgent, receding = targets.targets
     assert urgent.verification is Verification.VERIFIED
-    # Track 1's decision could not beat track 2's: not gated, and it says why.
-    assert first.verification is Verification.NOT_CHECKED and first.decision is Decision.NONE
-    assert first.reason.startswith("not gated: track 2 decides the command (TTC_eff 1.40 s")
-    assert first.roi_xywh != ()                    # its ROI is still given
+    assert first.verification is Verification.VERIFIED and first.decision is Decision.BRAKE
     assert receding.verification is Verification.NOT_CHECKED
     assert receding.reason.startswith("not closing")
+    assert targets.header.seq == decided.command.header.seq
 
 
 def test_a_rejected_urgent_track_lets_the_next_threat_decide():
@@ -317,21 +318,23 @@ def test_a_rejected_urgent_track_lets_the_next_threat_decide():
     assert res.targets.targets[1].verification is Verification.REJECTED
 
 
-def test_a_threat_is_gated_only_while_it_can_beat_the_command_so_far():
+def test_a_threat_is_gated_for_the_command_only_while_it_can_beat_it():
     verifier = FixedVerifier(verdict=True)
     core = make_core(verifier, decision={"corridor": {"enabled": False}})
     hidden = track(tid=1, x=4.0, y=-9.0, vx=-12.0)   # BRAKE threat no camera sees
     brake = track(tid=2, x=12.0, vx=-5.0)            # BRAKE threat, TTC_eff 1.4 s
     warn = track(tid=3, x=18.0, vx=-5.0)             # WARNING threat, TTC_eff 2.6 s
     # The hidden track is a WARNING (policy warn), more urgent than the WARNING threat.
-    res = run(core, hidden, warn)
-    assert res.targets.targets[0].verification is Verification.NOT_VISIBLE
-    assert res.command.decision is Decision.WARNING and res.command.track_id == 1
+    decided = core.decide(cycle(hidden, warn), feed(frame()), T0 + 5 * MS, 1)
+    assert decided.command.decision is Decision.WARNING and decided.command.track_id == 1
     assert verifier.calls == []
-    assert res.targets.targets[1].reason.startswith("not gated: track 1 decides")
+    targets = core.report(decided).targets
+    assert targets[0].verification is Verification.NOT_VISIBLE
+    assert targets[1].verification is Verification.VERIFIED and len(verifier.calls) == 1
     # A BRAKE threat can still beat that WARNING: it is gated, and decides.
-    res = run(core, hidden, brake, warn, seq=1)
-    assert res.command.decision is Decision.BRAKE and res.command.track_id == 2
+    verifier.calls.clear()
+    decided = core.decide(cycle(hidden, brake, warn, seq=1), feed(frame()), T0 + 5 * MS, 1)
+    assert decided.command.decision is Decision.BRAKE and decided.command.track_id == 2
     assert len(verifier.calls) == 1
 
 
