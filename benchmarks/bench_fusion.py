@@ -71,7 +71,7 @@ from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.shell import FusionShell
-from services.fusion.verifiers import GateResult, ParamValue, Verifier, create
+from services.fusion.verifiers import GateResult, Observation, ParamValue, Verifier, create
 from tools.sim.rig import rig_calibration_toml
 from tools.sim.scenes import Obstacle, Scene, render
 
@@ -117,14 +117,15 @@ class CountingVerifier:
     def __init__(self, inner: Verifier) -> None:
         self.inner = inner
         self.name = inner.name
+        self.needs_depth = inner.needs_depth
         self.runs = 0
 
     def params(self) -> dict[str, ParamValue]:
         return self.inner.params()
 
-    def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
+    def verify(self, obs: Observation) -> GateResult:
         self.runs += 1
-        return self.inner.verify(gray, roi)
+        return self.inner.verify(obs)
 
 
 class TimedPublisher:

@@ -24,6 +24,7 @@ figures for the suite (`python -m benchmarks`) and raises if any density differs
 
 import argparse
 import json
+import math
 import time
 from collections.abc import Callable
 from functools import partial
@@ -37,7 +38,7 @@ from benchmarks.figures import Figure
 from common.calibration import Calibration
 from common.imaging import decode_bgr, decode_gray, encode_jpeg
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import create
+from services.fusion.verifiers import Observation, create
 from tools.sim.scenario import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, labelled_frames, render
 
@@ -122,7 +123,8 @@ def time_gates(cal: Calibration, frames: list[tuple[np.ndarray, list[Obstacle]]]
         for label, size in SIZES.items():
             per = timings.setdefault(label, {})
             for roi in rois_of_size(cal, obstacles, size, rng):
-                d_ours = ours.verify(gray, roi).density
+                obs = Observation(gray, roi, roi, 0.0)
+                d_ours = ours.verify(obs).score
                 d_naive = naive_density(same_pixels, roi)
                 identical += int(d_ours == d_naive)
                 d_colour = naive_density(real_colour, roi)
@@ -133,8 +135,8 @@ def time_gates(cal: Calibration, frames: list[tuple[np.ndarray, list[Obstacle]]]
                     ("naive (default threads)", partial(naive_density, same_pixels, roi),
                      _DEFAULT_THREADS),
                     ("naive (1 thread)", partial(naive_density, same_pixels, roi), 1),
-                    ("ours: edge_density", partial(ours.verify, gray, roi), 1),
-                    ("adaptive_edge_density", partial(adaptive.verify, gray, roi), 1),
+                    ("ours: edge_density", partial(ours.verify, obs), 1),
+                    ("adaptive_edge_density", partial(adaptive.verify, obs), 1),
                 ]
                 # Short blocks in turn, so that a busy neighbour on this shared machine
                 # slows every implementation alike.
@@ -165,10 +167,11 @@ def night_evaluation(cal: Calibration, n: int, seed: int) -> dict[str, dict[str,
             for f in frames:
                 if f.night != night:
                     continue
-                roi = projector.rois(np.array([f.track_xy]))[0]
-                if roi is None:
+                box = projector.boxes(np.array([f.track_xy]))[0]
+                if box is None:
                     continue
-                ok = verifier.verify(decode_gray(f.jpeg), roi).verified
+                ok = verifier.verify(Observation(decode_gray(f.jpeg), *box,
+                                                 math.hypot(*f.track_xy))).verified
                 tp += ok and f.obstacle
                 fp += ok and not f.obstacle
                 fn += (not ok) and f.obstacle

@@ -19,6 +19,7 @@ Exit codes: 0 done, 2 bad arguments, calibration, configuration, image or tracks
 """
 
 import argparse
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +34,7 @@ from common.config.loader import ConfigError, load_config, parse_config
 from common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
 from common.messages import DecodeError, RadarTracks, decode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import GateResult, VerifierConfigError, create
+from services.fusion.verifiers import GateResult, Observation, VerifierConfigError, create
 
 _GREEN, _RED, _BLUE, _GREY, _YELLOW = (0, 200, 0), (0, 0, 230), (255, 120, 0), (160, 160, 160), \
     (0, 220, 255)
@@ -107,9 +108,15 @@ def load_frame(path: Path, cal: Calibration, quality: int) -> tuple[np.ndarray, 
 def check(gray: np.ndarray, tracks: list[TrackIn], projector: ColumnProjector,
           settings: FusionSettings) -> list[TrackOut]:
     verifier = create(settings.verifier.name, settings.verifier.params)
-    rois = projector.rois(np.array([(t.x_m, t.y_m) for t in tracks]).reshape(-1, 2))
-    return [TrackOut(t, roi, verifier.verify(gray, roi) if roi is not None else None)
-            for t, roi in zip(tracks, rois, strict=True)]
+    boxes = projector.boxes(np.array([(t.x_m, t.y_m) for t in tracks]).reshape(-1, 2))
+    out = []
+    for t, box in zip(tracks, boxes, strict=True):
+        if box is None:
+            out.append(TrackOut(t, None, None))
+        else:
+            obs = Observation(gray, *box, math.hypot(t.x_m, t.y_m))
+            out.append(TrackOut(t, box[0], verifier.verify(obs)))
+    return out
 
 
 def _polyline(img: np.ndarray, cal: Calibration, pts: np.ndarray, colour: tuple[int, int, int],
@@ -157,7 +164,7 @@ def draw_tracks(img: np.ndarray, projector: ColumnProjector, outs: list[TrackOut
         cv2.rectangle(img, (r.x, r.y), (r.x + r.w - 1, r.y + r.h - 1), colour, 1)
         label = f"#{o.track.track_id} {o.track.x_m:.1f},{o.track.y_m:.1f}"
         if o.result is not None:
-            label += f" d={o.result.density:.3f}"
+            label += f" d={o.result.score:.3f}"
         if not o.track.confirmed:
             label += " (unconfirmed)"
         cv2.putText(img, label, (r.x, max(10, r.y - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
@@ -178,7 +185,7 @@ def table(outs: list[TrackOut], frame_pixels: int) -> str:
             verdict += " (unconfirmed: fusion skips it)"
         lines.append(f"{t.track_id:<6} {t.x_m:<7.2f} {t.y_m:<7.2f} "
                      f"{f'{r.x},{r.y},{r.w},{r.h}':<21} {100 * r.area / frame_pixels:<7.2f} "
-                     f"{res.density:<8.4f} {verdict}")
+                     f"{res.score:<8.4f} {verdict}")
     return "\n".join(lines)
 
 

@@ -17,6 +17,7 @@ see it, in configured order:
   their image).
 """
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -26,9 +27,9 @@ from common.messages import RadarTrack, Verification
 from common.messages.fusion import CameraCheck
 from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
 from services.fusion.roi import ColumnProjector, Roi
-from services.fusion.verifiers import GateResult
+from services.fusion.verifiers import GateResult, Observation
 
-Gate = Callable[[np.ndarray, Roi], GateResult]
+Gate = Callable[[Observation], GateResult]
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,14 +41,15 @@ class Camera:
 @dataclass(frozen=True, slots=True)
 class CameraView:
     """One camera in one radar cycle: its frame (None: unavailable, `reason` says why),
-    each confirmed track predicted to that frame's capture time (`xy`), and its ROI
-    (None: the camera does not see it)."""
+    each track predicted to that frame's capture time (`xy`), and its ROI and column
+    box (None: the camera does not see it)."""
 
     name: str
     frame: DecodedFrame | None
     reason: str
     xy: list[list[float]]
     rois: list[Roi | None]
+    columns: list[Roi | None]
 
 
 def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
@@ -65,8 +67,10 @@ def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
                                                                  max_skew_ns)
         dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
         xy = pos + vel * dt_s
-        rois = cam.projector.rois(xy) if len(xy) else []
-        views.append(CameraView(cam.name, frame, reason, xy.tolist(), rois))
+        boxes = cam.projector.boxes(xy) if len(xy) else []
+        views.append(CameraView(cam.name, frame, reason, xy.tolist(),
+                                [b[0] if b is not None else None for b in boxes],
+                                [b[1] if b is not None else None for b in boxes]))
     return views
 
 
@@ -108,14 +112,17 @@ def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -
             state, density = Verification.NOT_CHECKED, None
             unchecked = unchecked or (v, roi)
         else:
-            result = verify(v.frame.gray, roi)
-            density = result.density
+            column = v.columns[i]
+            assert column is not None           # a ROI always has its column
+            x, y = v.xy[i]
+            result = verify(Observation(v.frame.gray, roi, column, math.hypot(x, y)))
+            density = result.score
             if result.verified:
                 state = Verification.VERIFIED
                 verified = (v, roi, result)
             else:
                 state = Verification.REJECTED
-                if rejected is None or result.density > rejected[2].density:
+                if rejected is None or result.score > rejected[2].score:
                     rejected = (v, roi, result)
         if several:
             per_camera.append(CameraCheck(v.name, state, () if roi is None else tuple(roi),

@@ -230,7 +230,7 @@ class FusionCore:
         decision, reason = threat
         check = check_track(j, views, gate, self.verifier.verify)
         verification = check.verification
-        density = check.result.density if check.result is not None else None
+        density = check.result.score if check.result is not None else None
         if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
             reason = f"{reason}; {_reasons(views, j)}"
         decision, reason = decide(decision, reason, verification, self.rule.policy)

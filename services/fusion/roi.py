@@ -104,12 +104,15 @@ class ColumnProjector:
         return uv.reshape(n, s, 2), valid.reshape(n, s)
 
     def rois(self, xy: np.ndarray) -> list[Roi | None]:
-        """The padded, clipped ROI of each track's column; None when not visible (behind
-        the camera, or the unpadded column does not touch the image).
+        """The padded, clipped ROI of each track's column; None when not visible (see
+        `boxes`)."""
+        return [b[0] if b is not None else None for b in self.boxes(xy)]
 
-        The box spans the pixels (nearest pixel centre) of the column's samples, plus
-        `padding_px` on every side, clipped to the image.
-        """
+    def boxes(self, xy: np.ndarray) -> list[tuple[Roi, Roi] | None]:
+        """(ROI, column) of each track: the column's own box (the pixels, nearest pixel
+        centre, of its samples, clipped to the image) and the ROI, that box plus
+        `padding_px` on every side, clipped; None when not visible (behind the camera,
+        or the unpadded column does not touch the image)."""
         uv, valid = self.project_columns(xy)
         if len(uv) == 0:
             return []
@@ -118,15 +121,19 @@ class ColumnProjector:
         visible = (valid.any(axis=1) & (hi > -0.5).all(axis=1)
                    & (lo < self._last_px).all(axis=1))
         pad = self.geometry.padding_px
-        box = np.concatenate([lo, hi], axis=1)
-        box[~visible] = 0.0
-        box = np.floor(box + 0.5)
+        column = np.concatenate([lo, hi], axis=1)
+        column[~visible] = 0.0
+        column = np.floor(column + 0.5)
+        column[:, 2:] += 1
+        box = column.copy()
         box[:, :2] -= pad
-        box[:, 2:] += pad + 1
+        box[:, 2:] += pad
         np.clip(box, 0, self._size2, out=box)
-        out: list[Roi | None] = []
-        for (x0, y0, x1, y1), vis in zip(box.astype(np.int64).tolist(), visible.tolist(),
-                                         strict=True):
-            out.append(Roi(x0, y0, x1 - x0, y1 - y0) if vis else None)
+        np.clip(column, 0, self._size2, out=column)
+        out: list[tuple[Roi, Roi] | None] = []
+        for (x0, y0, x1, y1), (c0, r0, c1, r1), vis in zip(
+                box.astype(np.int64).tolist(), column.astype(np.int64).tolist(),
+                visible.tolist(), strict=True):
+            out.append((Roi(x0, y0, x1 - x0, y1 - y0), Roi(c0, r0, c1 - c0, r1 - r0))
+                       if vis else None)
         return out
-

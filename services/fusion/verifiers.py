@@ -1,7 +1,8 @@
 """Verifiers: does the image show an obstacle inside a track's ROI?
 
-A verifier takes the decoded grayscale frame (common.imaging.decode_gray) and a ROI and
-returns an edge density and a verdict. Verifiers are registered by name with a factory
+A verifier takes an `Observation` of one track (the decoded grayscale frame, the ROI, the
+projected column, the radar range, and aligned depth when the camera has it) and returns
+a score and a verdict. Verifiers are registered by name with a factory
 that validates their parameters, so that a config selects one (`[fusion.verifier]`) and
 an A/B instance can run another without touching fusion. Every published decision
 records the verifier's name and parameters.
@@ -15,8 +16,8 @@ records the verifier's name and parameters.
   compared with its own threshold. On a lit ROI with little noise it equals
   `edge_density` exactly.
 
-To add one: write a class with `name`, `params()` and `verify()`, a msgspec Struct for its
-parameters, and register a factory with `@register("name")` (see docs/fusion.md).
+To add one: write a class with `name`, `needs_depth`, `params()` and `verify()`, a msgspec
+Struct for its parameters, and register a factory with `@register("name")` (see docs/fusion.md).
 """
 
 import math
@@ -42,21 +43,44 @@ class VerifierConfigError(ValueError):
 
 
 @dataclass(frozen=True, slots=True)
+class Observation:
+    """What the camera shows of one radar track: every verifier's input.
+
+    `gray`: the frame, 2-D uint8 (common.imaging.decode_gray). `roi`: the padded box
+    around the track's projected column, inside the frame and non-empty. `column`: the
+    column's own box (z from 0 to the column height at the track), clipped to the frame.
+    `range_m`: the track's radar range at the frame's time. `depth_m`: depth aligned to
+    `gray` in metres (float32, 0 where there is no return), None when the camera has no
+    depth."""
+
+    gray: np.ndarray
+    roi: Roi
+    column: Roi
+    range_m: float
+    depth_m: np.ndarray | None = None
+
+
+@dataclass(frozen=True, slots=True)
 class GateResult:
-    density: float
+    """`score` is what the verifier compares with its threshold (the edge density for the
+    edge-density verifiers); `detail` says how it got there."""
+
+    score: float
     verified: bool
     detail: dict[str, float] = field(default_factory=dict)
 
 
 class Verifier(Protocol):
     name: str
+    # True: the verifier needs `Observation.depth_m`; without depth it cannot check.
+    needs_depth: bool
 
     def params(self) -> dict[str, ParamValue]:
         """Every parameter, defaults included, as recorded with each decision."""
         ...
 
-    def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
-        """Check `roi` of a 2-D uint8 frame. `roi` is inside the frame and non-empty."""
+    def verify(self, obs: Observation) -> GateResult:
+        """Check one track's observation."""
         ...
 
 
@@ -118,6 +142,7 @@ class EdgeDensity:
     """The paper's gate, on a slice of the frame (no copy)."""
 
     name = "edge_density"
+    needs_depth = False
 
     def __init__(self, p: EdgeDensityParams) -> None:
         self.p = p
@@ -125,8 +150,9 @@ class EdgeDensity:
     def params(self) -> dict[str, ParamValue]:
         return msgspec.structs.asdict(self.p)
 
-    def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
-        patch = gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
+    def verify(self, obs: Observation) -> GateResult:
+        roi = obs.roi
+        patch = obs.gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
         density = cv2.countNonZero(cv2.Canny(patch, self.p.low, self.p.high)) / roi.area
         return GateResult(density, density >= self.p.tau)
 
@@ -176,6 +202,7 @@ class AdaptiveEdgeDensity:
     """Edge density with noise-adapted Canny thresholds and highlight masking."""
 
     name = "adaptive_edge_density"
+    needs_depth = False
 
     def __init__(self, p: AdaptiveEdgeDensityParams) -> None:
         self.p = p
@@ -204,9 +231,9 @@ class AdaptiveEdgeDensity:
             sat = np.where(np.isin(labels, small), np.uint8(255), np.uint8(0))
         return cv2.dilate(sat, self._kernel) if self._kernel is not None else sat
 
-    def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
-        p = self.p
-        patch = gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
+    def verify(self, obs: Observation) -> GateResult:
+        p, roi = self.p, obs.roi
+        patch = obs.gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
         sigma = self.noise_sigma(patch) if roi.w > 1 else 0.0
         low = max(p.low, p.noise_k * sigma)
         high = max(p.high, low * self._ratio)

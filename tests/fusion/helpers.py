@@ -13,7 +13,7 @@ from common.messages import Decision, Header, OutputMode, RadarTrack, RadarTrack
 from services.fusion.core import FusionCore
 from services.fusion.frames import DecodedFrame, FrameFeed
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import GateResult, ParamValue, create
+from services.fusion.verifiers import GateResult, Observation, ParamValue, create
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"
 T0 = 1_800_000_000_000_000_000      # a wall-clock instant (ns)
@@ -58,14 +58,20 @@ class FixedVerifier:
     verdict: bool = True
     density: float = 0.1
     name: str = "fixed"
+    needs_depth: bool = False
     calls: list[Roi] = field(default_factory=list)
 
     def params(self) -> dict[str, ParamValue]:
         return {"verdict": self.verdict}
 
-    def verify(self, gray: np.ndarray, roi: Roi) -> GateResult:
-        self.calls.append(roi)
+    def verify(self, obs: Observation) -> GateResult:
+        self.calls.append(obs.roi)
         return GateResult(self.density, self.verdict)
+
+
+def observe(gray: np.ndarray, roi: Roi, range_m: float = 10.0) -> Observation:
+    """An observation of a ROI whose column is the ROI itself."""
+    return Observation(gray, roi, roi, range_m)
 
 
 def settings(**fusion: Any) -> FusionSettings:

@@ -8,7 +8,7 @@ from common.imaging import decode_gray, encode_jpeg
 from common.messages import encode
 from services.fusion.roi import Roi
 from services.fusion.verifiers import create
-from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
+from tests.fusion.helpers import CAL, CALIBRATION, cycle, observe, track
 from tools import calib_check
 from tools.sim.scenes import Obstacle, Scene, render
 
@@ -32,7 +32,7 @@ def test_draws_rois_and_prints_the_densities_fusion_would_compute(scene_jpeg, tm
     assert "346,155,45,199" in rows["1"] and rows["1"].endswith("verified")
     assert rows["2"].endswith("rejected") and "not visible" in rows["3"]
     gray = decode_gray(scene_jpeg.read_bytes())
-    density = create("edge_density").verify(gray, Roi(346, 155, 45, 199)).density
+    density = create("edge_density").verify(observe(gray, Roi(346, 155, 45, 199))).score
     assert f"{density:.4f}" in rows["1"]
     drawn = cv2.imread(str(out))
     assert drawn is not None

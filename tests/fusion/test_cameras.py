@@ -21,7 +21,7 @@ from services.fusion.frames import FrameDecoder
 from services.fusion.main import build_core
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.shell import FusionShell
-from services.fusion.verifiers import GateResult
+from services.fusion.verifiers import GateResult, Observation
 from tests.fusion.helpers import (
     CAL,
     MS,
@@ -46,7 +46,7 @@ def view(name: str, sees: bool = True, has_frame: bool = True) -> CameraView:
     gray = np.zeros((480, 848), np.uint8)
     return CameraView(name, frame(gray=gray) if has_frame else None,
                       "" if has_frame else "no camera frame received",
-                      [[10.0, 0.0]], [ROI if sees else None])
+                      [[10.0, 0.0]], [ROI if sees else None], [ROI if sees else None])
 
 
 class ByCamera:
@@ -56,9 +56,9 @@ class ByCamera:
         self.verdicts = verdicts       # id(frame.gray) -> (verified, density)
         self.calls: list[int] = []
 
-    def __call__(self, gray: np.ndarray, roi: Roi) -> GateResult:
-        self.calls.append(id(gray))
-        verified, density = self.verdicts[id(gray)]
+    def __call__(self, obs: Observation) -> GateResult:
+        self.calls.append(id(obs.gray))
+        verified, density = self.verdicts[id(obs.gray)]
         return GateResult(density, verified)
 
 
@@ -73,7 +73,7 @@ def test_verified_if_any_camera_verifies_and_the_first_that_does_decides():
     gate = scripted(views, (False, 0.012), (True, 0.06), (True, 0.09))
     check = check_track(0, views, True, gate)
     assert check.verification is Verification.VERIFIED
-    assert check.view is views[1] and check.result is not None and check.result.density == 0.06
+    assert check.view is views[1] and check.result is not None and check.result.score == 0.06
     # The camera after the deciding one is not gated: its verdict could not change it.
     assert len(gate.calls) == 2
     assert [(c.camera, c.verification, c.density) for c in check.per_camera] == [

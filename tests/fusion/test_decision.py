@@ -307,8 +307,8 @@ def test_a_rejected_urgent_track_lets_the_next_threat_decide():
     verdicts = iter([False, True])                 # first call (most urgent) rejects
 
     class Scripted(FixedVerifier):
-        def verify(self, gray, roi):
-            self.calls.append(roi)
+        def verify(self, obs):
+            self.calls.append(obs.roi)
             return GateResult(0.1, next(verdicts))
 
     verifier = Scripted()
@@ -346,9 +346,9 @@ def test_the_command_does_not_depend_on_the_gate_scope():
     class ByRoi(FixedVerifier):
         """A verdict that depends on the ROI only, so both scopes see the same one."""
 
-        def verify(self, gray, roi):
-            self.calls.append(roi)
-            return GateResult(0.1, hash(tuple(roi)) % 2 == 0)
+        def verify(self, obs):
+            self.calls.append(obs.roi)
+            return GateResult(0.1, hash(tuple(obs.roi)) % 2 == 0)
 
     for policy in ("warn", "ignore", "radar_only"):
         scoped = {scope: make_core(ByRoi(), gate_scope=scope,

@@ -16,7 +16,7 @@ from services.fusion.verifiers import (
     VerifierConfigError,
     create,
 )
-from tests.fusion.helpers import CAL, T0, feed, frame, make_core, run, track
+from tests.fusion.helpers import CAL, T0, feed, frame, make_core, observe, run, track
 from tools.sim.render import Light
 from tools.sim.scenario import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
@@ -54,10 +54,10 @@ def test_edge_density_equals_a_direct_opencv_computation_on_the_same_pixels():
     gate = create("edge_density")
     densities = []
     for roi in day_rois():
-        got = gate.verify(gray, roi)
-        assert got.density == direct_density(gray, roi), roi
-        assert got.verified is (got.density >= 0.025)
-        densities.append(got.density)
+        got = gate.verify(observe(gray, roi))
+        assert got.score == direct_density(gray, roi), roi
+        assert got.verified is (got.score >= 0.025)
+        densities.append(got.score)
     # Obstacle ROIs have edges; the numbers are not all zero by accident.
     assert min(densities[:3]) > 0.025
 
@@ -82,16 +82,16 @@ def test_the_papers_colour_path_gives_identical_densities_on_the_same_pixels():
     for roi in day_rois():
         crop = bgr[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
         edges = cv2.Canny(cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY), 40, 120)
-        assert np.count_nonzero(edges) / edges.size == create("edge_density").verify(
-            gray, roi).density
+        ours = create("edge_density").verify(observe(gray, roi)).score
+        assert np.count_nonzero(edges) / edges.size == ours
 
 
 def test_adaptive_verifier_equals_the_paper_gate_on_lit_low_noise_rois():
     gray = gray_of(DAY)
     ed, ad = create("edge_density"), create("adaptive_edge_density")
     for roi in day_rois():
-        a, b = ed.verify(gray, roi), ad.verify(gray, roi)
-        assert (b.density, b.verified) == (a.density, a.verified), roi
+        a, b = ed.verify(observe(gray, roi)), ad.verify(observe(gray, roi))
+        assert (b.score, b.verified) == (a.score, a.verified), roi
         assert b.detail["low"] == 40.0 and b.detail["masked"] == 0.0
 
 
@@ -99,22 +99,22 @@ def test_adaptive_verifier_does_not_mask_a_saturated_object_in_a_lit_roi():
     gray = np.full((480, 848), 120, np.uint8)
     cv2.rectangle(gray, (400, 200), (440, 300), 255, -1)         # a sunlit white panel
     roi = Roi(380, 180, 80, 140)
-    a, b = create("edge_density").verify(gray, roi), create("adaptive_edge_density").verify(
-        gray, roi)
-    assert b.density == a.density and a.verified and b.verified
+    obs = observe(gray, roi)
+    a, b = create("edge_density").verify(obs), create("adaptive_edge_density").verify(obs)
+    assert b.score == a.score and a.verified and b.verified
     assert b.detail["dark"] == 0.0 and b.detail["masked"] == 0.0
     # At night the same panel, saturated in the headlights, is an object, not a lamp (it
     # covers 37 % of the ROI): its edges count. A lamp-sized blob beside it does not.
     gray[:] = 20
     cv2.rectangle(gray, (400, 200), (440, 300), 255, -1)
-    panel = create("adaptive_edge_density").verify(gray, roi)
+    panel = create("adaptive_edge_density").verify(observe(gray, roi))
     assert panel.detail["dark"] == 1.0 and panel.detail["masked"] == 0.0
-    assert panel.density == create("edge_density").verify(gray, roi).density
+    assert panel.score == create("edge_density").verify(observe(gray, roi)).score
     assert panel.verified
     cv2.circle(gray, (395, 190), 3, 255, -1)
-    lamp = create("adaptive_edge_density").verify(gray, roi)
+    lamp = create("adaptive_edge_density").verify(observe(gray, roi))
     assert 0.0 < lamp.detail["masked"] < 0.02
-    assert lamp.density == pytest.approx(panel.density, rel=0.02)
+    assert lamp.score == pytest.approx(panel.score, rel=0.02)
 
 
 @pytest.mark.parametrize("lights", [ONCOMING, LAMPS], ids=["oncoming", "lamps"])
@@ -126,15 +126,15 @@ def test_at_night_the_adaptive_verifier_rejects_empty_road_the_paper_gate_confir
     roi = PROJECTOR.rois(np.array([[15.0, 0.3]]))[0]
     assert roi is not None
     empty = gray_of(Scene(night=True, lights=lights, noise_sigma=6.0, seed=5))
-    a, b = create("edge_density").verify(empty, roi), create("adaptive_edge_density").verify(
-        empty, roi)
+    obs = observe(empty, roi)
+    a, b = create("edge_density").verify(obs), create("adaptive_edge_density").verify(obs)
     assert a.verified and not b.verified
     assert b.detail["low"] > 40.0 and b.detail["masked"] > 0.0 and b.detail["dark"] == 1.0
     # A pedestrian at the same place, lit by the headlights, is confirmed by both.
     person = gray_of(Scene(obstacles=(Obstacle(15, 0.3, ObjectKind.PEDESTRIAN),),
                            night=True, lights=lights, noise_sigma=6.0, seed=5))
-    assert create("edge_density").verify(person, roi).verified
-    assert create("adaptive_edge_density").verify(person, roi).verified
+    assert create("edge_density").verify(observe(person, roi)).verified
+    assert create("adaptive_edge_density").verify(observe(person, roi)).verified
 
 
 def test_oncoming_headlights_before_a_lamp_lit_road_are_a_known_limit():
@@ -145,10 +145,10 @@ def test_oncoming_headlights_before_a_lamp_lit_road_are_a_known_limit():
     roi = PROJECTOR.rois(np.array([[15.0, 0.3]]))[0]
     assert roi is not None
     empty = gray_of(Scene(night=True, lights=ONCOMING + LAMPS, noise_sigma=6.0, seed=5))
-    a, b = create("edge_density").verify(empty, roi), create("adaptive_edge_density").verify(
-        empty, roi)
+    obs = observe(empty, roi)
+    a, b = create("edge_density").verify(obs), create("adaptive_edge_density").verify(obs)
     assert a.verified and b.detail["masked"] > 0.0
-    assert b.density < 0.5 * a.density
+    assert b.score < 0.5 * a.score
     assert b.verified
 
 
@@ -162,10 +162,10 @@ def test_a_near_box_in_the_low_beams_is_a_known_limit_of_the_adaptive_verifier()
     rejected = 0
     for seed in range(1, 7):                          # six box textures
         box = gray_of(Scene(obstacles=(Obstacle(7.0, 0.0),), night=True, seed=seed))
-        a = create("edge_density").verify(box, roi)
-        b = create("adaptive_edge_density").verify(box, roi)
+        a = create("edge_density").verify(observe(box, roi))
+        b = create("adaptive_edge_density").verify(observe(box, roi))
         assert a.verified and b.detail["dark"] == 1.0 and b.detail["masked"] > 0.1
-        assert b.density < 0.3 * a.density
+        assert b.score < 0.3 * a.score
         rejected += not b.verified
     assert rejected >= 4
 
@@ -192,6 +192,7 @@ def test_registry_creates_verifiers_with_defaults_and_validates_params():
 def test_a_new_verifier_is_selected_by_config_without_touching_fusion(monkeypatch):
     class Brightness:
         name = "brightness"
+        needs_depth = False
 
         def __init__(self, level: float) -> None:
             self.level = level
@@ -199,8 +200,9 @@ def test_a_new_verifier_is_selected_by_config_without_touching_fusion(monkeypatc
         def params(self):
             return {"level": self.level}
 
-        def verify(self, gray, roi):
-            mean = float(gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w].mean())
+        def verify(self, obs):
+            roi = obs.roi
+            mean = float(obs.gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w].mean())
             return verifiers.GateResult(mean / 255, mean >= self.level)
 
     monkeypatch.setitem(verifiers._REGISTRY, "brightness",

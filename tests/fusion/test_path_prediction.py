@@ -162,7 +162,7 @@ def test_the_early_command_equals_the_most_severe_of_all_targets_with_prediction
     rng = random.Random(11)
 
     class Coin(FixedVerifier):
-        def verify(self, gray, roi):
+        def verify(self, obs):
             return GateResult(0.1, rng.random() < 0.6)
 
     core = make_core(Coin(), decision={"hold_s": 0.0,

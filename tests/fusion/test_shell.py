@@ -83,8 +83,8 @@ def test_a_failure_half_way_through_a_cycle_sends_one_command_and_counts_it():
     calls = []
 
     class Breaks(FixedVerifier):
-        def verify(self, gray, roi):
-            calls.append(roi)
+        def verify(self, obs):
+            calls.append(obs.roi)
             if len(calls) > 1:
                 raise RuntimeError("bug in a verifier")
             return GateResult(0.001, False)
@@ -103,7 +103,7 @@ def test_a_failure_half_way_through_a_cycle_sends_one_command_and_counts_it():
 
 def test_a_failing_verifier_sends_a_none_command_with_the_error():
     class Broken(FixedVerifier):
-        def verify(self, gray, roi):
+        def verify(self, obs):
             raise RuntimeError("boom")
 
     shell, bus = shell_with(Broken())
