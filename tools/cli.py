@@ -22,6 +22,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+# The extra (pyproject.toml) that installs what a command needs beyond the base install,
+# and the modules of those optional dependencies
+COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion",
+                 "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo"}
+OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
+                    "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense"}
+
+
 def usage() -> str:
     lines = ["usage: aeb <command> [options]", "", "commands:"]
     lines += [f"  {name:<13} {doc}" for name, (_, doc) in COMMANDS.items()]
@@ -37,7 +45,16 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"error: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
         return 2
-    module = importlib.import_module(COMMANDS[name][0])
+    try:
+        module = importlib.import_module(COMMANDS[name][0])
+    except ModuleNotFoundError as exc:
+        missing = (exc.name or "").split(".")[0]
+        if missing not in OPTIONAL_MODULES:
+            raise
+        extra = COMMAND_EXTRA.get(name, OPTIONAL_MODULES[missing])
+        print(f"error: aeb {name} needs the Python package {exc.name!r}, which is not "
+              f"installed: pip install 'aeb-radar-camera[{extra}]'", file=sys.stderr)
+        return 2
     result = module.main(rest)
     return int(result or 0)
 

@@ -197,5 +197,5 @@ def test_the_two_boards_meet_at_ecu_a_and_brake_ages_commands_on_wall_clocks():
     assert b_connect and b_connect <= a_listen
     table = tomllib.loads((DEPLOY / "ecu-a.toml").read_text())
     brake = next(s for s in table["service"] if s["name"] == "brake")
-    assert load_config(DEPLOY.parent / brake["config"], BrakeConfig).brake.age_clock.value \
+    assert load_config(DEPLOY / brake["config"], BrakeConfig).brake.age_clock.value \
         == "wall"

@@ -13,22 +13,20 @@ import shlex
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
-from pathlib import Path
 
 from common.config.loader import ConfigError
 from common.cpu_latency import CpuLatencyRefused, cpu_latency
+from common.resources import SINGLE_HOST_TABLE
 from common.service import stop_event_on_signals
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import load_table, resolve_launches
-
-DEFAULT_TABLE = Path(__file__).resolve().parents[2] / "deploy" / "single-host.toml"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb up", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--table", "-t", default=str(DEFAULT_TABLE),
-                        help="process table (TOML), default deploy/single-host.toml")
+    parser.add_argument("--table", "-t", default=str(SINGLE_HOST_TABLE),
+                        help="process table (TOML), default: the shipped deploy/single-host.toml")
     parser.add_argument("--only", default="",
                         help="comma-separated service names to start (router still starts)")
     parser.add_argument("--no-router", action="store_true",

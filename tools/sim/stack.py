@@ -14,9 +14,10 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-CALIBRATION = REPO / "deploy" / "calibration" / "d435_848x480.toml"
-FUSION_CONFIG = REPO / "deploy" / "fusion.toml"
+from common.resources import DEPLOY, EXAMPLE_CALIBRATION
+
+CALIBRATION = EXAMPLE_CALIBRATION
+FUSION_CONFIG = DEPLOY / "fusion.toml"
 SERVICES = ("radar", "camera", "fusion", "brake")
 # service -> its liveliness token (service, instance)
 TOKENS = {"radar": ("radar", "front"), "camera": ("camera", "front"),
