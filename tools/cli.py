@@ -4,6 +4,7 @@ Commands are imported lazily so that `aeb brake` never pays for OpenCV.
 """
 
 import importlib
+import importlib.metadata
 import sys
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -19,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
+    "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
 }
 
 
@@ -30,8 +32,19 @@ OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejp
                     "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense"}
 
 
+DISTRIBUTION = "aeb-radar-camera"
+
+
+def version() -> str:
+    try:
+        return importlib.metadata.version(DISTRIBUTION)
+    except importlib.metadata.PackageNotFoundError:   # run from a checkout, not installed
+        return "unknown (not installed)"
+
+
 def usage() -> str:
-    lines = ["usage: aeb <command> [options]", "", "commands:"]
+    lines = ["usage: aeb <command> [options]    (aeb --version; aeb <command> --help)", "",
+             "commands:"]
     lines += [f"  {name:<13} {doc}" for name, (_, doc) in COMMANDS.items()]
     return "\n".join(lines)
 
@@ -40,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if not args or args[0] in ("-h", "--help"):
         print(usage())
+        return 0
+    if args[0] in ("-V", "--version"):
+        print(f"aeb {version()} ({DISTRIBUTION}, Python {sys.version.split()[0]})")
         return 0
     name, rest = args[0], args[1:]
     if name not in COMMANDS:

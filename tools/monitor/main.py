@@ -24,7 +24,7 @@ from common.bus import Bus, BusError
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import REGISTRY, KeySpec
-from common.log import setup_logging
+from common.log import add_log_level, setup_logging
 from common.service import stop_event_on_signals
 from tools.monitor.state import MonitorState
 from tools.monitor.view import render_text, snapshot
@@ -55,6 +55,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     where.add_argument("--same-host", dest="same_host", action="store_true", default=None,
                        help="publishers share this host's monotonic clock (hop latency)")
     where.add_argument("--remote", dest="same_host", action="store_false")
+    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -84,7 +85,7 @@ def subscribe_all(bus: Bus, state: MonitorState, lock: threading.Lock) -> list[A
 def main(argv: list[str] | None = None) -> int:
     """Returns 0, or 2 when the bus cannot be opened (bad endpoint, no router in time)."""
     args = parse_args(argv)
-    setup_logging("monitor", "WARNING")
+    setup_logging("monitor", args.log_level)
     connect = tuple(args.connect or ["tcp/127.0.0.1:7447"])
     same_host = args.same_host
     if same_host is None:
