@@ -21,6 +21,7 @@ from common.log import RateLimitedLog, kv
 from common.messages.header import Header
 from common.messages.radar import BusState, RadarStatus, RadarTracks
 from common.messages.vehicle import EgoMotion
+from common.systemd import Watchdog
 from services.radar.ars408.codec import Frame
 from services.radar.ars408.table import classify
 from services.radar.core import CycleResult, RadarCore
@@ -59,8 +60,10 @@ class RadarShell:
         settings: RadarSettings,
         output: RadarOutput,
         port_factory: Callable[[], CanPort] | None = None,
+        watchdog: Watchdog | None = None,
     ) -> None:
         self.settings = settings
+        self.watchdog = watchdog or Watchdog(env={})   # fed by the CAN loop
         self.output = output
         self._factory = port_factory or (lambda: open_port(settings.can, settings.replay))
         self.interface, self.channel = describe(settings.can, settings.replay)
@@ -95,7 +98,7 @@ class RadarShell:
         while not stop.is_set():
             if lost:
                 self._status_tick(mono_ns(), wall_ns())
-                if stop.wait(backoff):
+                if self.watchdog.wait(stop, backoff):
                     break
                 backoff = min(2 * backoff, can_cfg.reopen_backoff_max_s)
             try:
@@ -182,7 +185,7 @@ class RadarShell:
         self._set_bus_state(BusState.ENDED, mono_ns())
         _log.info(kv("replay_ended", cycles=sum(c.cycles_total for c in self.cores.values())))
         if not self.settings.replay.exit_at_end:
-            while not stop.wait(self.settings.status_period_s):
+            while not self.watchdog.wait(stop, self.settings.status_period_s):
                 self._publish_all_status(mono_ns(), wall_ns())
         return 0
 
@@ -299,6 +302,7 @@ class RadarShell:
         return BusState.ACTIVE
 
     def _housekeeping(self, mono: int, wall: int) -> None:
+        self.watchdog.feed()
         for core in self.cores.values():
             results = core.poll(mono)
             if results:
