@@ -1,8 +1,10 @@
 """Zenoh access for every process: open a session from settings, and publish, subscribe,
 query and declare liveliness only through the key registry.
 
-Payloads that do not decode are counted (`Bus.decode_errors`, by key name) and logged
-with a rate limit; they never reach a callback and never raise in Zenoh's threads.
+Every sample is published with its Zenoh encoding, ``application/msgpack;aeb.<Type>``
+(common/messages/schema.py), so that generic tools can tell what it carries. Payloads
+that do not decode are counted (`Bus.decode_errors`, by key name) and logged with a rate
+limit; they never reach a callback and never raise in Zenoh's threads.
 """
 
 import json
@@ -21,6 +23,7 @@ from common.counters import ReasonCounter
 from common.keys import HEALTH, Congestion, KeySpec, Priority
 from common.log import RateLimitedLog
 from common.messages import DecodeError, decode, encode
+from common.messages.schema import zenoh_encoding
 
 T = TypeVar("T", bound=msgspec.Struct)
 
@@ -97,14 +100,21 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
         raise BusError(f"cannot open zenoh session: {exc}") from exc
 
 
+def encoding(spec: KeySpec[Any]) -> zenoh.Encoding | None:
+    """The Zenoh encoding of a key's samples (None for a key without a message)."""
+    return None if spec.msg_type is None else zenoh.Encoding(zenoh_encoding(spec.msg_type))
+
+
 class TypedPublisher(Generic[T]):
-    """A declared publisher for one concrete key, with the registry's QoS."""
+    """A declared publisher for one concrete key, with the registry's QoS and the key's
+    message encoding."""
 
     def __init__(self, session: zenoh.Session, spec: KeySpec[T], key: str) -> None:
         self.spec = spec
         self.key = key
         self._pub = session.declare_publisher(
             key,
+            encoding=encoding(spec),
             priority=_PRIORITY[spec.qos.priority],
             congestion_control=_CONGESTION[spec.qos.congestion],
             express=spec.qos.express,
@@ -270,6 +280,7 @@ class Bus:
         """Answer queries on one concrete key with `reply()`, encoded. A `reply` that
         raises is counted in `callback_errors` and answered with an error reply."""
         key = self.key(spec, **params)
+        reply_encoding = encoding(spec)
 
         def on_query(query: zenoh.Query) -> None:
             try:
@@ -280,7 +291,7 @@ class Bus:
                                error=repr(exc))
                 query.reply_err(f"{type(exc).__name__}: {exc}")
                 return
-            query.reply(key, payload)
+            query.reply(key, payload, encoding=reply_encoding)
 
         return self.session.declare_queryable(key, on_query)
 

@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
     "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
+    "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
 }
 
 
