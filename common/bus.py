@@ -227,6 +227,26 @@ class Bus:
 
         return self.session.declare_subscriber(expr, on_sample)
 
+    def subscribe_expr(
+        self, key_expr: str, callback: Callable[[bytes, str, str, int], None],
+    ) -> zenoh.Subscriber[None]:
+        """Every sample on a key expression, whatever key or message it is:
+        `callback(payload, key, encoding, receipt_mono_ns)` (for tools that watch any key:
+        `aeb echo`, `aeb hz`). `key_expr` is absolute (``aeb/<vehicle>/...``)."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            t = mono_ns()
+            key = str(sample.key_expr)
+            try:
+                callback(sample.payload.to_bytes(), key, str(sample.encoding), t)
+            except Exception as exc:  # a subscriber's bug must not end delivery to the rest
+                self.callback_errors.add("expr")
+                self._rl.error("cb:expr", "callback_failed", key=key, error=repr(exc))
+
+        return self.session.declare_subscriber(key_expr, on_sample)
+
     def subscribe_queued(
         self, spec: KeySpec[Any], capacity: int, **params: str,
     ) -> zenoh.Subscriber[zenoh.Handler[zenoh.Sample]]:

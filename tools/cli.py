@@ -5,6 +5,7 @@ Commands are imported lazily so that `aeb brake` never pays for OpenCV.
 
 import importlib
 import importlib.metadata
+import os
 import sys
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -22,6 +23,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("benchmarks.suite", "the benchmark suite"),
     "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
     "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
+    "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
+    "hz": ("tools.topics.hz", "publish rate of a key: mean, min, max and std of the period"),
 }
 
 
@@ -72,7 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: aeb {name} needs the Python package {exc.name!r}, which is not "
               f"installed: pip install 'aeb-radar-camera[{extra}]'", file=sys.stderr)
         return 2
-    result = module.main(rest)
+    try:
+        result = module.main(rest)
+    except BrokenPipeError:   # the reader went away (`aeb echo KEY | head`): not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return int(result or 0)
 
 

@@ -20,16 +20,11 @@ from typing import Any
 
 import msgspec
 
-from common.keys import REGISTRY, KeySpec
 from common.log import add_log_level, setup_logging
 from common.messages import SCHEMA_VERSION
 from common.messages.schema import json_schema, schema_name
 from tools.sim.messages import SIM_WORLD
-
-
-def message_keys() -> list[KeySpec[Any]]:
-    """Every key that carries a message: the registry's, then the simulator's."""
-    return [s for s in (*REGISTRY.values(), SIM_WORLD) if s.msg_type is not None]
+from tools.topics.catalog import message_keys
 
 
 def document() -> dict[str, Any]:

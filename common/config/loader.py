@@ -41,6 +41,22 @@ def load_config(path: str | Path, config_type: type[T]) -> T:
     return resolve_paths(parse_config(data, config_type, str(p)), p.resolve().parent)
 
 
+def relocated_text(path: str | Path, config_type: type[T]) -> str:
+    """The TOML text of a config file with each relative path in it (its `ConfigPath`
+    values) made absolute, for a copy written into another folder (the simulator's run
+    folder). Raises ConfigError like `load_config`."""
+    p = Path(path)
+    load_config(p, config_type)    # the same errors as loading it
+    text = p.read_text(encoding="utf-8")
+    pairs: list[tuple[str, str]] = []
+    resolve_paths(parse_config(tomllib.loads(text), config_type, str(p)), p.resolve().parent,
+                  pairs)
+    for written, absolute in pairs:
+        for quote in ('"', "'"):
+            text = text.replace(f"{quote}{written}{quote}", f"{quote}{absolute}{quote}")
+    return text
+
+
 def load_config_or_exit(path: str | Path | None, config_type: type[T]) -> T:
     """For a service's main: the config (defaults when `path` is None) or exit code 2."""
     try:

@@ -33,19 +33,22 @@ def resolve_path(value: str, base: Path) -> str:
     return str(path if path.is_absolute() else (base / path).resolve())
 
 
-def resolve_paths(cfg: S, base: Path) -> S:
+def resolve_paths(cfg: S, base: Path, resolved: list[tuple[str, str]] | None = None) -> S:
     """`cfg` with every `ConfigPath` field, at any depth (nested tables, arrays of
-    tables, tagged unions), resolved against `base`."""
+    tables, tagged unions), resolved against `base`; each (as written, resolved) pair
+    that changed is appended to `resolved` when given."""
     changes: dict[str, Any] = {}
     for field in msgspec.structs.fields(type(cfg)):
         value = getattr(cfg, field.name)
         if isinstance(value, str) and _is_path(field.type):
             new: Any = resolve_path(value, base)
+            if resolved is not None and new != value:
+                resolved.append((value, new))
         elif isinstance(value, msgspec.Struct):
-            new = resolve_paths(value, base)
+            new = resolve_paths(value, base, resolved)
         elif isinstance(value, tuple) and any(isinstance(v, msgspec.Struct) for v in value):
-            new = tuple(resolve_paths(v, base) if isinstance(v, msgspec.Struct) else v
-                        for v in value)
+            new = tuple(resolve_paths(v, base, resolved) if isinstance(v, msgspec.Struct)
+                        else v for v in value)
         else:
             continue
         if new != value:

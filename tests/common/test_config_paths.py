@@ -82,3 +82,15 @@ def test_a_config_built_from_a_mapping_keeps_paths_as_given():
 def test_fusions_default_calibration_is_the_shipped_example_from_anywhere(elsewhere):
     assert Path(parse_config({}, FusionConfig).fusion.calibration) == EXAMPLE_CALIBRATION
     assert EXAMPLE_CALIBRATION.is_file()
+
+
+def test_a_relocated_copy_of_a_config_keeps_pointing_at_the_same_files(tmp_path):
+    from common.config.loader import relocated_text
+
+    original = load_config(DEPLOY / "fusion.toml", FusionConfig)
+    (tmp_path / "fusion.toml").write_text(relocated_text(DEPLOY / "fusion.toml", FusionConfig))
+    assert load_config(tmp_path / "fusion.toml", FusionConfig) == original
+    # a naive copy would not: the calibration would be looked for beside the copy
+    (tmp_path / "naive.toml").write_text((DEPLOY / "fusion.toml").read_text())
+    assert load_config(tmp_path / "naive.toml", FusionConfig).fusion.calibration == \
+        str(tmp_path / "calibration/d435_848x480.toml")
