@@ -25,12 +25,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
     "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
     "hz": ("tools.topics.hz", "publish rate of a key: mean, min, max and std of the period"),
+    "can-export": ("tools.can_export", "a CAN log decoded to CSV with the shipped DBC"),
 }
 
 
 # The extra (pyproject.toml) that installs what a command needs beyond the base install,
 # and the modules of those optional dependencies
-COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion",
+COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
                  "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo"}
 OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
                     "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense"}

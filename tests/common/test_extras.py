@@ -2,12 +2,11 @@
 extra (pyproject.toml) is enough for its commands. Each check runs in a fresh
 interpreter in which the optional packages outside the role cannot be imported."""
 
-import subprocess
-import sys
 import tomllib
 
 import pytest
 
+from tests.extras_support import run_without
 from tests.support import REPO
 
 PYPROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())
@@ -16,16 +15,6 @@ MODULE_OF = {"python-can": "can", "numpy": "numpy", "opencv-python-headless": "c
              "simplejpeg": "simplejpeg", "matplotlib": "matplotlib", "cantools": "cantools",
              "pyrealsense2": "pyrealsense2"}
 OPTIONAL = set(MODULE_OF.values())
-
-_BLOCKER = """
-import importlib.abc, sys
-class Block(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path, target=None):
-        if name.split(".")[0] in BLOCKED:
-            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
-sys.meta_path.insert(0, Block())
-"""
-
 
 def _dist(requirement: str) -> str:
     for sep in "<>=[;! ":
@@ -43,12 +32,6 @@ def extra_modules(extra: str) -> set[str]:
         elif _dist(req) in MODULE_OF:
             out.add(MODULE_OF[_dist(req)])
     return out
-
-
-def run_without(blocked: set[str], code: str) -> subprocess.CompletedProcess[str]:
-    script = f"BLOCKED = {sorted(blocked)!r}\n{_BLOCKER}\n{code}"
-    return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=120, cwd=REPO)
 
 
 def test_no_optional_package_is_a_base_dependency():
