@@ -15,6 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "brake": ("services.brake.main", "brake service: commands to the actuator, fail-safe"),
     "sim-actuator": ("tools.sim.actuator", "simulated brake actuator on a serial port"),
     "calib-check": ("tools.calib_check", "draw projected radar tracks over a frame (PNG)"),
+    "calib-capture": ("tools.calib_capture", "save a frame and its nearest radar cycle"),
     "router": ("common.router", "a Zenoh router"),
     "up": ("tools.launch.main", "start the router and services of a process table"),
     "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
