@@ -169,6 +169,7 @@ class RadarSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     tracker: TrackerSettings = msgspec.field(default_factory=TrackerSettings)
     ego_motion: EgoMotionSettings = msgspec.field(default_factory=EgoMotionSettings)
     status_period_s: PositiveFloat = 1.0
+    stats_period_s: NonNegFloat = 10.0    # a radar_stats log line per radar this often (0: never)
     # SCHED_FIFO for the CAN loop (decode, track, publish) and the Zenoh I/O threads
     realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
 
