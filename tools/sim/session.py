@@ -120,7 +120,7 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     from tools.sim.actuator import SimActuator
     from tools.sim.can_links import SlcanPtyLink
 
-    run_dir = out / "run"
+    run_dir = (out / "run").resolve()   # the table and configs name absolute paths
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = out / "stack.log"
     endpoint = f"tcp/127.0.0.1:{port or free_port()}"
