@@ -202,7 +202,7 @@ class Bus:
             try:
                 callback(msg, key)
             except Exception as exc:  # a subscriber's bug must not end delivery to the rest
-                self._callback_failed(spec, key, exc)
+                self._callback_failed(spec.name, key, exc)
 
         return self.session.declare_subscriber(expr, on_sample)
 
@@ -213,19 +213,8 @@ class Bus:
 
         For shells that decode off Zenoh's thread (e.g. JPEG frames) or time the receipt.
         """
-        expr = spec.wildcard(self.vehicle, **params)
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            if sample.kind != zenoh.SampleKind.PUT:
-                return
-            t = mono_ns()
-            key = str(sample.key_expr)
-            try:
-                callback(sample.payload.to_bytes(), key, t)
-            except Exception as exc:  # a subscriber's bug must not end delivery to the rest
-                self._callback_failed(spec, key, exc)
-
-        return self.session.declare_subscriber(expr, on_sample)
+        return self._declare_raw(spec.wildcard(self.vehicle, **params), spec.name,
+                                 lambda s, key, t: callback(s.payload.to_bytes(), key, t))
 
     def subscribe_expr(
         self, key_expr: str, callback: Callable[[bytes, str, str, int], None],
@@ -233,6 +222,13 @@ class Bus:
         """Every sample on a key expression, whatever key or message it is:
         `callback(payload, key, encoding, receipt_mono_ns)` (for tools that watch any key:
         `aeb echo`, `aeb hz`). `key_expr` is absolute (``aeb/<vehicle>/...``)."""
+        return self._declare_raw(key_expr, "expr", lambda s, key, t: callback(
+            s.payload.to_bytes(), key, str(s.encoding), t))
+
+    def _declare_raw(self, expr: str, name: str,
+                     deliver: Callable[[zenoh.Sample, str, int], None]) -> zenoh.Subscriber[None]:
+        """`deliver(sample, key, receipt_mono_ns)` for every PUT; a failure is counted in
+        `callback_errors` under `name` and logged."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind != zenoh.SampleKind.PUT:
@@ -240,12 +236,11 @@ class Bus:
             t = mono_ns()
             key = str(sample.key_expr)
             try:
-                callback(sample.payload.to_bytes(), key, str(sample.encoding), t)
+                deliver(sample, key, t)
             except Exception as exc:  # a subscriber's bug must not end delivery to the rest
-                self.callback_errors.add("expr")
-                self._rl.error("cb:expr", "callback_failed", key=key, error=repr(exc))
+                self._callback_failed(name, key, exc)
 
-        return self.session.declare_subscriber(key_expr, on_sample)
+        return self.session.declare_subscriber(expr, on_sample)
 
     def subscribe_queued(
         self, spec: KeySpec[Any], capacity: int, **params: str,
@@ -279,9 +274,9 @@ class Bus:
                 out.append((msg, key))
         return out
 
-    def _callback_failed(self, spec: KeySpec[Any], key: str, exc: Exception) -> None:
-        self.callback_errors.add(spec.name)
-        self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
+    def _callback_failed(self, name: str, key: str, exc: Exception) -> None:
+        self.callback_errors.add(name)
+        self._rl.error(f"cb:{name}", "callback_failed", key=key, error=repr(exc))
         _log.debug("callback traceback", exc_info=True)
 
     def _decoded(self, spec: KeySpec[Any], msg_type: type[T], sample: zenoh.Sample,

@@ -3,8 +3,9 @@ where the router is, which vehicle, an optional Zenoh client config, and how lon
 for the router."""
 
 import argparse
+import sys
 
-from common.bus import Bus
+from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -36,3 +37,12 @@ def open_tool_bus(args: argparse.Namespace, source: str) -> Bus:
         mode=ZenohMode.CLIENT, connect=endpoints(args), config_file=args.zenoh_config,
         overrides={"connect/timeout_ms": int(args.connect_timeout * 1000)})
     return Bus.open(settings, args.vehicle, source)
+
+
+def open_or_say(args: argparse.Namespace, source: str) -> Bus | None:
+    """`open_tool_bus`, or None once the reason is printed (the tool exits with code 2)."""
+    try:
+        return open_tool_bus(args, source)
+    except (BusError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return None

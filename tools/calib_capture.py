@@ -27,12 +27,11 @@ from pathlib import Path
 
 import msgspec
 
-from common.bus import BusError
 from common.keys import CAMERA_JPEG, RADAR_TRACKS
 from common.log import add_log_level, setup_logging
 from common.messages import CompressedFrame, RadarTracks, encode
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, open_tool_bus
+from tools.bus_args import add_bus_args, open_or_say
 
 _KEEP_CYCLES = 64       # about 5 s of radar cycles to choose from
 
@@ -139,10 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         with lock:
             offer(pairing.add_cycle(tracks))
 
-    try:
-        bus = open_tool_bus(args, "calib-capture")
-    except (BusError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    bus = open_or_say(args, "calib-capture")
+    if bus is None:
         return 2
     with bus:
         camera_key = bus.key(CAMERA_JPEG, camera=args.camera)

@@ -20,12 +20,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from common.bus import Bus, BusError
+from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.keys import REGISTRY, KeySpec
 from common.log import add_log_level, setup_logging
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, endpoints, on_this_host, open_tool_bus
+from tools.bus_args import add_bus_args, endpoints, on_this_host, open_or_say
 from tools.monitor.state import MonitorState
 from tools.monitor.view import render_text, snapshot
 from tools.sim.messages import SIM_WORLD
@@ -82,10 +82,8 @@ def main(argv: list[str] | None = None) -> int:
     setup_logging("monitor", args.log_level)
     connect = endpoints(args)
     same_host = on_this_host(args) if args.same_host is None else args.same_host
-    try:
-        bus = open_tool_bus(args, "monitor")
-    except (BusError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    bus = open_or_say(args, "monitor")
+    if bus is None:
         return 2
     stop = stop_event_on_signals()
     state = MonitorState(same_host)

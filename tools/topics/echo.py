@@ -24,12 +24,11 @@ from typing import Any
 
 import msgspec
 
-from common.bus import BusError
 from common.clock import wall_ns
 from common.log import add_log_level, setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, open_tool_bus
+from tools.bus_args import add_bus_args, open_or_say
 from tools.topics.catalog import Catalog
 
 Sample = tuple[bytes, str, str, int]       # payload, key, encoding, receipt wall ns
@@ -143,10 +142,8 @@ def main(argv: list[str] | None = None) -> int:
             with lock:
                 dropped[0] += 1
 
-    try:
-        bus = open_tool_bus(args, "echo")
-    except (BusError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    bus = open_or_say(args, "echo")
+    if bus is None:
         return 2
     stop = stop_event_on_signals()
     shown = undecodable = 0

@@ -23,12 +23,11 @@ from dataclasses import asdict
 
 import msgspec
 
-from common.bus import BusError
 from common.clock import mono_ns
 from common.log import add_log_level, setup_logging
 from common.messages import Header
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, open_tool_bus
+from tools.bus_args import add_bus_args, open_or_say
 from tools.topics.catalog import Catalog
 from tools.topics.rates import PeriodStats, RateReport
 
@@ -112,10 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     catalog = Catalog(args.vehicle)
     expr = catalog.expression(args.key)
     rates = Rates(args.window, args.clock == "stamp")
-    try:
-        bus = open_tool_bus(args, "hz")
-    except (BusError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    bus = open_or_say(args, "hz")
+    if bus is None:
         return 2
     stop = stop_event_on_signals()
     end = None if args.duration is None else time.monotonic() + args.duration
