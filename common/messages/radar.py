@@ -20,7 +20,7 @@ class BusState(enum.Enum):
     ENDED = "ended"            # a finite replay reached its end
 
 
-class RadarTrack(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarTrack(msgspec.Struct, frozen=True):
     """One Kalman track in the radar frame (x forward, y left, z up; origin at the radar).
 
     `range_rate_mps` is the time derivative of range: negative means closing.
@@ -44,7 +44,7 @@ class RadarTrack(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     obj_class: int = -1        # ARS408 object class (0x60D: 0 point, 1 car, ...), -1 when unknown
 
 
-class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarTracks(msgspec.Struct, frozen=True):
     """Every track of one radar cycle, confirmed or not; published every cycle, also when empty.
 
     `header.stamp_ns` is the wall time the cycle's status frame was received.
@@ -64,7 +64,7 @@ class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     tracks: tuple[RadarTrack, ...]
 
 
-class RadarState(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarState(msgspec.Struct, frozen=True):
     """Decoded 0x201 RadarState."""
 
     nvm_read_ok: bool
@@ -83,7 +83,7 @@ class RadarState(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     rcs_threshold: int
 
 
-class RadarStatus(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarStatus(msgspec.Struct, frozen=True):
     """Radar health: published at 1 Hz and on every change of `ready`, `bus_state` or state."""
 
     header: Header
