@@ -19,6 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
+    "eval": ("tools.eval.cli", "evaluate verifiers on labelled ROIs (the paper's tables)"),
+    "label": ("tools.eval.labelweb", "label ROIs YES / NO in a local web page"),
 }
 
 
