@@ -65,15 +65,16 @@ def channels(path: Path) -> list[Channel]:
 
 def messages(path: Path, topics: list[str], start_ns: int | None = None,
              end_ns: int | None = None) -> Iterator[Message]:
-    """The messages of `topics` in log-time order. Raises RecordingError."""
+    """The messages of `topics` in log-time order, logged from `start_ns` (inclusive) to
+    `end_ns` (exclusive). Raises RecordingError."""
     try:
         f = open(path, "rb")  # noqa: SIM115 (closed in finally: a generator)
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read: {exc.strerror}") from exc
     try:
         reader = make_reader(f)
-        for schema, ch, msg in reader.iter_messages(topics=topics, start_time=start_ns,
-                                                    end_time=end_ns, log_time_order=True):
+        for schema, ch, msg in reader.iter_messages(topics=topics, starting_at=start_ns,
+                                                    ending_before=end_ns, log_time_order=True):
             if schema is None or ch.message_encoding != MESSAGE_ENCODING:
                 continue
             yield Message(Channel(ch.topic, schema.name[len(SCHEMA_PREFIX):]),
