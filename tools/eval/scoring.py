@@ -110,10 +110,12 @@ class Scorer:
 
 
 def lighting(gray: np.ndarray) -> tuple[str, float]:
-    """(day | dusk | night, the frame's median grey level); see DUSK_P90."""
-    cum = np.cumsum(cv2.calcHist([gray], [0], None, [256], [0, 256]).ravel())
-    median = float(np.searchsorted(cum, gray.size * 0.5))
-    p90 = float(np.searchsorted(cum, gray.size * 0.9))
+    """(day | dusk | night, the frame's median grey level); see DUSK_P90. Every 4th pixel
+    of every 4th row is plenty for a histogram and costs a sixteenth."""
+    sample = np.ascontiguousarray(gray[::4, ::4])
+    cum = np.cumsum(cv2.calcHist([sample], [0], None, [256], [0, 256]).ravel())
+    median = float(np.searchsorted(cum, sample.size * 0.5))
+    p90 = float(np.searchsorted(cum, sample.size * 0.9))
     if median < NIGHT_MEDIAN:
         return "night", median
     return ("dusk" if p90 < DUSK_P90 else "day"), median
