@@ -270,8 +270,7 @@ def _report(args: argparse.Namespace, records: list[RoiRecord],
     name = "compare" if compare else "report"
     if compare:
         evs = list(result["verifiers"].values())
-        text = tables.compare_table(evs) + "\n\n" + "\n\n".join(
-            tables.negative_kinds_table(ev) for ev in evs) + "\n"
+        text = tables.compare_table(evs) + "\n\n" + tables.compare_kinds_table(evs) + "\n"
     else:
         text = tables.full_report(result, args.stratum)
     print(text)

@@ -49,25 +49,24 @@ def _frame_message(ref: FrameRef) -> CompressedFrame:
     raise FrameLoadError(f"{ref.path}: no message on {ref.topic} at {ref.log_time_ns}")
 
 
-def load_gray(ref: FrameRef) -> np.ndarray:
-    """Raises FrameLoadError."""
+def _load(ref: FrameRef, colour: bool) -> np.ndarray:
     if ref.kind == "image":
-        return load_image(ref.path, ref.scale, ref.jpeg_quality)[0]
+        gray, bgr = load_image(ref.path, ref.scale, ref.jpeg_quality)
+        return bgr if colour else gray
     if ref.kind == "mcap":
+        jpeg = _frame_message(ref).jpeg
         try:
-            return decode_gray(_frame_message(ref).jpeg)
+            return np.ascontiguousarray(decode_bgr(jpeg)) if colour else decode_gray(jpeg)
         except ImageDecodeError as exc:
             raise FrameLoadError(f"{ref.path}: {exc}") from exc
     raise FrameLoadError(f"no frame for a record of kind {ref.kind!r}")
+
+
+def load_gray(ref: FrameRef) -> np.ndarray:
+    """The grey frame the verifiers saw. Raises FrameLoadError."""
+    return _load(ref, colour=False)
 
 
 def load_bgr(ref: FrameRef) -> np.ndarray:
     """The frame in colour for people (never for verifiers). Raises FrameLoadError."""
-    if ref.kind == "image":
-        return load_image(ref.path, ref.scale, ref.jpeg_quality)[1]
-    if ref.kind == "mcap":
-        try:
-            return np.ascontiguousarray(decode_bgr(_frame_message(ref).jpeg))
-        except ImageDecodeError as exc:
-            raise FrameLoadError(f"{ref.path}: {exc}") from exc
-    raise FrameLoadError(f"no frame for a record of kind {ref.kind!r}")
+    return _load(ref, colour=True)

@@ -215,6 +215,7 @@ def _negative_kinds(sel: Labelled, groups: list[str] | None, tau: float | None,
             r = metrics.roc(sel.scores[idx], sel.truth[idx])
             row["roc"] = {"fpr": r.fpr.tolist(), "tpr": r.tpr.tolist()}
         row["pass_rate_operating"] = float(sel.verdicts[neg].mean())
+        row["operating"] = metrics.confusion(sel.verdicts[idx], sel.truth[idx]).as_dict()
         if tau is not None:
             row["pass_rate_tau"] = float((sel.scores[neg] >= tau).mean())
         row["pass_rate_sweep"] = {f"{t:g}": float((sel.scores[neg] >= t).mean())

@@ -132,7 +132,7 @@ def class_table(ev: dict[str, Any]) -> str:
 def compare_table(evs: Sequence[dict[str, Any]]) -> str:
     """Several verifiers on the same ROIs."""
     kinds = sorted({k["kind"] for ev in evs for k in ev["negative_kinds"]})
-    header = ["verifier", "n YES/NO", "AUC [CI]", "recall", "precision", "FPR",
+    header = ["verifier", "n YES/NO", "n/a", "AUC [CI]", "recall", "precision", "FPR",
               "Youden τ", "recall@Y", "FPR@Y", "µs/ROI"] + [f"AUC vs {k}" for k in kinds]
     rows = []
     for ev in evs:
@@ -140,14 +140,31 @@ def compare_table(evs: Sequence[dict[str, Any]]) -> str:
         y = ev.get("youden") or {}
         t = ev["timing_us"]["roi"]
         by_kind = {k["kind"]: k for k in ev["negative_kinds"]}
-        rows.append([ev["verifier"], f"{ev['n_yes']}/{ev['n_no']}", _auc_text(ev),
+        rows.append([ev["verifier"], f"{ev['n_yes']}/{ev['n_no']}",
+                     str(ev["counts"]["not_applicable"]), _auc_text(ev),
                      num(op["recall"]), num(op["precision"]), num(op["fpr"]),
                      num(y.get("tau"), 4), num(y.get("recall")), num(y.get("fpr")),
                      "-" if t is None else f"{t['mean']:.0f}"]
                     + [_auc_text(by_kind[k]) if k in by_kind else "-" for k in kinds])
     return ("Verifiers side by side on the same ROIs (recall, precision, FPR at each "
-            "verifier's own operating point; @Y: at its Youden-optimal threshold)\n\n"
+            "verifier's own operating point; @Y: at its Youden-optimal threshold; n/a: "
+            "ROIs it cannot judge, e.g. no depth)\n\n"
             + _md(header, rows))
+
+
+def compare_kinds_table(evs: Sequence[dict[str, Any]]) -> str:
+    """Every verifier against each kind of negative: AUC, and at its operating point
+    recall, the share of those negatives that pass, precision against them alone."""
+    rows = []
+    for ev in evs:
+        for k in ev["negative_kinds"]:
+            op = k["operating"]
+            rows.append([ev["verifier"], k["kind"], f"{k['n_yes']}/{k['n_no']}", _auc_text(k),
+                         num(op["recall"]), num(op["fpr"]), num(op["precision"])])
+    return ("Per kind of negative (all YES against the NOs of that kind; at each "
+            "verifier's operating point)\n\n"
+            + _md(["verifier", "negatives", "n YES/NO", "AUC [CI]", "recall",
+                   "negatives passing", "precision"], rows))
 
 
 def full_report(result: dict[str, Any], stratum: str | None = None) -> str:
@@ -156,6 +173,7 @@ def full_report(result: dict[str, Any], stratum: str | None = None) -> str:
     evs = list(result["verifiers"].values())
     if len(evs) > 1:
         parts.append(compare_table(evs))
+        parts.append(compare_kinds_table(evs))
     for ev in evs:
         parts.append(f"## {ev['verifier']} {ev['params']}")
         parts.append(table_iii(ev))

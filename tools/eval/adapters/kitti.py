@@ -9,6 +9,7 @@ rectification, P2 = K [I | K^-1 p]), R0_rect and Tr_velo_to_cam. The sensor fram
 Velodyne's (x forward, y left, z up); objects are converted into it.
 """
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -61,9 +62,23 @@ def rect_to_velodyne(points_rect: np.ndarray, calib: dict[str, np.ndarray]) -> n
     return (np.asarray(points_rect) - r0 @ tr[:, 3]) @ rot
 
 
-def read_labels(path: Path, calib: dict[str, np.ndarray]) -> tuple[list[Box3D], list[Box2D]]:
-    """(objects in the Velodyne frame, DontCare regions). Raises KittiFormatError."""
-    boxes, dontcare = [], []
+@dataclass(frozen=True)
+class LabelRow:
+    """One object line of a KITTI-format label file, as written."""
+
+    obj_class: str
+    bbox: Box2D
+    h: float
+    w: float
+    length: float
+    location: np.ndarray        # the camera frame
+    rotation: float
+
+
+def read_label_rows(path: Path) -> tuple[list[LabelRow], list[Box2D]]:
+    """(object lines, DontCare regions) of a KITTI-format label file (VoD's has a score
+    after the 15 fields). Raises KittiFormatError naming the line."""
+    rows, dontcare = [], []
     for i, line in enumerate(path.read_text().splitlines(), 1):
         f = line.split()
         if not f:
@@ -75,17 +90,27 @@ def read_labels(path: Path, calib: dict[str, np.ndarray]) -> tuple[list[Box3D], 
             if f[0] == DONT_CARE:
                 dontcare.append(bbox)
                 continue
-            h, w, length = float(f[8]), float(f[9]), float(f[10])
-            x, y, z, ry = float(f[11]), float(f[12]), float(f[13]), float(f[14])
+            rows.append(LabelRow(f[0], bbox, float(f[8]), float(f[9]), float(f[10]),
+                                 np.array([float(v) for v in f[11:14]]), float(f[14])))
         except ValueError as exc:
             raise KittiFormatError(f"{path}:{i}: {exc}") from exc
+    return rows, dontcare
+
+
+def read_labels(path: Path, calib: dict[str, np.ndarray]) -> tuple[list[Box3D], list[Box2D]]:
+    """(objects in the Velodyne frame, DontCare regions). Raises KittiFormatError."""
+    rows, dontcare = read_label_rows(path)
+    boxes = []
+    for row in rows:
         # Bottom corners in the rectified camera frame (KITTI's devkit convention).
-        xs = np.array([length, length, -length, -length]) / 2.0
-        zs = np.array([w, -w, -w, w]) / 2.0
-        c, s = np.cos(ry), np.sin(ry)
+        xs = np.array([row.length, row.length, -row.length, -row.length]) / 2.0
+        zs = np.array([row.w, -row.w, -row.w, row.w]) / 2.0
+        c, s = np.cos(row.rotation), np.sin(row.rotation)
+        x, y, z = row.location
         corners = np.stack([c * xs + s * zs + x, np.full(4, y), -s * xs + c * zs + z], 1)
         velo = rect_to_velodyne(corners, calib)
-        boxes.append(Box3D(f[0], velo[:, :2], float(velo[:, 2].mean()), h, bbox))
+        boxes.append(Box3D(row.obj_class, velo[:, :2], float(velo[:, 2].mean()), row.h,
+                           row.bbox))
     return boxes, dontcare
 
 

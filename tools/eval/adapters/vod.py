@@ -22,6 +22,7 @@ from tools.eval.adapters.kitti import (
     find_image,
     image_size,
     read_calib,
+    read_label_rows,
     read_velodyne,
 )
 from tools.eval.adapters.paper_rois import Box2D, Box3D, DatasetFrame, orthonormal
@@ -40,30 +41,16 @@ def _camera_from(calib: dict[str, np.ndarray], path: Path) -> tuple[np.ndarray, 
 
 def read_labels(path: Path, r: np.ndarray, t: np.ndarray) -> tuple[list[Box3D], list[Box2D]]:
     """Objects in the lidar frame and DontCare regions. Raises KittiFormatError."""
-    boxes, dontcare = [], []
-    for i, line in enumerate(path.read_text().splitlines(), 1):
-        f = line.split()
-        if not f:
-            continue
-        if len(f) < 15:
-            raise KittiFormatError(f"{path}:{i}: expected 15 or 16 fields, got {len(f)}")
-        try:
-            bbox = (float(f[4]), float(f[5]), float(f[6]), float(f[7]))
-            if f[0] == "DontCare":
-                dontcare.append(bbox)
-                continue
-            h, w, length = float(f[8]), float(f[9]), float(f[10])
-            loc = np.array([float(f[11]), float(f[12]), float(f[13])])
-            rot = float(f[14])
-        except ValueError as exc:
-            raise KittiFormatError(f"{path}:{i}: {exc}") from exc
-        centre = (loc - t) @ r                    # lidar frame: bottom centre
-        yaw = -(rot + np.pi / 2)
+    rows, dontcare = read_label_rows(path)
+    boxes = []
+    for row in rows:
+        centre = (row.location - t) @ r           # lidar frame: bottom centre
+        yaw = -(row.rotation + np.pi / 2)
         c, s = np.cos(yaw), np.sin(yaw)
-        xs = np.array([length, length, -length, -length]) / 2.0
-        ys = np.array([w, -w, -w, w]) / 2.0
+        xs = np.array([row.length, row.length, -row.length, -row.length]) / 2.0
+        ys = np.array([row.w, -row.w, -row.w, row.w]) / 2.0
         corners = np.stack([c * xs - s * ys + centre[0], s * xs + c * ys + centre[1]], 1)
-        boxes.append(Box3D(f[0], corners, float(centre[2]), h, bbox))
+        boxes.append(Box3D(row.obj_class, corners, float(centre[2]), row.h, row.bbox))
     return boxes, dontcare
 
 
