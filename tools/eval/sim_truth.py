@@ -44,9 +44,9 @@ class Truth:
 
 
 def _footprints(world: SimWorld, stamp_ns: int) -> list[tuple[str, np.ndarray, float]]:
-    """(kind, footprint in the radar frame, height) of every object at `stamp_ns`."""
-    if not world.active:
-        return []
+    """(kind, footprint in the radar frame, height) of every object at `stamp_ns`: the
+    objects the camera renders, also in the moments after a run ended (the radar's
+    tracks of them coast on; between runs the world has none)."""
     bodies, ego_x = bodies_at(world, stamp_ns)
     return [(b.kind.value, b.corners() - np.array([ego_x, 0.0]), b.height_m) for b in bodies]
 
