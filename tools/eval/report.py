@@ -16,6 +16,7 @@ import numpy as np
 from tools.eval import metrics
 from tools.eval.labels import AMBIGUOUS, NO, YES
 from tools.eval.records import RoiRecord
+from tools.eval.scoring import PAPER_GATE
 
 PAPER_SWEEP = (0.010, 0.025, 0.050, 0.080, 0.100, 0.150)
 PAPER_TAU = 0.025
@@ -279,7 +280,9 @@ def evaluate_all(records: Sequence[RoiRecord], labels: dict[str, str],
                            "labels": {v: sum(1 for x in labels.values() if x == v)
                                       for v in (YES, NO, AMBIGUOUS)},
                            "rois": len(records)}
-    for name, params in verifiers.items():
+    # The paper's gate first: the reference every other verifier is compared with.
+    for name in sorted(verifiers, key=lambda n: (n != PAPER_GATE, n)):
+        params = verifiers[name]
         try:
             out["verifiers"][name] = evaluate(records, labels, name, params, settings)
         except ValueError as exc:
