@@ -103,7 +103,7 @@ def test_kitti_negatives_background_rows_and_lidar_structure(kitti_split):
             assert x + w - 1 < bx0 or x > bx1 or y + h - 1 < by0 or y > by1
     # The wall is the only lidar structure: ground, the boxes' own points are not.
     lidar = [r for r in recs if r.kind == "lidar" and r.frame == "000000"]
-    assert len(lidar) == 1
+    assert len(lidar) == 1 and not lidar[0].object_in_view
     wall_u = (KITTI_P2[0, 0] * 6.0 / 9.0 + KITTI_P2[0, 2] + 0.5) * sc.sx - 0.5
     assert lidar[0].roi[0] < wall_u < lidar[0].roi[0] + lidar[0].roi[2]
     assert lidar[0].range_m == pytest.approx(np.hypot(6.0, 9.0), abs=0.3)

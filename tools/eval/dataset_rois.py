@@ -116,6 +116,7 @@ def dataset_records(kind: str, root: Path, frame_ids: list[str], s: DatasetSetti
                 column=c.column, range_m=c.range_m, kind=c.kind, frame_ref=ref,
                 obj_class=c.obj_class, truth=c.truth, density=scorer.density(obs, scores),
                 lighting=light, frame_median=median, has_depth=depth is not None,
+                object_in_view=c.object_in_view,
                 scores=scores, frame_canny_us=frame_us))
             _bump(counters, f"rois_{c.kind}")
     return out

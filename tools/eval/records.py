@@ -70,6 +70,7 @@ class RoiRecord(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     lighting: str = ""                  # day | dusk | night (frame median grey level)
     frame_median: float = 0.0
     has_depth: bool = False
+    object_in_view: bool = False        # a negative with a labelled object in its column
     scores: dict[str, Score] = msgspec.field(default_factory=dict)
     frame_canny_us: float | None = None  # full-frame Canny, on one record per frame
 

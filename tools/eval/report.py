@@ -22,6 +22,7 @@ PAPER_SWEEP = (0.010, 0.025, 0.050, 0.080, 0.100, 0.150)
 PAPER_TAU = 0.025
 # Range bands of the strata: near (the paper's 8 m example), middle, far.
 RANGE_BANDS = ((3.0, 8.0), (8.0, 15.0), (15.0, 25.0))
+CLEAR_VIEW = ", clear view"
 
 
 @dataclass(frozen=True)
@@ -203,9 +204,14 @@ def _negative_kinds(sel: Labelled, groups: list[str] | None, tau: float | None,
     """Every YES against the NOs of one kind: how well the verifier tells obstacles from
     that kind of negative, and how many of them pass."""
     kinds = sorted({r.kind for r, y in zip(sel.records, sel.truth, strict=True) if not y})
+    # A kind whose negatives sometimes have an object in view is also judged on the others.
+    clear = [f"{k}{CLEAR_VIEW}" for k in kinds
+             if any(r.object_in_view for r in sel.records if r.kind == k)]
     out = []
-    for kind in kinds:
-        idx = np.array([bool(y) or r.kind == kind
+    for kind in kinds + clear:
+        base = kind.removesuffix(CLEAR_VIEW)
+        only_clear = kind != base
+        idx = np.array([bool(y) or (r.kind == base and not (only_clear and r.object_in_view))
                         for r, y in zip(sel.records, sel.truth, strict=True)])
         neg = idx & ~sel.truth
         g = None if groups is None else [k for k, keep in zip(groups, idx, strict=True)

@@ -98,6 +98,9 @@ class Candidate:
     range_m: float
     obj_class: str
     truth: str
+    # A negative whose column meets a labelled object's image box: an object stands in
+    # front of (or behind) the sensor point, at another range.
+    object_in_view: bool = False
 
 
 @dataclass
@@ -308,6 +311,7 @@ def point_candidates(frame: DatasetFrame, sc: Scaled, points: np.ndarray, kind: 
     grid[gx, gy] = 255
     _, labels = cv2.connectedComponents(grid, connectivity=8)
     cluster = labels[gx, gy]
+    boxes2d = [sc.box(b.bbox) for b in frame.boxes]
     out: list[Candidate] = []
     for c in np.unique(cluster):
         members = idx[cluster == c]
@@ -317,5 +321,9 @@ def point_candidates(frame: DatasetFrame, sc: Scaled, points: np.ndarray, kind: 
         got = projector(frame, sc, float(ground_z[j]), s).boxes(p[j:j + 1, :2])[0]
         if got is None:
             continue
-        out.append(Candidate(kind, len(out), got[0], got[1], float(rng_m[j]), "", "NO"))
+        cx0, cy0, cw, ch = got[1]
+        in_view = any(not (cx0 + cw - 1 < bx0 or cx0 > bx1 or cy0 + ch - 1 < by0 or cy0 > by1)
+                      for bx0, by0, bx1, by1 in boxes2d)
+        out.append(Candidate(kind, len(out), got[0], got[1], float(rng_m[j]), "", "NO",
+                             in_view))
     return out
