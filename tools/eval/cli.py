@@ -17,13 +17,15 @@ data sets get the paper's construction at its pixel scale (--focal-px). Data set
 simulator recordings are labelled by their ground truth; other recordings by `aeb label`.
 
 Exit codes: 0 done, 1 some source failed (the others are evaluated), 2 bad arguments or
-no usable input.
+no usable input, 130 interrupted (SIGINT, SIGTERM).
 """
 
 import argparse
 import json
 import os
+import signal
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -302,8 +304,15 @@ def _paper(args: argparse.Namespace) -> int:
     return main(argv)
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if threading.current_thread() is threading.main_thread():
+        # SIGTERM stops like Ctrl-C: the worker processes are stopped, not left behind.
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         if args.command == "paper":
             return _paper(args)
@@ -332,6 +341,9 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("\ninterrupted: nothing written for the unfinished step", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

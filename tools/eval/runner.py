@@ -10,10 +10,12 @@ project.
 """
 
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
@@ -163,16 +165,55 @@ class Progress:
         self.out.flush()
 
 
+def _worker_start() -> None:
+    """Worker start-up: Ctrl-C is for the parent, which stops the workers itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def _stop_deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM wait until the block is done, then raise KeyboardInterrupt: a
+    worker being handed its start-up data must not be left reading half of it. (Python
+    runs signal handlers in the main thread, whichever thread the kernel picked.)"""
+    got: list[int] = []
+
+    def note(signum: int, frame: object) -> None:
+        got.append(signum)
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+    if got:
+        raise KeyboardInterrupt
+
+
+def _indexed(item: tuple[int, Task]) -> tuple[int, TaskResult]:
+    return item[0], run_task(item[1])
+
+
 def _local(tasks: list[Task], jobs: int) -> Iterator[tuple[int, TaskResult]]:
     if jobs <= 1 or len(tasks) == 1:
         for i, t in enumerate(tasks):
             yield i, run_task(t)
         return
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)),
-                             mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_task, t): i for i, t in enumerate(tasks)}
-        for fut in as_completed(futures):
-            yield futures[fut], fut.result()
+    pool = None
+    try:
+        with _stop_deferred():
+            pool = get_context("spawn").Pool(min(jobs, len(tasks)),
+                                             initializer=_worker_start)
+        yield from pool.imap_unordered(_indexed, list(enumerate(tasks)))
+        pool.close()
+    finally:
+        # Done, interrupted or failed: no worker outlives the call.
+        if pool is not None:
+            pool.terminate()
+            pool.join()
 
 
 def _dask(tasks: list[Task], scheduler: str) -> Iterator[tuple[int, TaskResult]]:
