@@ -8,7 +8,8 @@ Sections (each a module with `run(quick, out_dir) -> list[Figure]`):
 - brake: command receipt -> serial write;
 - latency: last CAN frame -> brake bytes on the actuator, per stage, beside both floors
   (same-transport relays, bare Zenoh hops);
-- cost: CPU share and memory of each service while demo scenarios run.
+- cost: CPU share and memory of each service while demo scenarios run;
+- eval: `aeb eval` on a recording, ROIs/s per core, the paper's 131,603 frames projected.
 """
 
 import argparse
@@ -29,6 +30,7 @@ SECTIONS: dict[str, str] = {
     "brake": "benchmarks.bench_brake",
     "latency": "benchmarks.bench_latency",
     "cost": "benchmarks.bench_cost",
+    "eval": "benchmarks.bench_eval",
 }
 
 

@@ -27,6 +27,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
     "hz": ("tools.topics.hz", "publish rate of a key: mean, min, max and std of the period"),
     "can-export": ("tools.can_export", "a CAN log decoded to CSV with the shipped DBC"),
+    "eval": ("tools.eval.cli", "evaluate verifiers on labelled ROIs (the paper's tables)"),
+    "label": ("tools.eval.labelweb", "label ROIs YES / NO in a local web page"),
 }
 
 

@@ -1,0 +1,72 @@
+"""The grey frame a record's verifiers saw, rebuilt from its `FrameRef`, and the colour
+frame shown to a labeller. Data-set images are read in place.
+
+Images (data sets) are resized to the evaluation's pixel scale with INTER_AREA and,
+with a JPEG quality, coded and decoded through common.imaging as the camera service
+would publish them, so that a density means what it means in fusion.
+"""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
+from common.messages import CompressedFrame, DecodeError, decode
+from tools.eval.mcap_io import RecordingError, messages
+from tools.eval.records import FrameRef
+
+
+class FrameLoadError(ValueError):
+    """The frame of a record cannot be rebuilt; the message says why."""
+
+
+def resized_size(width: int, height: int, scale: float) -> tuple[int, int]:
+    return max(1, round(width * scale)), max(1, round(height * scale))
+
+
+def load_image(path: str | Path, scale: float, jpeg_quality: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(grey, BGR) of an image file at `scale`. Raises FrameLoadError."""
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise FrameLoadError(f"{path}: not an image OpenCV can read")
+    if scale != 1.0:
+        bgr = cv2.resize(bgr, resized_size(bgr.shape[1], bgr.shape[0], scale),
+                         interpolation=cv2.INTER_AREA)
+    if jpeg_quality > 0:
+        jpeg = encode_jpeg(bgr, jpeg_quality)
+        return decode_gray(jpeg), np.ascontiguousarray(decode_bgr(jpeg))
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), bgr
+
+
+def _frame_message(ref: FrameRef) -> CompressedFrame:
+    try:
+        for m in messages(Path(ref.path), [ref.topic], ref.log_time_ns, ref.log_time_ns + 1):
+            return decode(m.data, CompressedFrame)
+    except (RecordingError, DecodeError) as exc:
+        raise FrameLoadError(str(exc)) from exc
+    raise FrameLoadError(f"{ref.path}: no message on {ref.topic} at {ref.log_time_ns}")
+
+
+def _load(ref: FrameRef, colour: bool) -> np.ndarray:
+    if ref.kind == "image":
+        gray, bgr = load_image(ref.path, ref.scale, ref.jpeg_quality)
+        return bgr if colour else gray
+    if ref.kind == "mcap":
+        jpeg = _frame_message(ref).jpeg
+        try:
+            return np.ascontiguousarray(decode_bgr(jpeg)) if colour else decode_gray(jpeg)
+        except ImageDecodeError as exc:
+            raise FrameLoadError(f"{ref.path}: {exc}") from exc
+    raise FrameLoadError(f"no frame for a record of kind {ref.kind!r}")
+
+
+def load_gray(ref: FrameRef) -> np.ndarray:
+    """The grey frame the verifiers saw. Raises FrameLoadError."""
+    return _load(ref, colour=False)
+
+
+def load_bgr(ref: FrameRef) -> np.ndarray:
+    """The frame in colour for people (never for verifiers). Raises FrameLoadError."""
+    return _load(ref, colour=True)
