@@ -66,6 +66,12 @@ def release_freed_memory() -> None:
             trim(0)
 
 
+def _grey_bgr(levels: np.ndarray) -> np.ndarray:
+    """(H, W) grey levels, saturated to uint8, as an (H, W, 3) BGR image."""
+    grey = np.clip(levels, 0, 255).astype(np.uint8)
+    return np.repeat(grey[..., None], 3, axis=2)
+
+
 class Renderer:
     """Renders frames for one calibration. Building it precomputes the per-pixel ground
     geometry and the textures (about a second); `render` then costs a few ms."""
@@ -103,15 +109,20 @@ class Renderer:
     def _make_noise(self) -> None:
         """Sensor noise, the same on the three channels, added and subtracted with
         saturation: a few frames drawn once and used in turn, so that rendering keeps up
-        with 30 fps."""
+        with 30 fps.
+
+        It is drawn again at every scene, in the camera's capture thread: the float
+        draws stay one channel (a few MB) and are given back at once, or that thread's
+        heap would keep ~40 MB for the process's life.
+        """
         rng = np.random.default_rng((self._seed, 1))
         self._noise = []
         self._frame = 0
         for _ in range(_NOISE_BANK if self.look.noise > 0 else 0):
-            n = np.repeat(np.round(rng.normal(0, self.look.noise, (self.height, self.width, 1))),
-                          3, axis=2)
-            self._noise.append((np.clip(n, 0, 255).astype(np.uint8),
-                                np.clip(-n, 0, 255).astype(np.uint8)))
+            n = np.round(rng.normal(0, self.look.noise, (self.height, self.width)))
+            self._noise.append((_grey_bgr(n), _grey_bgr(-n)))
+            del n
+        release_freed_memory()
 
     # -- static geometry ----------------------------------------------------------------
 
