@@ -84,6 +84,7 @@ class Renderer:
         self.cam_pos = -calibration.r.T @ calibration.t      # camera centre, ground frame
         self._rng = np.random.default_rng(seed)
         self._seed = seed
+        self._night_xy: tuple[np.ndarray, np.ndarray] | None = None
         self._ground_geometry()
         self._textures()
         self._sprites: dict[tuple[int, str, str], sprites.Sprite] = {}
@@ -126,7 +127,10 @@ class Renderer:
 
     # -- static geometry ----------------------------------------------------------------
 
-    def _ground_geometry(self) -> None:
+    def _ground_hits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per pixel, float64: whether its ray meets the ground within MAX_GROUND_M, where
+        (x, y in the ego's frame, 0 where it does not), how far from the camera, and the
+        ray itself in the ground frame ((H, W, 3))."""
         h, w = self.height, self.width
         u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
         pix = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
@@ -139,11 +143,22 @@ class Renderer:
         gx = self.cam_pos[0] + s * rays[..., 0]
         gy = self.cam_pos[1] + s * rays[..., 1]
         dist = np.hypot(gx - self.cam_pos[0], gy - self.cam_pos[1])
-        self.ground = hits & (dist < MAX_GROUND_M)
-        gx = np.where(self.ground, gx, 0.0)
-        gy = np.where(self.ground, gy, 0.0)
-        # Where each ground pixel is, in the ego's frame (beams and lamp pools at night).
-        self._ground_xy = (gx.astype(np.float32), gy.astype(np.float32))
+        ground = hits & (dist < MAX_GROUND_M)
+        return ground, np.where(ground, gx, 0.0), np.where(ground, gy, 0.0), dist, rays
+
+    def _ground_xy(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where each ground pixel is, float32 (the beams and lamp pools at night).
+        Computed again on the first night frame rather than kept from the geometry: the
+        simulator's camera draws day and dusk only, and would hold 3 MB for nothing."""
+        if self._night_xy is None:
+            _, gx, gy, _, _ = self._ground_hits()
+            self._night_xy = (gx.astype(np.float32), gy.astype(np.float32))
+            release_freed_memory()
+        return self._night_xy
+
+    def _ground_geometry(self) -> None:
+        self.ground, gx, gy, dist, rays = self._ground_hits()
+        dz = rays[..., 2]
         # Texture coordinates (texels of level 0): column from +y (left) to -y.
         col0 = ((sprites.ROAD_HALF_WIDTH_M - gy) / sprites.ROAD_RES_M).astype(np.float32)
         row0 = (gx / sprites.ROAD_RES_M).astype(np.float32)
@@ -241,7 +256,7 @@ class Renderer:
         fall with about the cube of distance."""
         ambient = self.look.brightness
         if self._beams is None or self._beams[0] != ambient:
-            gx, gy = self._ground_xy
+            gx, gy = self._ground_xy()
             beam = self.ground & (gx > 0) & (np.abs(gy) < 0.25 * gx + 1.5)
             near = np.clip((10.0 / np.maximum(gx, 1.0)) ** 3, 0.0, 1.0)
             gain = ambient + np.where(beam, 0.7 * near, 0.0)
@@ -256,7 +271,7 @@ class Renderer:
         """Saturated lamps and headlights with glow; lamps light a pool of road below them."""
         out = img.astype(np.float32)
         glow = np.zeros(img.shape[:2], np.float32)
-        gx, gy = self._ground_xy
+        gx, gy = self._ground_xy()
         for light in lights:
             x = light.x_m - ego_x_m
             uv, in_front = self.cal.project(np.array([[x, light.y_m, light.z_m]]))
