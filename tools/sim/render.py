@@ -78,11 +78,13 @@ class Renderer:
         self.cam_pos = -calibration.r.T @ calibration.t      # camera centre, ground frame
         self._rng = np.random.default_rng(seed)
         self._seed = seed
+        self._night_xy: tuple[np.ndarray, np.ndarray] | None = None
         self._ground_geometry()
         self._textures()
         self._sprites: dict[tuple[int, str, str], sprites.Sprite] = {}
         self._beams: tuple[float, np.ndarray] | None = None
-        self._noise: list[tuple[np.ndarray, np.ndarray]] = []
+        self._noise: list[tuple[np.ndarray, np.ndarray]] = []     # (H, W) uint8: up, down
+        self._noise_bgr = np.empty((self.height, self.width, 3), np.uint8)
         self._frame = 0
         self._make_noise()
         release_freed_memory()
@@ -103,19 +105,29 @@ class Renderer:
     def _make_noise(self) -> None:
         """Sensor noise, the same on the three channels, added and subtracted with
         saturation: a few frames drawn once and used in turn, so that rendering keeps up
-        with 30 fps."""
+        with 30 fps. The bank holds one channel, spread to three into one scratch image
+        per frame (~0.1 ms): a three-channel bank would hold 6 MB more.
+
+        It is drawn again at every scene, in the camera's capture thread: the float
+        draws stay one channel (a few MB) and are given back at once, or that thread's
+        heap would keep ~40 MB for the process's life.
+        """
         rng = np.random.default_rng((self._seed, 1))
         self._noise = []
         self._frame = 0
         for _ in range(_NOISE_BANK if self.look.noise > 0 else 0):
-            n = np.repeat(np.round(rng.normal(0, self.look.noise, (self.height, self.width, 1))),
-                          3, axis=2)
+            n = np.round(rng.normal(0, self.look.noise, (self.height, self.width)))
             self._noise.append((np.clip(n, 0, 255).astype(np.uint8),
                                 np.clip(-n, 0, 255).astype(np.uint8)))
+            del n
+        release_freed_memory()
 
     # -- static geometry ----------------------------------------------------------------
 
-    def _ground_geometry(self) -> None:
+    def _ground_hits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per pixel, float64: whether its ray meets the ground within MAX_GROUND_M, where
+        (x, y in the ego's frame, 0 where it does not), how far from the camera, and the
+        ray itself in the ground frame ((H, W, 3))."""
         h, w = self.height, self.width
         u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
         pix = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
@@ -128,11 +140,22 @@ class Renderer:
         gx = self.cam_pos[0] + s * rays[..., 0]
         gy = self.cam_pos[1] + s * rays[..., 1]
         dist = np.hypot(gx - self.cam_pos[0], gy - self.cam_pos[1])
-        self.ground = hits & (dist < MAX_GROUND_M)
-        gx = np.where(self.ground, gx, 0.0)
-        gy = np.where(self.ground, gy, 0.0)
-        # Where each ground pixel is, in the ego's frame (beams and lamp pools at night).
-        self._ground_xy = (gx.astype(np.float32), gy.astype(np.float32))
+        ground = hits & (dist < MAX_GROUND_M)
+        return ground, np.where(ground, gx, 0.0), np.where(ground, gy, 0.0), dist, rays
+
+    def _ground_xy(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where each ground pixel is, float32 (the beams and lamp pools at night).
+        Computed again on the first night frame rather than kept from the geometry: the
+        simulator's camera draws day and dusk only, and would hold 3 MB for nothing."""
+        if self._night_xy is None:
+            _, gx, gy, _, _ = self._ground_hits()
+            self._night_xy = (gx.astype(np.float32), gy.astype(np.float32))
+            release_freed_memory()
+        return self._night_xy
+
+    def _ground_geometry(self) -> None:
+        self.ground, gx, gy, dist, rays = self._ground_hits()
+        dz = rays[..., 2]
         # Texture coordinates (texels of level 0): column from +y (left) to -y.
         col0 = ((sprites.ROAD_HALF_WIDTH_M - gy) / sprites.ROAD_RES_M).astype(np.float32)
         row0 = (gx / sprites.ROAD_RES_M).astype(np.float32)
@@ -217,8 +240,9 @@ class Renderer:
             img = self._lights(img, lights, ego_x_m)
         if self._noise:
             up, down = self._noise[self._frame % len(self._noise)]
-            cv2.add(img, up, dst=img)
-            cv2.subtract(img, down, dst=img)
+            grey = self._noise_bgr
+            cv2.add(img, cv2.merge((up, up, up), dst=grey), dst=img)
+            cv2.subtract(img, cv2.merge((down, down, down), dst=grey), dst=img)
             self._frame += 1
         return img
 
@@ -230,7 +254,7 @@ class Renderer:
         fall with about the cube of distance."""
         ambient = self.look.brightness
         if self._beams is None or self._beams[0] != ambient:
-            gx, gy = self._ground_xy
+            gx, gy = self._ground_xy()
             beam = self.ground & (gx > 0) & (np.abs(gy) < 0.25 * gx + 1.5)
             near = np.clip((10.0 / np.maximum(gx, 1.0)) ** 3, 0.0, 1.0)
             gain = ambient + np.where(beam, 0.7 * near, 0.0)
@@ -245,7 +269,7 @@ class Renderer:
         """Saturated lamps and headlights with glow; lamps light a pool of road below them."""
         out = img.astype(np.float32)
         glow = np.zeros(img.shape[:2], np.float32)
-        gx, gy = self._ground_xy
+        gx, gy = self._ground_xy()
         for light in lights:
             x = light.x_m - ego_x_m
             uv, in_front = self.cal.project(np.array([[x, light.y_m, light.z_m]]))
