@@ -18,7 +18,6 @@ later, from whatever thread opened the session), so that a silent bus from the v
 start already leads to FAILSAFE.
 """
 
-import dataclasses
 import logging
 import threading
 from collections import Counter
@@ -68,7 +67,8 @@ class LineAhead:
 
 def next_frame(frame: Command) -> Command:
     """The frame sent after `frame` if nothing changes: the next sequence number."""
-    return dataclasses.replace(frame, seq=(frame.seq + 1) % SEQ_MODULO)
+    # built directly: dataclasses.replace costs several times more, on every acknowledgement
+    return Command((frame.seq + 1) % SEQ_MODULO, frame.level_pct, frame.ttl_ms, frame.mode)
 
 
 class BrakeShell:

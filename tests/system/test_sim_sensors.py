@@ -171,6 +171,26 @@ def test_sky_is_sparse_and_dusk_lowers_contrast():
     assert gray_frame(dusk, ped).mean() < 0.5 * gray_frame(day, ped).mean()
 
 
+def test_sensor_noise_is_grey_and_a_scene_renders_the_same_whatever_came_before():
+    from tools.sim.render import Light
+
+    cal = Calibration.load(CALIBRATION)
+    ped = [body(ObjectKind.PEDESTRIAN, 10.0)]
+    quiet = Renderer(cal, seed=1, look=CameraLook(noise=0.0)).render(ped, 0.0).astype(int)
+    r = Renderer(cal, seed=1, look=CameraLook(noise=4.0))
+    r.new_scene(11)
+    first = r.render(ped, 0.0)
+    noise = first.astype(int) - quiet
+    assert noise.std() > 2.0                      # there is noise ...
+    sky = noise[:100]                             # ... the same on the three channels
+    assert (sky[..., 0] == sky[..., 1]).all() and (sky[..., 1] == sky[..., 2]).all()
+    # another scene, a night one (its own lighting), then the first scene again
+    r.new_scene(12)
+    r.render([body(ObjectKind.CAR, 20.0)], 3.0, [Light(40.0, 2.0, 6.0)], headlights=True)
+    r.new_scene(11)
+    assert np.array_equal(r.render(ped, 0.0), first)
+
+
 def test_nearer_objects_hide_farther_ones(renderer):
     far = body(ObjectKind.CAR, 15.0, 0.0, 0)
     near = body(ObjectKind.BOX, 12.0, 0.0, 1)
