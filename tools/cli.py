@@ -19,6 +19,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
+    "record": ("tools.recording.record", "record the bus into MCAP (opens in Foxglove)"),
+    "replay": ("tools.recording.replay", "publish a recording back on the bus"),
+    "rerun": ("tools.recording.rerun", "re-run fusion or radar on a recording, offline"),
+    "evidence": ("tools.recording.evidence", "a folder of evidence per WARNING and BRAKE"),
+    "foxglove": ("tools.foxglove.bridge", "live view of the bus in Foxglove (WebSocket)"),
 }
 
 

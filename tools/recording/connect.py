@@ -1,0 +1,82 @@
+"""Joining the bus from a tool (`aeb record`, `replay`, `evidence`, `foxglove`): the
+usual options, and a session opened so that Ctrl-C works while no router answers yet.
+
+`zenoh.open` blocks until a router is reachable, and a signal handler only runs once it
+returns; so the session is opened in a helper thread while the main thread waits on the
+stop event.
+"""
+
+import argparse
+import os
+import sys
+import threading
+
+from common.bus import Bus, BusError
+from common.config.base import ZenohMode, ZenohSettings
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, listen: bool = False) -> None:
+    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                        help=f"router endpoint (repeatable), default {DEFAULT_ENDPOINT}")
+    if listen:
+        parser.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                            help="run as a Zenoh router listening here instead (a replay "
+                                 "with a stack connecting to it)")
+    parser.add_argument("--vehicle", default="ego", help="vehicle id (default ego)")
+    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
+    parser.add_argument("--connect-timeout", type=float, default=0.0,
+                        help="give up when no router answers within this many seconds "
+                             "(default 0: wait until one does)")
+
+
+def bus_settings(args: argparse.Namespace) -> ZenohSettings:
+    """Raises ValueError for a malformed endpoint."""
+    listen = tuple(getattr(args, "listen", None) or ())
+    if listen:
+        return ZenohSettings(mode=ZenohMode.ROUTER, connect=tuple(args.connect or ()),
+                             listen=listen, config_file=args.zenoh_config)
+    overrides = ({"connect/timeout_ms": int(args.connect_timeout * 1000)}
+                 if args.connect_timeout > 0 else {})
+    return ZenohSettings(mode=ZenohMode.CLIENT, connect=tuple(args.connect or [DEFAULT_ENDPOINT]),
+                         config_file=args.zenoh_config, overrides=overrides)
+
+
+def open_bus(args: argparse.Namespace, source: str, stop: threading.Event) -> Bus:
+    """The bus. Prints and raises SystemExit(2) when the settings are invalid or the
+    session cannot be opened; exits the process (code 0) when `stop` is set before a
+    router answered (nothing was done yet)."""
+    try:
+        settings = bus_settings(args)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from exc
+    result: list[Bus | BaseException] = []
+    done = threading.Event()
+
+    def opener() -> None:
+        try:
+            result.append(Bus.open(settings, args.vehicle, source))
+        except BaseException as exc:  # handed to the main thread
+            result.append(exc)
+        done.set()
+
+    threading.Thread(target=opener, name="bus-open", daemon=True).start()
+    if not done.wait(0.5):
+        endpoints = ", ".join(settings.listen or settings.connect)
+        print(f"waiting for a Zenoh router at {endpoints} ...", file=sys.stderr, flush=True)
+    while not done.wait(0.1):
+        if stop.is_set():
+            print("stopped before the bus was reached", file=sys.stderr, flush=True)
+            # The opener is stuck in zenoh.open and would hold the interpreter's exit.
+            sys.stderr.flush()
+            sys.stdout.flush()
+            os._exit(0)
+    outcome = result[0]
+    if isinstance(outcome, BusError):
+        print(f"error: {outcome}", file=sys.stderr)
+        raise SystemExit(2)
+    if isinstance(outcome, BaseException):
+        raise outcome
+    return outcome
