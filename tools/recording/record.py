@@ -27,9 +27,10 @@ import queue
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import msgspec
 import zenoh
@@ -46,6 +47,7 @@ from tools.foxglove.convert import Converter, encode_derived
 from tools.recording.connect import add_bus_arguments, open_bus
 from tools.recording.format import (
     KNOWN_SPECS,
+    ChannelType,
     channel_of_topic,
     parse_topic,
 )
@@ -114,16 +116,29 @@ def selection(keys: str, vehicle: str) -> list[str]:
     return out
 
 
-class Recorder:
-    """Subscribes to `exprs`, writes into `writer`; `converter` derives the Foxglove views
-    (None: only the stack's channels); `sinks` get every decoded stack message too
-    (the evidence collector)."""
+class Writer(Protocol):
+    """Where the recorder writes: an MCAP file (RecordingWriter), or the live Foxglove
+    server (tools/foxglove/bridge.py)."""
 
-    def __init__(self, bus: Bus, writer: RecordingWriter, exprs: list[str],
+    def write(self, topic: str, kind: ChannelType, payload: bytes, log_time_ns: int,
+              publish_time_ns: int, sequence: int = 0) -> None: ...
+
+    def close(self) -> WriterStats: ...
+
+
+class Recorder:
+    """Subscribes to `exprs`, writes into `writer` (None: writes nothing, for the sinks
+    alone); `converter` derives the Foxglove views (None: only the stack's channels);
+    `sinks` get every decoded stack message too (the evidence collector); `keep(key,
+    log_ns)` may leave samples out (the bridge's frame rate limit)."""
+
+    def __init__(self, bus: Bus, writer: Writer | None, exprs: list[str],
                  converter: Converter | None, sinks: tuple[Any, ...] = (),
-                 capacity: int = QUEUE_CAPACITY) -> None:
+                 capacity: int = QUEUE_CAPACITY,
+                 keep: Callable[[str, int], bool] | None = None) -> None:
         self.bus = bus
         self.writer = writer
+        self.keep = keep
         self.exprs = exprs
         self.converter = converter
         self.sinks = sinks
@@ -140,11 +155,12 @@ class Recorder:
     def start(self) -> None:
         self.stats.started_ns = wall_ns()
         self._writer_thread.start()
+        prefix = f"aeb/{self.bus.vehicle}/"
         for expr in self.exprs:
-            spec: KeySpec[Any] = KeySpec("record", expr.removeprefix(f"aeb/{self.bus.vehicle}/"), None,
-                           None, None, QoS())
-            if not expr.startswith(f"aeb/{self.bus.vehicle}/"):
-                raise ValueError(f"key {expr!r} is not under aeb/{self.bus.vehicle}/")
+            if not expr.startswith(prefix):
+                raise ValueError(f"key {expr!r} is not under {prefix}")
+            spec: KeySpec[Any] = KeySpec("record", expr.removeprefix(prefix), None, None,
+                                         None, QoS())
             sub = self.bus.subscribe_queued(spec, self.capacity)
             self._subs.append(sub)
             reader = threading.Thread(target=self._read_loop, args=(sub.handler,),
@@ -187,6 +203,8 @@ class Recorder:
             assert self.converter is not None
             self._derived([self.converter.health(service, instance, alive == "1")], log_ns)
             return
+        if self.keep is not None and not self.keep(key, log_ns):
+            return
         stats = self.stats.keys.get(key)
         if stats is None:
             stats = self.stats.keys[key] = KeyStats()
@@ -201,7 +219,8 @@ class Recorder:
             stats.last_seq = seq
         except (msgspec.DecodeError, msgspec.ValidationError):
             pass
-        self.writer.write(key, channel_of_topic(key), payload, log_ns, pub_ns, seq)
+        if self.writer is not None:
+            self.writer.write(key, channel_of_topic(key), payload, log_ns, pub_ns, seq)
         if self.converter is None and not self.sinks:
             return
         info = parse_topic(key)
@@ -223,6 +242,8 @@ class Recorder:
             self._derived(derived, log_ns)
 
     def _derived(self, derived: list[tuple[str, Any]], log_ns: int) -> None:
+        if self.writer is None:
+            return
         for topic, view in derived:
             kind, data = encode_derived(view)
             self.writer.write(topic, kind, data, log_ns, log_ns)
@@ -240,10 +261,11 @@ class Recorder:
         self._writer_thread.join()
         for sink in self.sinks:
             sink.close()
-        written: WriterStats = self.writer.close()
         self.stats.ended_ns = wall_ns()
-        self.stats.files = [str(p) for p in written.files]
-        self.stats.bytes_on_disk = written.bytes_on_disk
+        if self.writer is not None:
+            written: WriterStats = self.writer.close()
+            self.stats.files = [str(p) for p in written.files]
+            self.stats.bytes_on_disk = written.bytes_on_disk
         return self.stats
 
 

@@ -11,8 +11,11 @@ had. What the recording says about them, and so how exact the re-run is:
   recorded frames up to that one (at most the live ring's size), less any that would have
   been nearer to the cycle than it (the live ring cannot have held them, or it would have
   chosen them). Without a frame named (no recorded output, no track checked), the ring is
-  the frames the recorder had received before the cycle: live fusion may have had
-  another (decoding lag, frames dropped on its link), which the comparison then shows;
+  the frames the recorder had received before the cycle, less, when the recorded cycle
+  says the camera had no usable frame, those the cycle would have used (they had not
+  reached fusion yet). Live fusion may still have held other frames (decoding lag,
+  frames dropped on its link): the comparison then shows it, typically as another
+  `unavailable_reason`;
 - with several cameras, each camera's frame is named only for the tracks it decided.
 
 Frames are decoded only when the core reads a selected frame's pixels (a cycle that gates
@@ -45,6 +48,7 @@ from services.fusion.frames import (
     FrameError,
     FrameFeed,
     decode_frame,
+    select_frame,
 )
 from services.fusion.main import build_core
 from tools.recording.reader import Record, Recording
@@ -230,8 +234,15 @@ class FusionRerun:
             ring = [f for f in frames if f.log_ns <= cycle.log_ns]
         ring = [f for f in ring if (camera, f.seq) not in self._bad][-RING_SIZE:]
         received = sum(1 for f in frames if f.log_ns <= cycle.log_ns)
-        return FrameFeed(tuple(LazyFrame(camera, f, self._decode) for f in ring), received,
-                         self.stats.frames_undecodable)
+        lazy = [LazyFrame(camera, f, self._decode) for f in ring]
+        recorded = cycle.recorded
+        if pinned is None and recorded is not None and camera in recorded.cameras_unavailable:
+            # Live fusion had no usable frame: those the recorder had in time had not
+            # reached it yet.
+            while (late := select_frame(tuple(lazy), radar_stamp_ns, self._skew_ns,
+                                        self.s.frames.align)) is not None:
+                lazy = [f for f in lazy if f is not late]
+        return FrameFeed(tuple(lazy), received, self.stats.frames_undecodable)
 
     def _decode(self, camera: str, ref: FrameRef) -> np.ndarray:
         """A frame's pixels, on the first use by the core (each frame decoded once).
