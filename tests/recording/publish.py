@@ -4,8 +4,8 @@ their raw CAN batch, fusion targets (a ROI on the frame checked) and commands, b
 status, radar status and camera info."""
 
 import threading
-from typing import Any
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -31,9 +31,7 @@ from common.messages import (
     RadarStatus,
     RawCanFrames,
     Verification,
-)
-from common.messages import (
-    VerifiedTarget as VT,
+    VerifiedTarget,
 )
 from tests.system.messages import (
     brake_command,
@@ -122,11 +120,12 @@ class StackPublisher:
                     header(k, "radar/radar", now, mono), "radar", "slcan", "/dev/pts/x",
                     (CanFrame(1.0 + k, now, mono, 0x60A, bytes([1, 0, 0, 0x10])),)))
                 age_ms = (now - last_frame_stamp) / 1e6
-                tgt = VT(track_id=1, x_m=12.0, y_m=0.0, range_m=12.0, range_rate_mps=-5.0,
-                         in_path=True, verification=Verification.VERIFIED,
-                         roi_xywh=(400, 200, 40, 90), density=0.08, ttc_s=2.4,
-                         ttc_eff_s=1.4, decision=decision, reason="test",
-                         frame_seq=i - 1, frame_age_ms=age_ms, camera="front")
+                tgt = VerifiedTarget(
+                    track_id=1, x_m=12.0, y_m=0.0, range_m=12.0, range_rate_mps=-5.0,
+                    in_path=True, verification=Verification.VERIFIED,
+                    roi_xywh=(400, 200, 40, 90), density=0.08, ttc_s=2.4, ttc_eff_s=1.4,
+                    decision=decision, reason="test", frame_seq=i - 1, frame_age_ms=age_ms,
+                    camera="front")
                 self._put("cmd", brake_command("primary", k, k, decision, now))
                 self._put("targets", verified_targets("primary", k, (tgt,), stamp_ns=now))
                 self._put("brake", brake_status(k, stamp_ns=now, mono_ns=mono))

@@ -57,6 +57,19 @@ QUEUE_CAPACITY = 8192        # samples per subscription Zenoh may hold for its r
 ALL_KEYS: KeySpec[Any] = KeySpec("all", "**", None, None, None, QoS())
 
 
+class RecorderStatus(msgspec.Struct, frozen=True):
+    """What a running recorder wrote so far (its queryable `record/<pid>/status`)."""
+
+    messages: dict[str, int]     # per key
+    derived: int
+    queued: int                  # received, not written yet
+
+
+# A tool's key, not the vehicle's: answered on request only.
+RECORDER_STATUS: KeySpec[RecorderStatus] = KeySpec(
+    "recorder_status", "record/{instance}/status", RecorderStatus, None, None, QoS())
+
+
 class _Seq(msgspec.Struct):
     header: "_SeqHeader"
 
@@ -179,6 +192,10 @@ class Recorder:
                 return
             if sample.kind == zenoh.SampleKind.PUT:
                 self._queue.put((str(sample.key_expr), sample.payload.to_bytes(), wall_ns()))
+
+    def status(self) -> RecorderStatus:
+        return RecorderStatus({k: s.messages for k, s in list(self.stats.keys.items())},
+                              self.stats.derived, self._queue.qsize())
 
     def submit(self, key: str, payload: bytes, log_ns: int) -> None:
         """A payload from another source (the CAN reader), recorded as if received on
@@ -365,6 +382,8 @@ def main(argv: list[str] | None = None) -> int:
             recorder.stop()
             return 2
         # Declared once subscribed: seeing it means the recorder is recording.
+        status = bus.declare_queryable(RECORDER_STATUS, recorder.status,
+                                       instance=str(os.getpid()))
         token = bus.declare_health("record", str(os.getpid()))
         print(f"recording {', '.join(exprs)} into {args.out} (Ctrl-C to stop)",
               file=sys.stderr, flush=True)
@@ -376,6 +395,7 @@ def main(argv: list[str] | None = None) -> int:
             if t_end is not None and time.monotonic() >= t_end:
                 break
         token.undeclare()
+        status.undeclare()
         if can_reader is not None:
             can_reader.stop()
         stats = recorder.stop()
