@@ -8,7 +8,10 @@ Sections (each a module with `run(quick, out_dir) -> list[Figure]`):
 - brake: command receipt -> serial write;
 - latency: last CAN frame -> brake bytes on the actuator, per stage, beside both floors
   (same-transport relays, bare Zenoh hops);
-- cost: CPU share and memory of each service while demo scenarios run.
+- cost: CPU share and memory of each service while demo scenarios run;
+- record: `aeb record` at nominal rates, messages published vs recorded per key (30 s
+  here; `python -m benchmarks.bench_record --minutes 10` for the 10-minute run);
+- rerun: `aeb rerun fusion` in multiples of real time per core.
 """
 
 import argparse
@@ -28,6 +31,8 @@ SECTIONS: dict[str, str] = {
     "brake": "benchmarks.bench_brake",
     "latency": "benchmarks.bench_latency",
     "cost": "benchmarks.bench_cost",
+    "record": "benchmarks.bench_record",
+    "rerun": "benchmarks.bench_rerun",
 }
 
 
