@@ -45,7 +45,7 @@ from tests.system.messages import (
 WIDTH, HEIGHT = 848, 480
 
 
-def test_jpeg(seed: int = 0) -> bytes:
+def textured_jpeg(seed: int = 0) -> bytes:
     """A textured 848x480 frame (about 60 KB at quality 80, like the simulator's)."""
     rng = np.random.default_rng(seed)
     y, x = np.mgrid[0:HEIGHT, 0:WIDTH]
@@ -71,7 +71,7 @@ class StackPublisher:
         self.bus = bus
         self.frame_s = frame_s
         self.cycles = cycles
-        self.jpeg = test_jpeg()
+        self.jpeg = textured_jpeg()
         self.published = Published()
         self.stop = threading.Event()
         self.pubs: dict[str, TypedPublisher[Any]] = {

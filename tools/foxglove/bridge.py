@@ -23,7 +23,6 @@ import argparse
 import os
 import sys
 import threading
-import time
 from typing import Any
 
 import foxglove
@@ -34,7 +33,7 @@ from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
 from tools.foxglove.convert import Converter, object_schema
-from tools.recording.connect import add_bus_arguments, open_bus
+from tools.recording.connect import add_bus_arguments, open_bus, run_until
 from tools.recording.format import ChannelType, parse_topic
 from tools.recording.record import Recorder, decision_settings, selection
 from tools.recording.writer import TopicCount, WriterStats
@@ -162,10 +161,7 @@ def main(argv: list[str] | None = None) -> int:
         token = bus.declare_health("foxglove", str(os.getpid()))
         print(f"Foxglove WebSocket on ws://{args.host}:{server.port} (Foxglove: Open "
               "connection, Foxglove WebSocket)", file=sys.stderr, flush=True)
-        t_end = None if args.duration is None else time.monotonic() + args.duration
-        while not stop.wait(0.5):
-            if t_end is not None and time.monotonic() >= t_end:
-                break
+        run_until(stop, args.duration)
         token.undeclare()
         recorder.stop()
     server.stop()

@@ -10,6 +10,8 @@ import argparse
 import os
 import sys
 import threading
+import time
+from collections.abc import Callable
 
 from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
@@ -80,3 +82,12 @@ def open_bus(args: argparse.Namespace, source: str, stop: threading.Event) -> Bu
     if isinstance(outcome, BaseException):
         raise outcome
     return outcome
+
+
+def run_until(stop: threading.Event, duration_s: float | None,
+              failed: Callable[[], bool] = lambda: False) -> None:
+    """Until a signal (`stop`), `duration_s` (None: no limit) or `failed()`."""
+    end = None if duration_s is None else time.monotonic() + duration_s
+    while not stop.wait(0.5 if end is None else max(0.0, min(0.5, end - time.monotonic()))):
+        if failed() or (end is not None and time.monotonic() >= end):
+            return

@@ -28,7 +28,6 @@ import json
 import math
 import sys
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -489,7 +488,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         collector.close()
     else:
-        from tools.recording.connect import open_bus
+        from tools.recording.connect import open_bus, run_until
         from tools.recording.record import Recorder, selection
 
         stop = stop_event_on_signals()
@@ -500,10 +499,7 @@ def main(argv: list[str] | None = None) -> int:
             recorder.start()
             print(f"writing evidence of every WARNING and BRAKE under {out} (Ctrl-C to stop)",
                   file=sys.stderr, flush=True)
-            t_end = None if args.duration is None else time.monotonic() + args.duration
-            while not stop.wait(0.5):
-                if t_end is not None and time.monotonic() >= t_end:
-                    break
+            run_until(stop, args.duration)
             recorder.stop()
     for folder in collector.written:
         print(folder)

@@ -26,7 +26,6 @@ import os
 import queue
 import sys
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +43,7 @@ from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
 from tools.foxglove.convert import Converter, encode_derived
-from tools.recording.connect import add_bus_arguments, open_bus
+from tools.recording.connect import add_bus_arguments, open_bus, run_until
 from tools.recording.format import (
     KNOWN_SPECS,
     ChannelType,
@@ -86,7 +85,7 @@ _seq_decoder = msgspec.msgpack.Decoder(_Seq)
 class KeyStats:
     messages: int = 0
     bytes: int = 0
-    missed: int = 0            # sequence numbers that never arrived
+    dropped: int = 0           # sequence numbers that never arrived
     undecodable: int = 0       # recorded all the same
     last_seq: int | None = None
 
@@ -105,7 +104,7 @@ class RecordStats:
         return {"files": self.files, "bytes_on_disk": self.bytes_on_disk,
                 "duration_s": (self.ended_ns - self.started_ns) / 1e9,
                 "derived_messages": self.derived, "derived_errors": self.derived_errors,
-                "keys": {k: {"messages": s.messages, "bytes": s.bytes, "missed": s.missed,
+                "keys": {k: {"messages": s.messages, "bytes": s.bytes, "dropped": s.dropped,
                              "undecodable": s.undecodable} for k, s in self.keys.items()}}
 
 
@@ -232,7 +231,7 @@ class Recorder:
             head = _seq_decoder.decode(payload).header
             pub_ns, seq = head.stamp_ns, head.seq
             if stats.last_seq is not None and seq > stats.last_seq + 1:
-                stats.missed += seq - stats.last_seq - 1
+                stats.dropped += seq - stats.last_seq - 1
             stats.last_seq = seq
         except (msgspec.DecodeError, msgspec.ValidationError):
             pass
@@ -291,19 +290,19 @@ def summary_text(stats: RecordStats) -> str:
     lines = [f"wrote {len(stats.files)} file(s), {stats.bytes_on_disk / 1e6:.1f} MB in "
              f"{minutes * 60:.1f} s ({stats.bytes_on_disk / 1e6 / minutes:.1f} MB/min): "
              + ", ".join(stats.files),
-             f"{'key':<44} {'messages':>9} {'MB':>9} {'missed':>7} {'undecodable':>12}"]
+             f"{'key':<44} {'messages':>9} {'MB':>9} {'dropped':>7} {'undecodable':>12}"]
     for key, s in sorted(stats.keys.items()):
-        lines.append(f"{key:<44} {s.messages:>9} {s.bytes / 1e6:>9.2f} {s.missed:>7} "
+        lines.append(f"{key:<44} {s.messages:>9} {s.bytes / 1e6:>9.2f} {s.dropped:>7} "
                      f"{s.undecodable:>12}")
     total = sum(s.messages for s in stats.keys.values())
-    missed = sum(s.missed for s in stats.keys.values())
+    dropped = sum(s.dropped for s in stats.keys.values())
     lines.append(f"{'total':<44} {total:>9} {sum(s.bytes for s in stats.keys.values()) / 1e6:>9.2f}"
-                 f" {missed:>7} {sum(s.undecodable for s in stats.keys.values()):>12}")
+                 f" {dropped:>7} {sum(s.undecodable for s in stats.keys.values()):>12}")
     lines.append(f"derived Foxglove messages: {stats.derived}"
                  + (f" ({stats.derived_errors} could not be derived)"
                     if stats.derived_errors else ""))
-    lines.append("missed: messages the publisher numbered that never reached the recorder "
-                 "(dropped on the way, or published before the recording started)")
+    lines.append("dropped: messages the publisher numbered, between the first and the last "
+                 "recorded, that never reached the recorder")
     return "\n".join(lines)
 
 
@@ -387,13 +386,7 @@ def main(argv: list[str] | None = None) -> int:
         token = bus.declare_health("record", str(os.getpid()))
         print(f"recording {', '.join(exprs)} into {args.out} (Ctrl-C to stop)",
               file=sys.stderr, flush=True)
-        t_end = None if args.duration is None else time.monotonic() + args.duration
-        while not stop.wait(1.0 if t_end is None
-                            else max(0.0, min(1.0, t_end - time.monotonic()))):
-            if recorder.write_error is not None:
-                break
-            if t_end is not None and time.monotonic() >= t_end:
-                break
+        run_until(stop, args.duration, lambda: recorder.write_error is not None)
         token.undeclare()
         status.undeclare()
         if can_reader is not None:
