@@ -279,7 +279,7 @@ def figures_from(m: dict[str, Any]) -> list[Figure]:
             target="0", target_met=got == n,
             note=f"published {n}, in the file {got}, plain subscriber {base}; the recorder's "
                  f"own count of missing sequence numbers "
-                 f"{m['summary']['keys'].get(key, {}).get('missed', '-')}"))
+                 f"{m['summary']['keys'].get(key, {}).get('dropped', '-')}"))
     figs.append(Figure("record", "file size", round(m["bytes"] / 1e6 / minutes, 1), "MB/min",
                        note=f"{m['bytes'] / 1e6:.0f} MB in {minutes:g} min, zstd, with the "
                             "Foxglove views"))

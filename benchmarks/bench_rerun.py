@@ -1,17 +1,17 @@
 """Process replay speed: `aeb rerun fusion` over a demo recording, in multiples of real
 time per core (recorded seconds / CPU seconds of the re-run; one thread).
 
-The recording: in the full run, made here (a demo scenario in closed loop,
-tools/sim/session.py, camera at 30 fps, `aeb record` beside the stack); in the quick run
-(the suite's), the demo recording kept in tests/data/recording/ (camera at 10 fps). Then
-fusion's core is re-run over it with the shipped config, frames decoded only when a
-cycle's gate reads them.
+The recording: the demo recording kept in tests/data/recording/ (camera at 10 fps: the
+suite's run), one given with `--recording` (e.g. of `aeb demo`), or with `--record-demo`
+one made here (demo scenarios in closed loop, tools/sim/session.py, camera at 30 fps,
+`aeb record` beside the stack). Fusion's core is re-run over it with the shipped config,
+frames decoded only when a cycle's gate reads them.
 
 Baselines, in the same run: reading the recording alone (the floor: every record read
 and its message decoded, no fusion), and the re-run plus decoding every recorded frame
 (what a re-run costs that decodes every frame, as live fusion's `every_frame` policy).
 
-    python -m benchmarks.bench_rerun [--quick] [--recording FILE.mcap]
+    python -m benchmarks.bench_rerun [--recording FILE.mcap | --record-demo]
 """
 
 import argparse
@@ -116,9 +116,9 @@ def figures_from(m: dict[str, Any]) -> list[Figure]:
     ]
 
 
-def run(quick: bool, out_dir: Path, recording: str = "") -> list[Figure]:
+def run(quick: bool, out_dir: Path, recording: str = "", demo: bool = False) -> list[Figure]:
     path = Path(recording) if recording else (
-        KEPT if quick else record_demo(FULL_SCENARIOS, out_dir))
+        record_demo(FULL_SCENARIOS, out_dir) if demo else KEPT)
     m = measure(path)
     (out_dir / "bench_rerun.json").write_text(json.dumps(m, indent=1))
     return figures_from(m)
@@ -128,15 +128,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_rerun",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true",
-                        help="the kept recording instead of a new demo recording")
-    parser.add_argument("--recording", default="", help="re-run this one instead")
+    parser.add_argument("--recording", default="", help="re-run this one")
+    parser.add_argument("--record-demo", action="store_true",
+                        help="record demo scenarios first and re-run that")
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
-    figs = run(args.quick, out, args.recording)
+    figs = run(False, out, args.recording, args.record_demo)
     from benchmarks.report import print_table
 
     print_table(figs, sys.stdout)

@@ -11,11 +11,12 @@ had. What the recording says about them, and so how exact the re-run is:
   recorded frames up to that one (at most the live ring's size), less any that would have
   been nearer to the cycle than it (the live ring cannot have held them, or it would have
   chosen them). Without a frame named (no recorded output, no track checked), the ring is
-  the frames the recorder had received before the cycle, less, when the recorded cycle
-  says the camera had no usable frame, those the cycle would have used (they had not
-  reached fusion yet). Live fusion may still have held other frames (decoding lag,
-  frames dropped on its link): the comparison then shows it, typically as another
-  `unavailable_reason`;
+  the frames the recorder had received before the cycle, made to agree with what the
+  recorded cycle says of the camera: when it had no usable frame, less those the cycle
+  would have used (they had not reached fusion yet); when it had one and the recorder
+  had none in time, with the next frames the recorder received (they reached fusion
+  first). Live fusion may still have held other frames (decoding lag, frames dropped on
+  its link): the comparison then shows it, typically as another `unavailable_reason`;
 - with several cameras, each camera's frame is named only for the tracks it decided.
 
 Frames are decoded only when the core reads a selected frame's pixels (a cycle that gates
@@ -39,6 +40,7 @@ from common.messages import (
     DecodeError,
     RadarTracks,
     VerifiedTargets,
+    VerifierStatus,
     decode,
 )
 from services.fusion.core import CycleResult
@@ -59,6 +61,7 @@ LOOKAHEAD_NS = 1_000_000_000
 # Recent frames kept per camera (undecoded), to build rings from.
 WINDOW_FRAMES = 64
 _DECODED_KEPT = 8
+_EARLY_KEPT = 64
 
 
 class _Head(msgspec.Struct):
@@ -135,6 +138,8 @@ class FusionRerun:
         self._received: dict[str, int] = dict.fromkeys(self.cameras, 0)
         self._decoded: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
         self._bad: set[tuple[str, int]] = set()
+        self._early: dict[tuple[int, int], tuple[BrakeCommand | None, VerifiedTargets | None,
+                                                 int | None]] = {}
         self._skew_ns = round(self.s.frames.max_skew_s * 1e9)
         self._tracks_topic = RADAR_TRACKS.key(vehicle, sensor=self.s.radar_sensor)
         self._cmd_topic = FUSION_BRAKE_CMD.key(vehicle, instance=self.instance)
@@ -174,21 +179,41 @@ class FusionRerun:
             elif topic == self._tracks_topic:
                 tracks = decode(rec.data, RadarTracks)
                 cycle = Cycle(tracks, rec.log_time_ns)
+                key = (tracks.header.seq, tracks.header.stamp_ns)
                 pending.append(cycle)
-                by_cycle[(tracks.header.seq, tracks.header.stamp_ns)] = cycle
+                by_cycle[key] = cycle
+                # Outputs the recorder received before the cycle itself (its threads
+                # take each key's samples separately).
+                early = self._early.pop(key, None)
+                if early is not None:
+                    cycle.recorded_cmd, cycle.recorded, cycle.recorded_log_ns = early
             elif topic == self._cmd_topic:
                 cmd = decode(rec.data, BrakeCommand)
-                found = by_cycle.get((cmd.radar_seq, cmd.header.stamp_ns))
+                key = (cmd.radar_seq, cmd.header.stamp_ns)
+                found = by_cycle.get(key)
                 if found is not None:
                     found.recorded_cmd = cmd
+                else:
+                    self._keep_early(key, rec.log_time_ns, cmd=cmd)
             elif topic == self._targets_topic:
                 targets = decode(rec.data, VerifiedTargets)
-                found = by_cycle.get((targets.radar_seq, targets.header.stamp_ns))
+                key = (targets.radar_seq, targets.header.stamp_ns)
+                found = by_cycle.get(key)
                 if found is not None:
                     found.recorded = targets
                     found.recorded_log_ns = rec.log_time_ns
+                else:
+                    self._keep_early(key, rec.log_time_ns, targets=targets)
         except DecodeError:
             self.stats.undecodable[topic] = self.stats.undecodable.get(topic, 0) + 1
+
+    def _keep_early(self, key: tuple[int, int], log_ns: int, cmd: BrakeCommand | None = None,
+                    targets: VerifiedTargets | None = None) -> None:
+        old_cmd, old_targets, old_log = self._early.get(key, (None, None, None))
+        self._early[key] = (cmd or old_cmd, targets or old_targets,
+                            log_ns if targets is not None else old_log)
+        while len(self._early) > _EARLY_KEPT:     # outputs of cycles never recorded
+            del self._early[next(iter(self._early))]
 
     def _rerun(self, cycle: Cycle, by_cycle: dict[tuple[int, int], Cycle]) -> Cycle:
         tracks = cycle.tracks
@@ -236,13 +261,29 @@ class FusionRerun:
         received = sum(1 for f in frames if f.log_ns <= cycle.log_ns)
         lazy = [LazyFrame(camera, f, self._decode) for f in ring]
         recorded = cycle.recorded
-        if pinned is None and recorded is not None and camera in recorded.cameras_unavailable:
-            # Live fusion had no usable frame: those the recorder had in time had not
-            # reached it yet.
-            while (late := select_frame(tuple(lazy), radar_stamp_ns, self._skew_ns,
-                                        self.s.frames.align)) is not None:
-                lazy = [f for f in lazy if f is not late]
+        if pinned is None and recorded is not None:
+            lazy = self._as_recorded(camera, lazy, frames, cycle, recorded)
         return FrameFeed(tuple(lazy), received, self.stats.frames_undecodable)
+
+    def _as_recorded(self, camera: str, lazy: list["LazyFrame"], frames: deque[FrameRef],
+                     cycle: Cycle, recorded: VerifiedTargets) -> list["LazyFrame"]:
+        """A ring that agrees with what the recorded cycle says of the camera, where no
+        frame is named: none usable (those the recorder had in time had not reached
+        fusion yet), or one usable (it reached fusion before it reached the recorder)."""
+        stamp = cycle.tracks.header.stamp_ns
+
+        def usable(ring: list[LazyFrame]) -> DecodedFrame | None:
+            return select_frame(tuple(ring), stamp, self._skew_ns, self.s.frames.align)
+
+        if camera in recorded.cameras_unavailable:
+            while (late := usable(lazy)) is not None:
+                lazy = [f for f in lazy if f is not late]
+        elif recorded.verifier_status is VerifierStatus.OK and usable(lazy) is None:
+            for ref in (f for f in frames if f.log_ns > cycle.log_ns):
+                lazy = [*lazy, LazyFrame(camera, ref, self._decode)][-RING_SIZE:]
+                if usable(lazy) is not None:
+                    break
+        return lazy
 
     def _decode(self, camera: str, ref: FrameRef) -> np.ndarray:
         """A frame's pixels, on the first use by the core (each frame decoded once).
