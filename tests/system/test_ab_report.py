@@ -82,9 +82,9 @@ def test_the_report_of_an_mcap_recording(tmp_path):
         t = 10**18
         for seq in range(20):
             for instance in ("primary", "candidate"):
-                for spec, msg in zip((FUSION_TARGETS, FUSION_BRAKE_CMD), cycle(instance, seq),
-                                     strict=True):
-                    key = spec.key("ego", instance=instance)
+                targets, command = cycle(instance, seq)
+                for key, msg in ((FUSION_TARGETS.key("ego", instance=instance), targets),
+                                 (FUSION_BRAKE_CMD.key("ego", instance=instance), command)):
                     t += 1000
                     w.write(key, channel_of_topic(key), encode(msg), t, t)
     proc = ab_report("--from", str(path), "--json")
