@@ -66,6 +66,7 @@ from common.messages import (
     encode,
 )
 from common.net import free_endpoint
+from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
@@ -75,7 +76,7 @@ from services.fusion.verifiers import GateResult, Observation, ParamValue, Verif
 from tools.sim.rig import rig_calibration_toml
 from tools.sim.scenes import Obstacle, Scene, render
 
-CALIBRATION = "deploy/calibration/d435_848x480.toml"
+CALIBRATION = str(EXAMPLE_CALIBRATION)
 COUNTS = (0, 1, 8, 64, 128)
 CAMERA_COUNTS = (1, 2, 4)
 QUICK_CAMERA_COUNTS = (1, 4)

@@ -37,12 +37,13 @@ import numpy as np
 from benchmarks.figures import Figure
 from common.calibration import Calibration
 from common.imaging import decode_bgr, decode_gray, encode_jpeg
+from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation, create
 from tools.sim.scenario import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, labelled_frames, render
 
-CALIBRATION = "deploy/calibration/d435_848x480.toml"
+CALIBRATION = str(EXAMPLE_CALIBRATION)
 SIZES = {"roi 4.3% (134x130)": (134, 130), "roi 1.3% (75x70)": (75, 70),
          "full frame (848x480)": (848, 480)}
 # OpenCV's default pool has one thread per CPU (fusion sets 1 when it imports its verifiers).

@@ -49,6 +49,7 @@ import numpy as np
 from benchmarks.figures import Figure, machine_info
 from common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
 from common.messages.radar import OutputMode, RadarStatus, RadarTracks
+from common.resources import ARS408_RECORDING
 from services.radar.ars408 import (
     ClusterGeneral,
     ClusterQuality,
@@ -67,8 +68,7 @@ from services.radar.core import RadarCore
 from services.radar.detections import decode_cycle
 from services.radar.shell import RadarShell
 
-RECORDING = Path(__file__).resolve().parent.parent / "tests" / "data" / "ars408" / (
-    "candump-2026-06-24_154259.log")
+RECORDING = ARS408_RECORDING
 
 TARGET_MS = 2.0
 CPU_CLOCK = time.thread_time_ns

@@ -27,10 +27,11 @@ from common.imaging import encode_jpeg
 from common.keys import CAMERA_JPEG
 from common.messages import CompressedFrame
 from common.net import free_port
+from common.resources import EXAMPLE_CALIBRATION
 from services.camera.shell import CameraShell
 from tools.sim.moving_box import MovingBoxSource
 
-CALIBRATION = Path(__file__).resolve().parent.parent / "deploy/calibration/d435_848x480.toml"
+CALIBRATION = EXAMPLE_CALIBRATION
 
 
 def percentiles(values_us: list[float]) -> tuple[float, float]:

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from benchmarks.figures import Figure, machine_info
 from benchmarks.report import plot, print_table, write_json
+from common.log import add_log_level, setup_logging
 
 SECTIONS: dict[str, str] = {
     "gate": "benchmarks.bench_gate",
@@ -42,11 +43,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--quick", action="store_true", help="short runs (under a minute in all)")
     p.add_argument("--only", default="", help=f"comma-separated sections of {list(SECTIONS)}")
     p.add_argument("--out", default="out/bench", help="JSON, PNG and per-section files")
+    add_log_level(p, "WARNING")
     return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    setup_logging("bench", args.log_level)
     names = [n.strip() for n in args.only.split(",") if n.strip()] or list(SECTIONS)
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:

@@ -1,8 +1,10 @@
 """Zenoh access for every process: open a session from settings, and publish, subscribe,
 query and declare liveliness only through the key registry.
 
-Payloads that do not decode are counted (`Bus.decode_errors`, by key name) and logged
-with a rate limit; they never reach a callback and never raise in Zenoh's threads.
+Every sample is published with its Zenoh encoding, ``application/msgpack;aeb.<Type>``
+(common/messages/schema.py), so that generic tools can tell what it carries. Payloads
+that do not decode are counted (`Bus.decode_errors`, by key name) and logged with a rate
+limit; they never reach a callback and never raise in Zenoh's threads.
 """
 
 import json
@@ -21,6 +23,7 @@ from common.counters import ReasonCounter
 from common.keys import HEALTH, Congestion, KeySpec, Priority
 from common.log import RateLimitedLog
 from common.messages import DecodeError, decode, encode
+from common.messages.schema import zenoh_encoding
 
 T = TypeVar("T", bound=msgspec.Struct)
 
@@ -97,14 +100,21 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
         raise BusError(f"cannot open zenoh session: {exc}") from exc
 
 
+def encoding(spec: KeySpec[Any]) -> zenoh.Encoding | None:
+    """The Zenoh encoding of a key's samples (None for a key without a message)."""
+    return None if spec.msg_type is None else zenoh.Encoding(zenoh_encoding(spec.msg_type))
+
+
 class TypedPublisher(Generic[T]):
-    """A declared publisher for one concrete key, with the registry's QoS."""
+    """A declared publisher for one concrete key, with the registry's QoS and the key's
+    message encoding."""
 
     def __init__(self, session: zenoh.Session, spec: KeySpec[T], key: str) -> None:
         self.spec = spec
         self.key = key
         self._pub = session.declare_publisher(
             key,
+            encoding=encoding(spec),
             priority=_PRIORITY[spec.qos.priority],
             congestion_control=_CONGESTION[spec.qos.congestion],
             express=spec.qos.express,
@@ -192,7 +202,7 @@ class Bus:
             try:
                 callback(msg, key)
             except Exception as exc:  # a subscriber's bug must not end delivery to the rest
-                self._callback_failed(spec, key, exc)
+                self._callback_failed(spec.name, key, exc)
 
         return self.session.declare_subscriber(expr, on_sample)
 
@@ -203,7 +213,22 @@ class Bus:
 
         For shells that decode off Zenoh's thread (e.g. JPEG frames) or time the receipt.
         """
-        expr = spec.wildcard(self.vehicle, **params)
+        return self._declare_raw(spec.wildcard(self.vehicle, **params), spec.name,
+                                 lambda s, key, t: callback(s.payload.to_bytes(), key, t))
+
+    def subscribe_expr(
+        self, key_expr: str, callback: Callable[[bytes, str, str, int], None],
+    ) -> zenoh.Subscriber[None]:
+        """Every sample on a key expression, whatever key or message it is:
+        `callback(payload, key, encoding, receipt_mono_ns)` (for tools that watch any key:
+        `aeb echo`, `aeb hz`). `key_expr` is absolute (``aeb/<vehicle>/...``)."""
+        return self._declare_raw(key_expr, "expr", lambda s, key, t: callback(
+            s.payload.to_bytes(), key, str(s.encoding), t))
+
+    def _declare_raw(self, expr: str, name: str,
+                     deliver: Callable[[zenoh.Sample, str, int], None]) -> zenoh.Subscriber[None]:
+        """`deliver(sample, key, receipt_mono_ns)` for every PUT; a failure is counted in
+        `callback_errors` under `name` and logged."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind != zenoh.SampleKind.PUT:
@@ -211,9 +236,9 @@ class Bus:
             t = mono_ns()
             key = str(sample.key_expr)
             try:
-                callback(sample.payload.to_bytes(), key, t)
+                deliver(sample, key, t)
             except Exception as exc:  # a subscriber's bug must not end delivery to the rest
-                self._callback_failed(spec, key, exc)
+                self._callback_failed(name, key, exc)
 
         return self.session.declare_subscriber(expr, on_sample)
 
@@ -249,9 +274,9 @@ class Bus:
                 out.append((msg, key))
         return out
 
-    def _callback_failed(self, spec: KeySpec[Any], key: str, exc: Exception) -> None:
-        self.callback_errors.add(spec.name)
-        self._rl.error(f"cb:{spec.name}", "callback_failed", key=key, error=repr(exc))
+    def _callback_failed(self, name: str, key: str, exc: Exception) -> None:
+        self.callback_errors.add(name)
+        self._rl.error(f"cb:{name}", "callback_failed", key=key, error=repr(exc))
         _log.debug("callback traceback", exc_info=True)
 
     def _decoded(self, spec: KeySpec[Any], msg_type: type[T], sample: zenoh.Sample,
@@ -270,6 +295,7 @@ class Bus:
         """Answer queries on one concrete key with `reply()`, encoded. A `reply` that
         raises is counted in `callback_errors` and answered with an error reply."""
         key = self.key(spec, **params)
+        reply_encoding = encoding(spec)
 
         def on_query(query: zenoh.Query) -> None:
             try:
@@ -280,7 +306,7 @@ class Bus:
                                error=repr(exc))
                 query.reply_err(f"{type(exc).__name__}: {exc}")
                 return
-            query.reply(key, payload)
+            query.reply(key, payload, encoding=reply_encoding)
 
         return self.session.declare_queryable(key, on_query)
 

@@ -1,5 +1,6 @@
 """Structured logging (one `event key=value` line per record) with rate limits for repeats."""
 
+import argparse
 import logging
 import sys
 import threading
@@ -7,7 +8,28 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from common.config.base import LogLevel
+
 _FORMAT = "%(asctime)s.%(msecs)03d %(levelname)s %(name)s %(message)s"
+LOG_LEVELS = tuple(level.value for level in LogLevel)
+
+
+def log_level(text: str) -> str:
+    """An argparse type: a level name in any case, returned upper case. Raises
+    argparse.ArgumentTypeError naming the levels (argparse then exits with code 2)."""
+    level = text.upper()
+    if level not in LOG_LEVELS:
+        raise argparse.ArgumentTypeError(
+            f"invalid level {text!r}; choose one of {', '.join(LOG_LEVELS)}")
+    return level
+
+
+def add_log_level(parser: argparse.ArgumentParser, default: str | None = None) -> None:
+    """`--log-level LEVEL`, the same on every command. `default` None: the command's own
+    (a service's config file, `[log] level`)."""
+    fallback = default or "the config's [log] level"
+    parser.add_argument("--log-level", type=log_level, default=default, metavar="LEVEL",
+                        help=f"{' | '.join(LOG_LEVELS)} (default: {fallback})")
 
 
 class _CurrentStderrHandler(logging.StreamHandler):

@@ -4,10 +4,11 @@ import argparse
 import json
 import sys
 
+from common import systemd
 from common.bus import BusError, open_session, zenoh_config
 from common.config.base import ZenohMode, ZenohSettings
 from common.config.realtime import RealtimeSettings
-from common.log import kv, setup_logging
+from common.log import add_log_level, kv, setup_logging
 from common.realtime import ThreadRealtime
 from common.service import stop_event_on_signals
 
@@ -30,14 +31,21 @@ def main(argv: list[str] | None = None) -> int:
                         metavar="0..99",
                         help="SCHED_FIFO priority for the router's Zenoh I/O threads (0: "
                              "normal scheduling; needs CAP_SYS_NICE; see docs/deploy.md)")
+    add_log_level(parser, "INFO")
+    parser.add_argument("--check", action="store_true",
+                        help="validate the settings and the Zenoh config, then exit (0 or 2)")
     args = parser.parse_args(argv)
-    log = setup_logging("router")
+    log = setup_logging("router", args.log_level)
     listen = args.listen or ([] if args.config_file else ["tcp/127.0.0.1:7447"])
     stop = stop_event_on_signals()
     try:
         settings = router_settings(listen, args.connect, args.config_file)
         # What the router really listens on: the config file's endpoints when none are given.
         listening = json.loads(zenoh_config(settings).get_json("listen/endpoints"))
+        if args.check:
+            print(f"router: configuration ok ({args.config_file or 'no config file'}, "
+                  f"listen {','.join(map(str, listening or []))})")
+            return 0
         # Every thread of a router is Zenoh's, and each inherits the policy of the thread
         # that created it: real-time before the session exists, they all are.
         ThreadRealtime(RealtimeSettings(priority=args.realtime_priority), log,
@@ -49,7 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     with session:
         log.info(kv("router_ready", listen=",".join(map(str, listening or [])),
                     zid=str(session.zid())))
-        stop.wait()
+        systemd.ready(f"listening on {','.join(map(str, listening or []))}")
+        watchdog = systemd.Watchdog()
+        while not watchdog.wait(stop, 3600.0):
+            pass
     log.info(kv("router_stopped"))
     return 0
 

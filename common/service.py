@@ -11,6 +11,7 @@ import msgspec
 
 from common.config.base import ServiceConfig
 from common.config.loader import load_config_or_exit
+from common.log import add_log_level
 
 C = TypeVar("C", bound=ServiceConfig)
 
@@ -23,7 +24,10 @@ def service_argparser(name: str, description: str) -> argparse.ArgumentParser:
         help="Zenoh endpoint to connect to (repeatable), overrides the config's zenoh.connect",
     )
     parser.add_argument("--vehicle", help="vehicle id, overrides the config's vehicle")
-    parser.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    add_log_level(parser)
+    parser.add_argument("--check", action="store_true",
+                        help="validate the configuration and every file it names as at start, "
+                             "then exit (0 valid, 2 invalid) without opening the bus or devices")
     return parser
 
 
@@ -43,6 +47,12 @@ def load_service_config(args: argparse.Namespace, config_type: type[C]) -> C:
             cfg, log=msgspec.structs.replace(cfg.log, level=LogLevel(args.log_level))
         )
     return cfg
+
+
+def config_checked(name: str, args: argparse.Namespace) -> int:
+    """What `--check` prints once everything a start would validate passed; exit code 0."""
+    print(f"{name}: configuration ok ({args.config or 'defaults'})")
+    return 0
 
 
 # How long a clean stop may take after SIGINT/SIGTERM before the process exits anyway.

@@ -14,11 +14,11 @@ from contextlib import contextmanager
 import can
 
 from common.config.radar import RadarSettings
+from common.resources import ARS408_RECORDING
 from services.radar.ars408 import Frame, classify
 from services.radar.core import CycleResult, RadarCore
-from tests.support import REPO
 
-RECORDING = REPO / "tests" / "data" / "ars408" / "candump-2026-06-24_154259.log"
+RECORDING = ARS408_RECORDING
 RECORDING_CYCLES = 515
 RECORDING_FRAMES = 9579
 

@@ -32,6 +32,7 @@ from common.calibration import Calibration
 from common.config.fusion import FusionConfig, FusionSettings
 from common.config.loader import ConfigError, load_config, parse_config
 from common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
+from common.log import add_log_level, setup_logging
 from common.messages import DecodeError, RadarTracks, decode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import GateResult, Observation, VerifierConfigError, create
@@ -202,7 +203,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-grid", action="store_true", help="do not draw the ground grid")
     parser.add_argument("--jpeg-quality", type=int, default=80,
                         help="quality for non-JPEG images (the camera's, default 80)")
+    add_log_level(parser, "WARNING")
     args = parser.parse_args(argv)
+    setup_logging("calib-check", args.log_level)
     try:
         cal = Calibration.load(args.calibration)
         settings = (load_config(args.fusion_config, FusionConfig).fusion if args.fusion_config

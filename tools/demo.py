@@ -29,7 +29,7 @@ import numpy as np
 from common.bus import Bus, BusError
 from common.config.loader import ConfigError
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.log import setup_logging
+from common.log import add_log_level, setup_logging
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, render
 from tools.ab.feeder import Feeder
@@ -74,6 +74,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="the radar also publishes its raw CAN frames (to record them "
                              "with `aeb record` for `aeb rerun radar`)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
+    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -206,7 +207,7 @@ def report(results: list[RunResult], feed: RadarFeed | None, actuator: Any, out:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    setup_logging("demo", "WARNING")
+    setup_logging("demo", args.log_level)
     if args.list:
         for path in all_scenarios():
             sc = load_scenario(path)

@@ -6,6 +6,8 @@ from typing import Annotated, Any
 
 import msgspec
 
+from common.config.paths import ConfigPath
+
 _VEHICLE = re.compile(r"^[A-Za-z0-9_\-]+$")
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|unixsock-stream|ws)/.+")
 
@@ -19,15 +21,16 @@ class ZenohMode(enum.Enum):
 class ZenohSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """How a process joins the bus.
 
-    `config_file` (Zenoh JSON5) is read first; the fields below override it; `overrides`
-    are raw Zenoh config keys (``"transport/unicast/max_links"``) applied last.
+    `config_file` (Zenoh JSON5, relative to the service's config file) is read first; the
+    fields below override it; `overrides` are raw Zenoh config keys
+    (``"transport/unicast/max_links"``) applied last.
     Multicast scouting stays off unless `multicast_scouting` is true.
     """
 
     mode: ZenohMode = ZenohMode.CLIENT
     connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     listen: tuple[str, ...] = ()
-    config_file: str = ""
+    config_file: ConfigPath = ""
     multicast_scouting: bool = False
     gossip_scouting: bool = False
     overrides: dict[str, Any] = msgspec.field(default_factory=dict)

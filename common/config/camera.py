@@ -2,7 +2,8 @@
 
 The source is a tagged union on `kind`; each kind has its own fields, and an unknown
 field or kind fails at start naming it. A source `fps` of 0 means "the camera's `fps`".
-See docs/camera.md.
+File paths (calibration, bag, video file, folder) are relative to the config file's
+folder. See docs/camera.md.
 """
 
 import re
@@ -11,6 +12,7 @@ from typing import Annotated, Any
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.paths import ConfigPath
 
 Fps = Annotated[float, msgspec.Meta(ge=0, le=1000)]
 _CAMERA_NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -25,7 +27,7 @@ class RealSenseSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, t
     """
 
     serial: str = ""            # empty: the first device found
-    bag: str = ""               # a recording (.bag, or .db3 from librealsense 2.59) to play
+    bag: ConfigPath = ""        # a recording (.bag, or .db3 from librealsense 2.59) to play
     loop: bool = False          # bag only: play again from the start at its end
     width: Annotated[int, msgspec.Meta(gt=0)] = 848
     height: Annotated[int, msgspec.Meta(gt=0)] = 480
@@ -42,7 +44,7 @@ class OpenCVSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, tag_
     own rate (`width`, `height` and `fps` are requested from them when non-zero).
     """
 
-    device: str
+    device: ConfigPath
     backend: str = "any"        # any | v4l2 | ffmpeg | gstreamer
     loop: bool = False          # files only
     fps: Fps = 0.0
@@ -61,7 +63,7 @@ class FolderSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, tag_
                    tag="folder"):
     """Image files of a folder in natural sort order ("f2" before "f10"), paced at `fps`."""
 
-    path: str
+    path: ConfigPath
     fps: Fps = 0.0
     loop: bool = True
     extensions: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".bmp", ".ppm", ".pgm", ".tif",
@@ -93,11 +95,10 @@ class CameraSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     `fps` is the publish rate: frames arriving faster are skipped (counted as decimated).
     `calibration` is required: the size, K, distortion and extrinsics that CameraInfo
-    carries and that frames must match. Relative paths are relative to the working
-    directory.
+    carries and that frames must match.
     """
 
-    calibration: str
+    calibration: ConfigPath
     name: str = "front"
     fps: Annotated[float, msgspec.Meta(gt=0, le=1000)] = 30.0
     jpeg_quality: Annotated[int, msgspec.Meta(ge=1, le=100)] = 80

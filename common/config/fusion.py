@@ -11,12 +11,14 @@ from typing import Annotated
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.paths import ConfigPath
 from common.config.realtime import RealtimeSettings
 from common.keys import RADAR_TRACKS
+from common.resources import EXAMPLE_CALIBRATION
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
 _DEFAULT_CAMERA = "front"
-_DEFAULT_CALIBRATION = "deploy/calibration/d435_848x480.toml"
+_DEFAULT_CALIBRATION = str(EXAMPLE_CALIBRATION)   # the shipped example
 
 NonNegative = Annotated[float, msgspec.Meta(ge=0)]
 Positive = Annotated[float, msgspec.Meta(gt=0)]
@@ -66,7 +68,7 @@ class CameraInput(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     projects into it with its own calibration file."""
 
     name: str
-    calibration: str
+    calibration: ConfigPath
 
 
 class RoiSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -138,8 +140,8 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # Every key this instance publishes is under fusion/<instance>/.
     instance: str = "primary"
     radar_sensor: str = "front"
-    # Calibration TOML (common/calibration.py); relative paths are from the working directory.
-    calibration: str = _DEFAULT_CALIBRATION
+    # Calibration TOML (common/calibration.py), relative to this config file's folder.
+    calibration: ConfigPath = _DEFAULT_CALIBRATION
     gate_scope: GateScope = GateScope.CANDIDATES
     frames: FrameSettings = msgspec.field(default_factory=FrameSettings)
     roi: RoiSettings = msgspec.field(default_factory=RoiSettings)

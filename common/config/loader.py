@@ -1,4 +1,5 @@
-"""Load a TOML file into a validated config type; fail fast naming the field."""
+"""Load a TOML file into a validated config type; fail fast naming the field. Paths in the
+file are resolved against its folder (common/config/paths.py)."""
 
 import sys
 import tomllib
@@ -6,6 +7,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import msgspec
+
+from common.config.paths import resolve_paths
 
 T = TypeVar("T", bound=msgspec.Struct)
 
@@ -15,7 +18,8 @@ class ConfigError(ValueError):
 
 
 def parse_config(data: dict[str, Any], config_type: type[T], origin: str = "<config>") -> T:
-    """Validate a mapping as `config_type`. Raises ConfigError naming the offending field."""
+    """Validate a mapping as `config_type` (paths stay as given). Raises ConfigError naming
+    the offending field."""
     try:
         return msgspec.convert(data, config_type, strict=True)
     except msgspec.ValidationError as exc:
@@ -23,7 +27,8 @@ def parse_config(data: dict[str, Any], config_type: type[T], origin: str = "<con
 
 
 def load_config(path: str | Path, config_type: type[T]) -> T:
-    """Read and validate a TOML file. Raises ConfigError (missing file, bad TOML, bad field)."""
+    """Read and validate a TOML file; relative paths in it are resolved against its
+    folder. Raises ConfigError (missing file, bad TOML, bad field)."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -33,7 +38,23 @@ def load_config(path: str | Path, config_type: type[T]) -> T:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
-    return parse_config(data, config_type, str(p))
+    return resolve_paths(parse_config(data, config_type, str(p)), p.resolve().parent)
+
+
+def relocated_text(path: str | Path, config_type: type[T]) -> str:
+    """The TOML text of a config file with each relative path in it (its `ConfigPath`
+    values) made absolute, for a copy written into another folder (the simulator's run
+    folder). Raises ConfigError like `load_config`."""
+    p = Path(path)
+    load_config(p, config_type)    # the same errors as loading it
+    text = p.read_text(encoding="utf-8")
+    pairs: list[tuple[str, str]] = []
+    resolve_paths(parse_config(tomllib.loads(text), config_type, str(p)), p.resolve().parent,
+                  pairs)
+    for written, absolute in pairs:
+        for quote in ('"', "'"):
+            text = text.replace(f"{quote}{written}{quote}", f"{quote}{absolute}{quote}")
+    return text
 
 
 def load_config_or_exit(path: str | Path | None, config_type: type[T]) -> T:

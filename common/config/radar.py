@@ -12,6 +12,7 @@ from typing import Annotated, Any
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.paths import ConfigPath
 from common.config.realtime import RealtimeSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
@@ -63,9 +64,9 @@ class CanSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 class ReplaySettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """A recorded log (candump .log, .asc, .blf, ... anything python-can's LogReader reads).
-    Relative paths are relative to the working directory."""
+    A relative `file` is relative to the config file's folder."""
 
-    file: str = ""
+    file: ConfigPath = ""
     pace: Pace = Pace.REALTIME
     loop: bool = False
     exit_at_end: bool = False   # exit the service (code 0) when a non-looping replay ends
@@ -180,6 +181,7 @@ class RadarSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     tracker: TrackerSettings = msgspec.field(default_factory=TrackerSettings)
     ego_motion: EgoMotionSettings = msgspec.field(default_factory=EgoMotionSettings)
     status_period_s: PositiveFloat = 1.0
+    stats_period_s: NonNegFloat = 10.0    # a radar_stats log line per radar this often (0: never)
     raw_can: RawCanSettings = msgspec.field(default_factory=RawCanSettings)
     # SCHED_FIFO for the CAN loop (decode, track, publish) and the Zenoh I/O threads
     realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)

@@ -5,7 +5,7 @@ import msgspec
 from common.messages.header import Header
 
 
-class CompressedFrame(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class CompressedFrame(msgspec.Struct, frozen=True):
     """One JPEG frame. `header.stamp_ns` is the capture time (wall clock)."""
 
     header: Header
@@ -15,7 +15,7 @@ class CompressedFrame(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     jpeg: bytes
 
 
-class CameraInfo(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class CameraInfo(msgspec.Struct, frozen=True):
     """Size, intrinsics and radar-to-camera extrinsics.
 
     `k` is the 3x3 camera matrix row-major, `dist` OpenCV distortion coefficients

@@ -29,7 +29,7 @@ class VerifierStatus(enum.Enum):
     STALE_RADAR = "stale_radar"    # radar input older than allowed: never brakes
 
 
-class CameraCheck(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class CameraCheck(msgspec.Struct, frozen=True):
     """One camera's view of a track, in instances with several cameras. `not_checked`
     here also means a camera after the one that verified the track (not gated)."""
 
@@ -39,7 +39,7 @@ class CameraCheck(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     density: float | None = None
 
 
-class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class VerifiedTarget(msgspec.Struct, frozen=True):
     """One confirmed radar track after verification and decision.
 
     `x_m`, `y_m` are the track predicted to the frame's capture time (what was projected;
@@ -78,7 +78,7 @@ class VerifiedTarget(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     cameras: tuple[CameraCheck, ...] = ()
 
 
-class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class VerifiedTargets(msgspec.Struct, frozen=True):
     header: Header
     instance: str
     radar_sensor: str
@@ -99,7 +99,7 @@ class VerifiedTargets(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)
 
 
-class BrakeCommand(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class BrakeCommand(msgspec.Struct, frozen=True):
     """Exactly one per radar cycle per fusion instance: the most severe decision, or a
     plain heartbeat (decision NONE, level 0).
 

@@ -20,7 +20,7 @@ class BusState(enum.Enum):
     ENDED = "ended"            # a finite replay reached its end
 
 
-class RadarTrack(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarTrack(msgspec.Struct, frozen=True):
     """One Kalman track in the radar frame (x forward, y left, z up; origin at the radar).
 
     `range_rate_mps` is the time derivative of range: negative means closing.
@@ -44,7 +44,7 @@ class RadarTrack(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     obj_class: int = -1        # ARS408 object class (0x60D: 0 point, 1 car, ...), -1 when unknown
 
 
-class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarTracks(msgspec.Struct, frozen=True):
     """Every track of one radar cycle, confirmed or not; published every cycle, also when empty.
 
     `header.stamp_ns` is the wall time the cycle's status frame was received.
@@ -64,7 +64,7 @@ class RadarTracks(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     tracks: tuple[RadarTrack, ...]
 
 
-class RadarState(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarState(msgspec.Struct, frozen=True):
     """Decoded 0x201 RadarState."""
 
     nvm_read_ok: bool
@@ -83,7 +83,7 @@ class RadarState(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     rcs_threshold: int
 
 
-class RadarStatus(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RadarStatus(msgspec.Struct, frozen=True):
     """Radar health: published at 1 Hz and on every change of `ready`, `bus_state` or state."""
 
     header: Header
@@ -107,9 +107,10 @@ class RadarStatus(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     ego_motion_frames_sent: int = 0    # 0x300 / 0x301 frames written to this radar
 
 
-class CanFrame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, array_like=True):
+class CanFrame(msgspec.Struct, frozen=True, array_like=True):
     """One CAN frame as the radar service received it (encoded as an array: a cycle has
-    hundreds). `timestamp_s` is the interface's own time (python-can's `Message.timestamp`,
+    hundreds; a field added later goes at the end, with a default, so that older readers
+    still decode it). `timestamp_s` is the interface's own time (python-can's `Message.timestamp`,
     the log's time in a replay); `rx_wall_ns` / `rx_mono_ns` are the host's receive times
     the service used. `flags`: CAN_EXTENDED | CAN_REMOTE | CAN_ERROR."""
 
@@ -126,7 +127,7 @@ CAN_REMOTE = 2
 CAN_ERROR = 4
 
 
-class RawCanFrames(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RawCanFrames(msgspec.Struct, frozen=True):
     """The raw frames of one CAN bus, in receive order, published when the radar is asked
     to (`[radar.raw_can] publish = true`): every frame received since the previous batch,
     one batch per radar cycle (after its tracks) and at least every cycle period while

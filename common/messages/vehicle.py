@@ -5,7 +5,7 @@ import msgspec
 from common.messages.header import Header
 
 
-class EgoMotion(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class EgoMotion(msgspec.Struct, frozen=True):
     """Ego speed (forward positive, reverse negative) and yaw rate (left positive)."""
 
     header: Header

@@ -5,10 +5,17 @@ import threading
 
 import msgspec
 
+from common import systemd
 from common.bus import Bus, BusError
 from common.config.brake import BrakeConfig
 from common.log import kv, setup_logging
-from common.service import load_service_config, service_argparser, stop_event_on_signals
+from common.service import (
+    config_checked,
+    load_service_config,
+    service_argparser,
+    stop_event_on_signals,
+)
+from common.systemd import Watchdog
 from services.brake.shell import SOURCE, BrakeShell
 
 
@@ -35,12 +42,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.port:
         serial = msgspec.structs.replace(cfg.brake.serial, port=args.port)
         cfg = msgspec.structs.replace(cfg, brake=msgspec.structs.replace(cfg.brake, serial=serial))
+    if args.check:
+        return config_checked("brake", args)
     log = setup_logging("brake", cfg.log.level.value)
     stop = stop_event_on_signals()
     # the timer thread waits at most ~1 ms for the GIL instead of the default 5 ms
     sys.setswitchinterval(0.001)
-    shell = BrakeShell(cfg, log)
+    shell = BrakeShell(cfg, log, Watchdog())
     shell.start()
+    # Ready once the deadline timer and the actuator link run, before the bus: without a
+    # router the brake still enforces its fail-safe, which is its service
+    systemd.ready("deadline timer and actuator link running; waiting for the bus")
     opened: list[Bus] = []
     errors: list[str] = []
     threading.Thread(target=_serve_bus, args=(cfg, shell, stop, opened, errors),

@@ -26,6 +26,7 @@ from collections.abc import Callable
 
 import zenoh
 
+from common import systemd
 from common.bus import Bus, TypedPublisher
 from common.clock import mono_ns, wall_ns
 from common.config.brake import AgeClock, BrakeConfig
@@ -33,6 +34,7 @@ from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
 from common.realtime import ThreadRealtime, apply_process, set_fifo
+from common.systemd import Watchdog
 from services.brake.core import BrakeCore, Outgoing
 from services.brake.protocol import SEQ_MODULO, BadLine, Command, encode
 from services.brake.serial_link import SerialLink
@@ -70,8 +72,10 @@ def next_frame(frame: Command) -> Command:
 
 
 class BrakeShell:
-    def __init__(self, cfg: BrakeConfig, log: logging.Logger) -> None:
+    def __init__(self, cfg: BrakeConfig, log: logging.Logger,
+                 watchdog: Watchdog | None = None) -> None:
         s = cfg.brake
+        self.watchdog = watchdog or Watchdog(env={})   # fed by the timer loop
         self.cfg = cfg
         self._log = log
         self._rl = RateLimitedLog(log, cfg.log.repeat_interval_s)
@@ -114,6 +118,7 @@ class BrakeShell:
         self._subscriber = bus.subscribe_raw(FUSION_BRAKE_CMD, self.on_command)
         apply_process(self.cfg.brake.realtime, self._log)
         self._token = bus.declare_health(SERVICE, INSTANCE)
+        systemd.status(f"serving: following fusion {self.cfg.brake.instance}")
         self._log.info(kv("brake_ready", instance=self.cfg.brake.instance,
                           port=self.cfg.brake.serial.port,
                           policy=self.cfg.brake.policy.value))
@@ -207,6 +212,7 @@ class BrakeShell:
                                    state=self.core.state.value,
                                    count=self.errors["timer_tick_failed"])
                     self._log.debug("timer traceback", exc_info=True)
+                self.watchdog.feed()
                 now = mono_ns()
                 wake = now + _TIMER_PERIOD_NS
                 if self._status_pub is not None:

@@ -7,7 +7,13 @@ from common.calibration import Calibration
 from common.config.camera import CameraConfig
 from common.config.loader import ConfigError
 from common.log import kv, setup_logging
-from common.service import load_service_config, service_argparser, stop_event_on_signals
+from common.service import (
+    config_checked,
+    load_service_config,
+    service_argparser,
+    stop_event_on_signals,
+)
+from common.systemd import Watchdog
 from services.camera.registry import build_source, check_source
 from services.camera.shell import EXIT_CONFIG, CameraShell
 from services.camera.source import SourceConfigError
@@ -28,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_CONFIG
     for warning in cal.warnings():
         log.warning(kv("calibration_implausible", file=settings.calibration, detail=warning))
+    if args.check:
+        return config_checked("camera", args)
     try:
         with Bus.open(cfg.zenoh, cfg.vehicle, f"camera/{settings.name}") as bus:
             try:
@@ -35,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
             except SourceConfigError as exc:
                 print(f"error: camera.source: {exc}", file=sys.stderr)
                 return EXIT_CONFIG
-            shell = CameraShell(settings, cal, source, bus)
+            shell = CameraShell(settings, cal, source, bus, Watchdog())
             code = shell.run(stop)
             if shell.pipeline.fatal is not None:
                 print(f"error: camera.source: {shell.pipeline.fatal}", file=sys.stderr)

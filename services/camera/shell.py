@@ -6,6 +6,7 @@ import threading
 
 import zenoh
 
+from common import systemd
 from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
@@ -13,6 +14,7 @@ from common.config.camera import CameraSettings
 from common.keys import CAMERA_INFO, CAMERA_JPEG
 from common.log import kv
 from common.messages import CameraInfo, Header
+from common.systemd import Watchdog
 from services.camera.core import Backoff, CameraCore, Health, camera_info
 from services.camera.pipeline import FramePipeline
 from services.camera.source import FrameSource
@@ -27,8 +29,9 @@ class CameraShell:
     """Wires a source, the pipeline and the bus. Use `run(stop)` from the main thread."""
 
     def __init__(self, settings: CameraSettings, cal: Calibration, source: FrameSource,
-                 bus: Bus) -> None:
+                 bus: Bus, watchdog: Watchdog | None = None) -> None:
         self.settings = settings
+        self.watchdog = watchdog or Watchdog(env={})   # fed by the info loop of `run`
         self.cal = cal
         self.bus = bus
         self.core = CameraCore(settings.name, cal.width, cal.height, settings.fps)
@@ -65,6 +68,7 @@ class CameraShell:
                                                      camera=self.settings.name)
         self.pipeline.start()
         self._token = self.bus.declare_health("camera", self.settings.name)
+        systemd.ready(f"serving camera {self.settings.name}")
         _log.info(kv("camera_serving", camera=self.settings.name,
                      source=self.pipeline.source.describe(), fps=self.settings.fps,
                      size=f"{self.cal.width}x{self.cal.height}"))
@@ -82,7 +86,7 @@ class CameraShell:
                 if self.settings.stats_period_s and mono_ns() >= next_stats:
                     next_stats = mono_ns() + round(self.settings.stats_period_s * 1e9)
                     self.log_stats()
-                if stop.wait(period):
+                if self.watchdog.wait(stop, period):
                     return EXIT_OK
         finally:
             self.close()

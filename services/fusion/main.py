@@ -12,13 +12,20 @@ import sys
 
 import msgspec
 
+from common import systemd
 from common.bus import Bus, BusError
 from common.calibration import Calibration
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError
 from common.log import kv, setup_logging
 from common.realtime import apply_process
-from common.service import load_service_config, service_argparser, stop_event_on_signals
+from common.service import (
+    config_checked,
+    load_service_config,
+    service_argparser,
+    stop_event_on_signals,
+)
+from common.systemd import Watchdog
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
@@ -72,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
         for warning in cal.warnings():
             log.warning(kv("calibration_implausible", camera=name, file=cal.origin,
                            detail=warning))
+    if args.check:
+        return config_checked("fusion", args)
     stop = stop_event_on_signals()
     try:
         bus = Bus.open(cfg.zenoh, cfg.vehicle, core.source)
@@ -90,8 +99,9 @@ def main(argv: list[str] | None = None) -> int:
                     params=core.verifier_params, radar=s.radar_sensor,
                     cameras=core.camera_names, decode=s.frames.decode.value,
                     calibration=",".join(c.calibration for c in s.camera_inputs)))
+        systemd.ready(f"serving fusion {s.instance}")
         try:
-            run_until(stop, shell, s.stats_interval_s)
+            run_until(stop, shell, s.stats_interval_s, Watchdog())
         finally:
             token.undeclare()
             shell.stop()

@@ -28,6 +28,7 @@ from common.messages import (
     decode,
 )
 from common.realtime import ThreadRealtime
+from common.systemd import Watchdog
 from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FrameDecoder
@@ -205,9 +206,11 @@ class FusionShell:
         self.log.info(kv("fusion_stats", **self.stats()))
 
 
-def run_until(stop: threading.Event, shell: FusionShell, interval_s: float) -> None:
-    """Log statistics every interval until `stop` is set."""
+def run_until(stop: threading.Event, shell: FusionShell, interval_s: float,
+              watchdog: Watchdog | None = None) -> None:
+    """Log statistics every interval until `stop` is set; feed systemd's watchdog."""
+    wait = (watchdog or Watchdog(env={})).wait
     next_log = time.monotonic() + interval_s
-    while not stop.wait(max(0.0, next_log - time.monotonic())):
+    while not wait(stop, max(0.0, next_log - time.monotonic())):
         shell.log_stats()
         next_log += interval_s

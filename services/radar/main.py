@@ -8,13 +8,20 @@ import sys
 
 import zenoh
 
+from common import systemd
 from common.bus import Bus, BusError, TypedPublisher
 from common.config.radar import RadarConfig
 from common.keys import EGO_MOTION, RADAR_CAN, RADAR_STATUS, RADAR_TRACKS
 from common.log import kv, setup_logging
 from common.messages.radar import RadarStatus, RadarTracks
 from common.realtime import ThreadRealtime, apply_process
-from common.service import load_service_config, service_argparser, stop_event_on_signals
+from common.service import (
+    config_checked,
+    load_service_config,
+    service_argparser,
+    stop_event_on_signals,
+)
+from common.systemd import Watchdog
 from services.radar.ports import ConfigurationError, check_settings
 from services.radar.shell import RadarShell
 
@@ -39,6 +46,7 @@ class ZenohRadarOutput:
 
     def serving(self) -> None:
         self._tokens = [self._bus.declare_health("radar", s) for s in self._sensors]
+        systemd.ready(f"serving radar {','.join(self._sensors)}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -51,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigurationError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.check:
+        return config_checked("radar", args)
     stop = stop_event_on_signals()
     sensors = [s.name for s in cfg.radar.sensors]
     try:
@@ -60,8 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     with bus:
         raw = cfg.radar.raw_can
-        service = RadarShell(cfg.radar, ZenohRadarOutput(bus, sensors), raw_can=(
-            bus.publisher(RADAR_CAN, bus=raw.bus).put if raw.publish else None))
+        service = RadarShell(cfg.radar, ZenohRadarOutput(bus, sensors), watchdog=Watchdog(),
+                             raw_can=(bus.publisher(RADAR_CAN, bus=raw.bus).put
+                                      if raw.publish else None))
         if cfg.radar.ego_motion.forward:
             bus.subscribe(EGO_MOTION, lambda msg, key: service.on_ego_motion(msg))
         log.info(kv("radar_start", sensors=",".join(sensors),

@@ -8,7 +8,9 @@ callback) under a lock shared with the configuration writes.
 """
 
 import logging
+import statistics
 import threading
+from collections import deque
 from collections.abc import Callable
 from typing import Protocol
 
@@ -30,6 +32,7 @@ from common.messages.radar import (
     RawCanFrames,
 )
 from common.messages.vehicle import EgoMotion
+from common.systemd import Watchdog
 from services.radar.ars408.codec import Frame
 from services.radar.ars408.table import classify
 from services.radar.core import CycleResult, RadarCore
@@ -74,9 +77,11 @@ class RadarShell:
         settings: RadarSettings,
         output: RadarOutput,
         port_factory: Callable[[], CanPort] | None = None,
+        watchdog: Watchdog | None = None,
         raw_can: Callable[[RawCanFrames], None] | None = None,
     ) -> None:
         self.settings = settings
+        self.watchdog = watchdog or Watchdog(env={})   # fed by the CAN loop
         self.output = output
         self._raw_sink = raw_can
         self._raw: list[CanFrame] = []
@@ -102,6 +107,13 @@ class RadarShell:
         self._rl = RateLimitedLog(_log)
         self._period_ns = int(settings.status_period_s * NS_PER_S)
         self._port_errors: dict[int, dict[str, int]] = {}
+        self._stats_period_ns = int(settings.stats_period_s * NS_PER_S)
+        self._stats_due = 0
+        # per radar, since the last stats line: (cycles, frames, mono) then, processing times
+        self._stats_from: dict[int, tuple[int, int, int]] = {}
+        self._processing_us: dict[int, deque[float]] = {
+            sid: deque(maxlen=4096) for sid in self.cores}
+        self._last_tracks: dict[int, tuple[int, int]] = dict.fromkeys(self.cores, (0, 0))
 
     # -- main loop ----------------------------------------------------------------------
 
@@ -113,7 +125,7 @@ class RadarShell:
         while not stop.is_set():
             if lost:
                 self._status_tick(mono_ns(), wall_ns())
-                if stop.wait(backoff):
+                if self.watchdog.wait(stop, backoff):
                     break
                 backoff = min(2 * backoff, can_cfg.reopen_backoff_max_s)
             try:
@@ -135,6 +147,7 @@ class RadarShell:
             lost = True
         self._publish_raw()
         self._publish_all_status(mono_ns(), wall_ns())
+        self.log_stats(mono_ns())
         return 0
 
     def _serve_port(self, port: CanPort, stop: threading.Event) -> bool:
@@ -202,8 +215,9 @@ class RadarShell:
         self._publish_raw()
         self._set_bus_state(BusState.ENDED, mono_ns())
         _log.info(kv("replay_ended", cycles=sum(c.cycles_total for c in self.cores.values())))
+        self.log_stats(mono_ns())
         if not self.settings.replay.exit_at_end:
-            while not stop.wait(self.settings.status_period_s):
+            while not self.watchdog.wait(stop, self.settings.status_period_s):
                 self._publish_all_status(mono_ns(), wall_ns())
         return 0
 
@@ -283,7 +297,11 @@ class RadarShell:
     def _publish_results(self, core: RadarCore, results: list[CycleResult],
                          processing_ns: int) -> None:
         name = core.sensor.name
+        sid = core.sensor.sensor_id
+        if processing_ns:
+            self._processing_us[sid].append(processing_ns / 1e3)
         for r in results:
+            self._last_tracks[sid] = (len(r.tracks), sum(t.confirmed for t in r.tracks))
             if not r.complete:
                 self._rl.warning(f"incomplete:{name}", "cycle_incomplete", sensor=name,
                                  closed_by=r.closed_by, meas_counter=r.meas_counter)
@@ -333,6 +351,29 @@ class RadarShell:
                 if found is not None:
                     self.ego_sent[found[1]] += 1
 
+    # -- stats --------------------------------------------------------------------------
+
+    def log_stats(self, mono: int) -> None:
+        """One `radar_stats` line per radar, like the camera's and fusion's: totals, and
+        rates and processing times since the previous line."""
+        for sid, core in self.cores.items():
+            cycles0, frames0, at = self._stats_from.get(sid, (0, 0, 0))
+            span_s = (mono - at) / NS_PER_S if at else 0.0
+            times = self._processing_us[sid]
+            tracks, confirmed = self._last_tracks[sid]
+            _log.info(kv(
+                "radar_stats", sensor=core.sensor.name, cycles=core.cycles_total,
+                rate_hz=(core.cycles_total - cycles0) / span_s if span_s else 0.0,
+                frames_per_s=(core.frames_total - frames0) / span_s if span_s else 0.0,
+                incomplete=core.cycles_incomplete, meas_counter_gaps=core.meas_counter_gaps,
+                tracker_resets=core.tracker.resets, tracks=tracks, confirmed=confirmed,
+                processing_us_p50=statistics.median(times) if times else 0.0,
+                processing_us_max=max(times, default=0.0), rejected=core.rejected.total(),
+                bus_state=self.bus_state.value, bus_rejected=self.bus_rejected.total(),
+                bus_reopens=self.bus_reopens))
+            self._stats_from[sid] = (core.cycles_total, core.frames_total, mono)
+            times.clear()
+
     # -- status -------------------------------------------------------------------------
 
     def _set_bus_state(self, state: BusState, mono: int) -> None:
@@ -353,6 +394,14 @@ class RadarShell:
 
     def _housekeeping(self, mono: int, wall: int) -> None:
         self._publish_raw(older_than_mono_ns=mono - _RAW_BATCH_MAX_AGE_NS)
+        self.watchdog.feed()
+        if self._stats_period_ns and mono >= self._stats_due:
+            if self._stats_due:
+                self.log_stats(mono)
+            else:               # serving from now: the first line counts from here
+                self._stats_from = {sid: (c.cycles_total, c.frames_total, mono)
+                                    for sid, c in self.cores.items()}
+            self._stats_due = mono + self._stats_period_ns
         for core in self.cores.values():
             results = core.poll(mono)
             if results:

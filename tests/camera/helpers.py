@@ -6,9 +6,10 @@ import cv2
 
 from common.calibration import Calibration
 from common.imaging import encode_jpeg
+from common.resources import EXAMPLE_CALIBRATION
 from tools.sim.moving_box import MovingBoxSource
 
-CALIBRATION = "deploy/calibration/d435_848x480.toml"
+CALIBRATION = str(EXAMPLE_CALIBRATION)
 WIDTH, HEIGHT = 848, 480
 
 

@@ -225,3 +225,39 @@ def test_put_bytes_publishes_the_payload_unchanged(router):
 
         wait_for(seen, 30, 0.05, "the raw payload")
         assert got[0] == data and decode(got[0], BrakeCommand).header.seq == 5
+
+
+def test_every_sample_carries_its_message_encoding(router):
+    """What `z_sub`, a bridge or a recorder sees: msgpack with the message type as schema,
+    on published samples and on query replies alike."""
+    from common.keys import CAMERA_INFO
+    from tests.messages_support import example
+
+    with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:
+        encodings: list[str] = []
+        raw = sub_bus.session.declare_subscriber(
+            "aeb/ego/**", lambda s: encodings.append(str(s.encoding)))
+        pub = pub_bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        status = pub_bus.publisher(BRAKE_STATUS)
+
+        def both_seen() -> bool:
+            pub.put(cmd(1))
+            status.put(example(BRAKE_STATUS.msg_type))
+            return len(set(encodings)) >= 2
+
+        wait_for(both_seen, 30, 0.05, "samples of both keys")
+        assert set(encodings) == {"application/msgpack;aeb.BrakeCommand",
+                                  "application/msgpack;aeb.BrakeStatus"}
+        q = pub_bus.declare_queryable(CAMERA_INFO, lambda: example(CAMERA_INFO.msg_type),
+                                      camera="front")
+        try:
+            def reply_encoding() -> str:
+                for reply in sub_bus.session.get("aeb/ego/camera/front/info", timeout=5.0):
+                    if reply.ok is not None:
+                        return str(reply.ok.encoding)
+                return ""
+
+            assert wait_for(reply_encoding, 30) == "application/msgpack;aeb.CameraInfo"
+        finally:
+            q.undeclare()
+            raw.undeclare()

@@ -10,12 +10,13 @@ from common.calibration import Calibration
 from common.config.fusion import FusionConfig, FusionSettings
 from common.config.loader import parse_config
 from common.messages import Decision, Header, OutputMode, RadarTrack, RadarTracks, VerifiedTarget
+from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.core import FusionCore
 from services.fusion.frames import DecodedFrame, FrameFeed
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import GateResult, Observation, ParamValue, create
 
-CALIBRATION = "deploy/calibration/d435_848x480.toml"
+CALIBRATION = str(EXAMPLE_CALIBRATION)
 T0 = 1_800_000_000_000_000_000      # a wall-clock instant (ns)
 MS = 1_000_000
 CAL = Calibration.load(CALIBRATION)

@@ -15,6 +15,7 @@ from common.clock import wall_ns
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, load_config, parse_config
 from common.messages import Decision, Verification, VerifierStatus, encode
+from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.cameras import Camera, CameraView, camera_views, check_track
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
@@ -227,7 +228,7 @@ def test_a_single_camera_config_reads_as_one_camera_input():
     s = load_config("deploy/fusion.toml", FusionConfig).fusion
     assert s.cameras == ()
     assert [(c.name, c.calibration) for c in s.camera_inputs] == [
-        ("front", "deploy/calibration/d435_848x480.toml")]
+        ("front", str(EXAMPLE_CALIBRATION))]
 
 
 @pytest.mark.parametrize(("fusion", "named"), [

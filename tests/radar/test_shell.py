@@ -349,3 +349,37 @@ def test_unplugged_slcan_adapter_is_reported_and_retried(running):
     # The link is closed: the service's reads fail and the device is gone.
     status = out.status_where(lambda st: st.bus_state is BusState.REOPENING)
     assert not status.ready and status.rejected.get("bus:bus_failure") == 1
+
+
+def test_stats_are_logged_periodically_and_at_the_end(running, caplog):
+    # a stats line per period while serving, with the rate since the previous line
+    caplog.set_level("INFO", logger="radar")
+    script = [m for k in range(40) for m in cycle_messages(k)]
+    s = RadarSettings(can=FAST_REOPEN, cycle=NO_EXTRAS, stats_period_s=0.05)
+    out = Output()
+    running(RadarShell(s, out, lambda: ScriptedPort(script)))
+
+    def lines() -> list[str]:
+        return [r.getMessage() for r in caplog.records if r.getMessage().startswith(
+            "radar_stats ")]
+
+    wait_for(lambda: len(lines()) >= 2 and "cycles=40 " in lines()[-1], 30,
+             what="two radar_stats lines, the last after every cycle")
+    fields = dict(kv.split("=", 1) for kv in lines()[-1].split()[1:])
+    assert fields["sensor"] == "front" and fields["incomplete"] == "0"
+    assert (fields["tracks"], fields["confirmed"]) == ("1", "1")
+    assert float(fields["processing_us_max"]) >= float(fields["processing_us_p50"])
+    assert fields["bus_state"] in ("active", "silent")
+    assert any(float(dict(kv.split("=", 1) for kv in ln.split()[1:])["rate_hz"]) > 0
+               for ln in lines())
+
+
+def test_a_replay_logs_its_totals_when_it_ends(caplog):
+    caplog.set_level("INFO", logger="radar")
+    s = RadarSettings(can=CanSettings(interface="replay"),
+                      replay=ReplaySettings(file=str(RECORDING), pace=Pace.FAST,
+                                            exit_at_end=True))
+    assert RadarShell(s, Output()).run(threading.Event()) == 0
+    final = [r.getMessage() for r in caplog.records if r.getMessage().startswith("radar_stats")]
+    assert final and f"cycles={RECORDING_CYCLES} " in final[-1]
+    assert "incomplete=0 " in final[-1] and "rejected=0 " in final[-1]

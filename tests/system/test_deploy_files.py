@@ -1,8 +1,8 @@
 """The files under deploy/: every Zenoh config is accepted by zenoh, the secure profile
 works end to end (mutual TLS and access control) with certificates made by its script,
-and the systemd units start real `aeb` commands on files that exist."""
+and the process tables name valid service configs (the systemd units:
+test_systemd_units.py)."""
 
-import configparser
 import json
 import shutil
 import subprocess
@@ -13,10 +13,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from common.resources import DEPLOY
 from tests.support import free_port, wait_for
-from tools.cli import COMMANDS
 
-DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ZENOH_CONFIGS = sorted((DEPLOY / "zenoh").rglob("*.json5"))
 
 
@@ -126,31 +125,6 @@ def test_secure_profile_mutual_tls_and_access_control(tmp_path):
         router.close()
 
 
-def _units() -> list[Path]:
-    return sorted((DEPLOY / "systemd").glob("*.service"))
-
-
-@pytest.mark.parametrize("unit", _units(), ids=lambda p: p.name)
-def test_systemd_units_run_aeb_commands_on_existing_files(unit):
-    parser = configparser.ConfigParser(interpolation=None, strict=False)
-    parser.read(unit)
-    assert {"Unit", "Service", "Install"} <= set(parser.sections())
-    argv = parser["Service"]["ExecStart"].split()
-    assert argv[0] == "/opt/aeb/.venv/bin/aeb"
-    command = argv[1]
-    instances = ["radar", "camera", "fusion", "brake"] if command == "%i" else [command]
-    tables = ["single-host", "ecu-a", "ecu-b"]
-    for inst in instances:
-        assert inst in COMMANDS
-        for arg in argv[2:]:
-            if arg.startswith("/opt/aeb/deploy/"):
-                rel = arg.removeprefix("/opt/aeb/")
-                names = tables if "%i" in rel and command == "up" else [inst]
-                for name in names:
-                    path = DEPLOY.parent / rel.replace("%i", name)
-                    assert path.is_file(), f"{unit.name}: {path} does not exist"
-
-
 TABLES = ["single-host", "ecu-a", "ecu-b"]
 
 
@@ -197,5 +171,5 @@ def test_the_two_boards_meet_at_ecu_a_and_brake_ages_commands_on_wall_clocks():
     assert b_connect and b_connect <= a_listen
     table = tomllib.loads((DEPLOY / "ecu-a.toml").read_text())
     brake = next(s for s in table["service"] if s["name"] == "brake")
-    assert load_config(DEPLOY.parent / brake["config"], BrakeConfig).brake.age_clock.value \
+    assert load_config(DEPLOY / brake["config"], BrakeConfig).brake.age_clock.value \
         == "wall"

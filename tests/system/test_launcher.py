@@ -126,7 +126,7 @@ def test_check_prints_resolved_commands_and_only_filters(tmp_path):
     """
     proc = run_check(tmp_path, table, "--only", "fusion")
     assert proc.returncode == 0, proc.stderr
-    lines = proc.stdout.splitlines()
+    lines = [ln for ln in proc.stdout.splitlines() if not ln.startswith(" ")]
     assert [ln.split(":")[0] for ln in lines] == ["router", "fusion"]
     assert "--listen tcp/127.0.0.1:7999" in lines[0]
     assert f"--config {tmp_path / 'fusion.toml'}" in lines[1]

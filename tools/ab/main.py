@@ -25,7 +25,7 @@ from common.bus import Bus, BusError
 from common.clock import wall_ns
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, KeySpec
-from common.log import setup_logging
+from common.log import add_log_level, setup_logging
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, Report, render
 from tools.ab.feeder import Feeder
@@ -51,6 +51,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="report on a recording (MCAP file(s) or a folder)")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--episodes", type=int, default=20, help="episodes to list")
+    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     """Returns 0, or 2 for what is not a recording (or holds neither instance's output)
     and for a bus that cannot be opened."""
     args = parse_args(argv)
-    setup_logging("ab-report", "WARNING")
+    setup_logging("ab-report", args.log_level)
     try:
         comparator = Comparator(args.primary, args.candidate)
     except ValueError as exc:

@@ -31,6 +31,7 @@ import msgspec
 from common.keys import CAMERA_JPEG
 from common.log import setup_logging
 from common.messages import DecodeError, decode
+from common.messages.schema import schema_name
 from common.service import stop_event_on_signals
 from tools.foxglove.convert import Converter, object_schema
 from tools.recording.connect import add_bus_arguments, open_bus, run_until
@@ -85,7 +86,7 @@ class FoxgloveSink:
         except DecodeError:
             return None
         schema = msgspec.json.encode(object_schema(msg_type))
-        return ChannelType(f"aeb.{msg_type.__name__}", "jsonschema", schema, "json"), \
+        return ChannelType(schema_name(msg_type), "jsonschema", schema, "json"), \
             msgspec.json.encode(msg)
 
     def close(self) -> WriterStats:
@@ -135,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     from common.config.loader import ConfigError
 
     args = parse_args(argv)
-    setup_logging("foxglove", "WARNING")
+    setup_logging("foxglove", args.log_level)
     stop = stop_event_on_signals()
     try:
         if args.max_fps < 0:

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import IO
 
+from common import systemd
 from tools.launch.restart import RestartState, describe_exit, on_exit
 from tools.launch.table import Launch
 
@@ -110,7 +111,10 @@ class Supervisor:
 
     def _spawn(self, child: Child) -> None:
         launch = child.launch
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", **launch.env}
+        # systemd's notification variables are the launcher's: a child is not the unit's
+        # main process
+        env = {k: v for k, v in os.environ.items() if k not in systemd.NOTIFY_ENV}
+        env = {**env, "PYTHONUNBUFFERED": "1", **launch.env}
         try:
             proc = subprocess.Popen(
                 launch.argv, cwd=launch.cwd, env=env, stdin=subprocess.DEVNULL,
@@ -166,16 +170,20 @@ class Supervisor:
                 self._spawn(child)
         return any(not c.finished for c in self.children)
 
-    def run(self, stop: threading.Event) -> int:
+    def run(self, stop: threading.Event, watchdog: systemd.Watchdog | None = None) -> int:
         """Start everything and supervise until `stop` is set (then stop everything) or
-        every process has ended for good. Returns 0 after a requested stop or when every
-        process ended with 0, else 1."""
+        every process has ended for good. Under systemd: READY=1 once every process is
+        started, and `watchdog` fed by this loop. Returns 0 after a requested stop or when
+        every process ended with 0, else 1."""
         self.start()
+        systemd.ready(f"supervising {', '.join(c.name for c in self.children)}")
         try:
             while not stop.is_set():
                 if not self.poll():
                     self.say("nothing left to run")
                     break
+                if watchdog is not None:
+                    watchdog.feed()
                 stop.wait(_POLL_S)
         finally:
             self.shutdown()

@@ -114,6 +114,7 @@ class Launch:
     restart: RestartMode
     backoff: Backoff
     stop_grace_s: float
+    command: str = ""      # the `aeb` command it runs; empty for an `exec` program
 
 
 def load_table(path: str | Path) -> tuple[ProcessTable, Path]:
@@ -151,10 +152,12 @@ def resolve_launches(
     origin: str,
     only: set[str] | None = None,
     with_router: bool = True,
+    log_level: str | None = None,
 ) -> list[Launch]:
     """The processes to start, router first, in table order.
 
-    `only` limits the services (the router is still started when the table has one).
+    `only` limits the services (the router is still started when the table has one);
+    `log_level` is given to every `aeb` command (the router's included) as --log-level.
     Raises ConfigError naming an unknown service in `only`, an unknown `aeb` command or a
     missing config/program file.
     """
@@ -178,8 +181,10 @@ def resolve_launches(
             argv += ["--config-file", str(cfg)]
         if table.router.realtime_priority:
             argv += ["--realtime-priority", str(table.router.realtime_priority)]
+        if log_level:
+            argv += ["--log-level", log_level]
         launches.append(Launch(ROUTER_NAME, tuple(argv), {}, workdir, RestartMode.ALWAYS,
-                               table.restart.backoff, table.stop_grace_s))
+                               table.restart.backoff, table.stop_grace_s, "router"))
     for svc in table.service:
         if not svc.enabled or (only is not None and svc.name not in only):
             continue
@@ -204,10 +209,12 @@ def resolve_launches(
         if svc.aeb and svc.connect:
             for ep in table.zenoh.connect:
                 argv += ["--connect", ep]
+        if svc.aeb and log_level:
+            argv += ["--log-level", log_level]
         argv += list(svc.args)
         launches.append(Launch(
             svc.name, tuple(argv), dict(svc.env), workdir,
             svc.restart or table.restart.mode, table.restart.backoff,
-            svc.stop_grace_s or table.stop_grace_s,
+            svc.stop_grace_s or table.stop_grace_s, svc.aeb,
         ))
     return launches

@@ -20,27 +20,23 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from common.bus import Bus, BusError
+from common.bus import Bus
 from common.clock import mono_ns, wall_ns
-from common.config.base import ZenohMode, ZenohSettings
 from common.keys import REGISTRY, KeySpec
-from common.log import setup_logging
+from common.log import add_log_level, setup_logging
 from common.service import stop_event_on_signals
+from tools.bus_args import add_bus_args, endpoints, on_this_host, open_or_say
 from tools.monitor.state import MonitorState
 from tools.monitor.view import render_text, snapshot
 from tools.sim.messages import SIM_WORLD
 
-_LOOPBACK = ("127.", "localhost", "[::1]")
 _CLEAR = "\x1b[H\x1b[2J"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb monitor", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                        help="router endpoint (repeatable), default tcp/127.0.0.1:7447")
-    parser.add_argument("--vehicle", default="ego")
-    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
+    add_bus_args(parser)
     parser.add_argument("--once", action="store_true",
                         help="collect for --duration (default 3 s), print once, exit")
     parser.add_argument("--duration", type=float, default=None,
@@ -49,12 +45,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--json", action="store_true", help="print snapshots as JSON lines")
     parser.add_argument("--plain", action="store_true",
                         help="append snapshots instead of redrawing (default when not a TTY)")
-    parser.add_argument("--connect-timeout", type=float, default=10.0,
-                        help="give up when no router answers within this many seconds")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--same-host", dest="same_host", action="store_true", default=None,
                        help="publishers share this host's monotonic clock (hop latency)")
     where.add_argument("--remote", dest="same_host", action="store_false")
+    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -84,18 +79,11 @@ def subscribe_all(bus: Bus, state: MonitorState, lock: threading.Lock) -> list[A
 def main(argv: list[str] | None = None) -> int:
     """Returns 0, or 2 when the bus cannot be opened (bad endpoint, no router in time)."""
     args = parse_args(argv)
-    setup_logging("monitor", "WARNING")
-    connect = tuple(args.connect or ["tcp/127.0.0.1:7447"])
-    same_host = args.same_host
-    if same_host is None:
-        same_host = all(ep.split("/", 1)[-1].startswith(_LOOPBACK) for ep in connect)
-    try:
-        settings = ZenohSettings(
-            mode=ZenohMode.CLIENT, connect=connect, config_file=args.zenoh_config,
-            overrides={"connect/timeout_ms": int(args.connect_timeout * 1000)})
-        bus = Bus.open(settings, args.vehicle, "monitor")
-    except (BusError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    setup_logging("monitor", args.log_level)
+    connect = endpoints(args)
+    same_host = on_this_host(args) if args.same_host is None else args.same_host
+    bus = open_or_say(args, "monitor")
+    if bus is None:
         return 2
     stop = stop_event_on_signals()
     state = MonitorState(same_host)

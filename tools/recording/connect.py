@@ -1,5 +1,6 @@
-"""Joining the bus from a tool (`aeb record`, `replay`, `evidence`, `foxglove`): the
-usual options, and a session opened so that Ctrl-C works while no router answers yet.
+"""Joining the bus from a recording tool (`aeb record`, `replay`, `evidence`,
+`foxglove`): the bus tools' options, and a session opened so that Ctrl-C works while no
+router answers yet.
 
 `zenoh.open` blocks until a router is reachable, and a signal handler only runs once it
 returns; so the session is opened in a helper thread while the main thread waits on the
@@ -15,22 +16,21 @@ from collections.abc import Callable
 
 from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
-
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+from common.log import add_log_level
+from tools.bus_args import add_bus_args, endpoints
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, listen: bool = False) -> None:
-    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                        help=f"router endpoint (repeatable), default {DEFAULT_ENDPOINT}")
+    """The bus tools' options (tools/bus_args.py), waiting for the router as long as it
+    takes unless `--connect-timeout` says otherwise (a recorder is started before the
+    stack); `listen`: also `--listen`, to be the router."""
+    add_bus_args(parser)
+    parser.set_defaults(connect_timeout=0.0)
     if listen:
         parser.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
                             help="run as a Zenoh router listening here instead (a replay "
                                  "with a stack connecting to it)")
-    parser.add_argument("--vehicle", default="ego", help="vehicle id (default ego)")
-    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
-    parser.add_argument("--connect-timeout", type=float, default=0.0,
-                        help="give up when no router answers within this many seconds "
-                             "(default 0: wait until one does)")
+    add_log_level(parser, "WARNING")
 
 
 def bus_settings(args: argparse.Namespace) -> ZenohSettings:
@@ -41,7 +41,7 @@ def bus_settings(args: argparse.Namespace) -> ZenohSettings:
                              listen=listen, config_file=args.zenoh_config)
     overrides = ({"connect/timeout_ms": int(args.connect_timeout * 1000)}
                  if args.connect_timeout > 0 else {})
-    return ZenohSettings(mode=ZenohMode.CLIENT, connect=tuple(args.connect or [DEFAULT_ENDPOINT]),
+    return ZenohSettings(mode=ZenohMode.CLIENT, connect=endpoints(args),
                          config_file=args.zenoh_config, overrides=overrides)
 
 

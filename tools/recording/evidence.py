@@ -463,7 +463,7 @@ def main(argv: list[str] | None = None) -> int:
     from tools.recording.record import decision_settings
 
     args = parse_args(argv)
-    setup_logging("evidence", "WARNING")
+    setup_logging("evidence", args.log_level)
     try:
         decision = decision_settings(args.fusion_config)
     except ConfigError as exc:

@@ -4,8 +4,9 @@ MCAP files (mcap.dev). One channel per Zenoh key:
 
 - topic = the full key (``aeb/ego/radar/front/tracks``);
 - message encoding ``msgpack``: the payload exactly as it was on the bus;
-- schema ``aeb.<MessageType>``, encoding ``jsonschema``, data = msgspec's JSON schema of
-  the type (`msgspec.json.schema(T)`), so that a generic tool can decode every channel;
+- schema ``aeb.<MessageType>`` (the name in the samples' Zenoh encoding), encoding
+  ``jsonschema``, data = msgspec's JSON schema of the type (common/messages/schema.py),
+  so that a generic tool can decode every channel;
 - log_time = the recorder's wall-clock receive time (ns); publish_time = the message's
   `header.stamp_ns` (when the data was measured), the log time when it has no header.
 
@@ -22,11 +23,11 @@ from typing import Any
 import msgspec
 
 from common.keys import REGISTRY, KeySpec
+from common.messages.schema import json_schema, schema_name
 from tools.sim.messages import SIM_WORLD
 
 MESSAGE_ENCODING = "msgpack"
 SCHEMA_ENCODING = "jsonschema"
-SCHEMA_PREFIX = "aeb."
 DERIVED_PREFIX = "/foxglove/"
 # Metadata record written at the start of every file of a recording.
 METADATA_NAME = "aeb.recording"
@@ -57,9 +58,9 @@ def stack_channel(msg_type: type[msgspec.Struct]) -> ChannelType:
     """The channel type of a stack message (msgpack with its JSON schema)."""
     kind = _STACK_CHANNELS.get(msg_type)
     if kind is None:
-        schema = msgspec.json.encode(msgspec.json.schema(msg_type))
+        schema = msgspec.json.encode(json_schema(msg_type))
         kind = _STACK_CHANNELS[msg_type] = ChannelType(
-            SCHEMA_PREFIX + msg_type.__name__, SCHEMA_ENCODING, schema, MESSAGE_ENCODING)
+            schema_name(msg_type), SCHEMA_ENCODING, schema, MESSAGE_ENCODING)
     return kind
 
 

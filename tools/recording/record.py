@@ -338,8 +338,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--can", default="", metavar="INTERFACE:CHANNEL[:BUS]",
                         help="also read raw CAN frames from this python-can interface")
     parser.add_argument("--summary-json", default="", help="write the exit summary here too")
-    parser.add_argument("--log-level", default="WARNING",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return parser.parse_args(argv)
 
 

@@ -344,7 +344,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    setup_logging("replay", "WARNING")
+    setup_logging("replay", args.log_level)
     stop = stop_event_on_signals()
     if args.rate <= 0:
         print("error: --rate must be positive", file=sys.stderr)

@@ -32,10 +32,12 @@ import msgspec
 
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, parse_config
+from common.config.paths import resolve_paths
 from common.config.radar import RadarConfig
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
-from common.log import setup_logging
+from common.log import add_log_level, setup_logging
 from common.messages import encode
+from common.resources import DEPLOY
 from services.fusion.verifiers import VerifierConfigError
 from tools.foxglove.convert import Converter, encode_derived
 from tools.recording.compare import Comparison, Difference, check_declared, summary_table
@@ -46,9 +48,10 @@ from tools.recording.writer import RecordingWriter
 C = TypeVar("C", bound=msgspec.Struct)
 
 
-def load_with_overrides(path: str, config_type: type[C], sets: list[str]) -> C:
+def load_with_overrides(path: str | Path, config_type: type[C], sets: list[str]) -> C:
     """A config file (defaults when empty) with `--set a.b.c=VALUE` applied (VALUE read
-    as a TOML value, else as a string). Raises ConfigError."""
+    as a TOML value, else as a string); relative paths in the file resolve against its
+    folder, as for the services. Raises ConfigError."""
     data: dict[str, Any] = {}
     if path:
         try:
@@ -73,7 +76,8 @@ def load_with_overrides(path: str, config_type: type[C], sets: list[str]) -> C:
                 raise ConfigError(f"--set {item!r}: {p} is not a table")
             node = child
         node[leaf] = value
-    return parse_config(data, config_type, path or "<defaults>")
+    cfg = parse_config(data, config_type, str(path) or "<defaults>")
+    return resolve_paths(cfg, Path(path).resolve().parent) if path else cfg
 
 
 class Progress:
@@ -98,7 +102,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("service", choices=["fusion", "radar"])
     parser.add_argument("recording", nargs="+", help="MCAP file(s) or a folder of them")
     parser.add_argument("-c", "--config", default="",
-                        help="the service's config (fusion default: deploy/fusion.toml)")
+                        help="the service's config (default: the shipped deploy/fusion.toml "
+                             "or deploy/radar.toml)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override one config field, e.g. fusion.verifier.params.tau=0.05")
     parser.add_argument("--instance", default="",
@@ -120,6 +125,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--start", type=float, default=None, help="seconds from the start")
     parser.add_argument("--end", type=float, default=None, help="seconds from the start")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -134,7 +140,7 @@ def run_fusion(args: argparse.Namespace, rec: Recording,
                vehicle: str) -> tuple[Comparison, dict[str, Any]]:
     from tools.recording.rerun_fusion import FusionRerun, config_params, normalised
 
-    cfg = load_with_overrides(args.config or "deploy/fusion.toml", FusionConfig, args.set)
+    cfg = load_with_overrides(args.config or DEPLOY / "fusion.toml", FusionConfig, args.set)
     rerun = FusionRerun(cfg, args.instance or None, vehicle)
     first, last, start, end = _window(rec, args)
     span_start = start if start is not None else first
@@ -193,7 +199,7 @@ def run_radar(args: argparse.Namespace, rec: Recording,
               vehicle: str) -> tuple[Comparison, dict[str, Any]]:
     from tools.recording.rerun_radar import RadarRerun
 
-    cfg = load_with_overrides(args.config or "deploy/radar.toml", RadarConfig, args.set)
+    cfg = load_with_overrides(args.config or DEPLOY / "radar.toml", RadarConfig, args.set)
     rerun = RadarRerun(cfg.radar, vehicle)
     _, _, start, end = _window(rec, args)
     writer = _writer(args, {"source": ",".join(map(str, rec.files)), "service": "radar"})
@@ -282,7 +288,7 @@ def report(args: argparse.Namespace, comparison: Comparison, timing: dict[str, A
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    setup_logging("rerun", "WARNING")
+    setup_logging("rerun", args.log_level)
     try:
         rec = Recording.open(args.recording)
         vehicle = args.vehicle or rec.metadata().get("vehicle", "ego")

@@ -48,7 +48,7 @@ from typing import Any, Protocol
 import serial
 
 from common.clock import mono_ns
-from common.log import kv, setup_logging
+from common.log import add_log_level, kv, setup_logging
 from common.service import stop_event_on_signals
 from services.brake.protocol import (
     FAULT_WATCHDOG,
@@ -629,7 +629,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--status-hz", type=float, default=50.0)
     parser.add_argument("--no-control", action="store_true", help="ignore stdin")
     parser.add_argument("--seed", type=int, help="seed of the garbage generator")
-    parser.add_argument("--log-level", default="INFO")
+    add_log_level(parser, "INFO")
     args = parser.parse_args(argv)
     log = setup_logging("sim_actuator", args.log_level)
     kw: dict[str, Any] = dict(tau_s=args.tau_s, seed=args.seed,

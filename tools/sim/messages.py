@@ -13,7 +13,7 @@ from common.keys import Congestion, KeySpec, Priority, QoS
 from common.messages.header import Header
 
 
-class SimObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class SimObject(msgspec.Struct, frozen=True):
     """One scenario object in the world frame (x along the road, y left, origin on the
     ground below the ego's radar at the start of the run)."""
 
@@ -29,7 +29,7 @@ class SimObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     vy_mps: float
 
 
-class SimWorld(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class SimWorld(msgspec.Struct, frozen=True):
     """The simulated world at `header.stamp_ns` (wall clock).
 
     Consumers extrapolate to their own capture time with the velocities and the ego's

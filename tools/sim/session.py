@@ -16,14 +16,15 @@ from typing import IO, Any
 from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
 from common.net import free_port
+from common.resources import DEPLOY
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import load_table, resolve_launches
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.runner import SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook
-from tools.sim.stack import FUSION_CONFIG, REPO, SERVICES, TOKENS, StackConfigs, write_configs
+from tools.sim.stack import FUSION_CONFIG, SERVICES, TOKENS, StackConfigs, write_configs
 
-CANDIDATE_CONFIG = REPO / "deploy" / "fusion-candidate.toml"
+CANDIDATE_CONFIG = DEPLOY / "fusion-candidate.toml"
 START_TIMEOUT_S = 120.0
 SETTLE_TIMEOUT_S = 60.0
 
@@ -37,7 +38,7 @@ def write_table(folder: Path, endpoint: str, configs: StackConfigs,
     """The session's process table (the same launcher as `aeb up`)."""
     lines = [
         "# Written by the closed-loop session: the stack under simulation.",
-        f'workdir = "{REPO}"', "stop_grace_s = 5.0", "",
+        f'workdir = "{folder.resolve()}"', "stop_grace_s = 5.0", "",
         "[router]", f'listen = ["{endpoint}"]', f"realtime_priority = {realtime_priority}", "",
         "[zenoh]", f'connect = ["{endpoint}"]', "",
         "[restart]", 'mode = "never"', "",
@@ -120,7 +121,7 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     from tools.sim.actuator import SimActuator
     from tools.sim.can_links import SlcanPtyLink
 
-    run_dir = out / "run"
+    run_dir = (out / "run").resolve()   # the table and configs name absolute paths
     run_dir.mkdir(parents=True, exist_ok=True)
     log_path = out / "stack.log"
     endpoint = f"tcp/127.0.0.1:{port or free_port()}"

@@ -14,9 +14,12 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-CALIBRATION = REPO / "deploy" / "calibration" / "d435_848x480.toml"
-FUSION_CONFIG = REPO / "deploy" / "fusion.toml"
+from common.config.fusion import FusionConfig
+from common.config.loader import relocated_text
+from common.resources import DEPLOY, EXAMPLE_CALIBRATION
+
+CALIBRATION = EXAMPLE_CALIBRATION
+FUSION_CONFIG = DEPLOY / "fusion.toml"
 SERVICES = ("radar", "camera", "fusion", "brake")
 # service -> its liveliness token (service, instance)
 TOKENS = {"radar": ("radar", "front"), "camera": ("camera", "front"),
@@ -82,7 +85,9 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
            f"{max(250, int(2 * heartbeat_ms) + 10)}\n")
         + rt.format("brake"))
     fusion = folder / "fusion.toml"
-    fusion.write_text(with_realtime(fusion_config.read_text(), "fusion", realtime_priority))
+    # the shipped file's relative paths (its calibration) made absolute for the copy
+    fusion.write_text(with_realtime(relocated_text(fusion_config, FusionConfig), "fusion",
+                                    realtime_priority))
     return StackConfigs(radar, camera, fusion, brake)
 
 

@@ -1,0 +1,56 @@
+"""Paths inside a configuration file are relative to the file's own folder, so that a
+config works from any current directory and a copied deploy/ folder stays whole.
+
+A config type marks a field as a path with `ConfigPath`; `load_config` resolves every
+marked field of a file it reads (`resolve_paths`). Left as written: empty values, absolute
+paths, URLs (``rtsp://...``) and device indexes (``"0"``). ``~`` is expanded. Paths given
+on a command line stay relative to the current directory, as any command's do.
+"""
+
+import os
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import msgspec
+
+_MARK = "aeb_config_path"
+ConfigPath = Annotated[str, msgspec.Meta(extra={_MARK: True})]
+
+S = TypeVar("S", bound=msgspec.Struct)
+
+
+def _is_path(annotation: Any) -> bool:
+    return any(isinstance(m, msgspec.Meta) and (m.extra or {}).get(_MARK)
+               for m in getattr(annotation, "__metadata__", ()))
+
+
+def resolve_path(value: str, base: Path) -> str:
+    """`value` against `base` (the config file's folder), unless it is empty, absolute,
+    a URL or a device index."""
+    if not value or "://" in value or value.isdigit():
+        return value
+    path = Path(os.path.expanduser(value))
+    return str(path if path.is_absolute() else (base / path).resolve())
+
+
+def resolve_paths(cfg: S, base: Path, resolved: list[tuple[str, str]] | None = None) -> S:
+    """`cfg` with every `ConfigPath` field, at any depth (nested tables, arrays of
+    tables, tagged unions), resolved against `base`; each (as written, resolved) pair
+    that changed is appended to `resolved` when given."""
+    changes: dict[str, Any] = {}
+    for field in msgspec.structs.fields(type(cfg)):
+        value = getattr(cfg, field.name)
+        if isinstance(value, str) and _is_path(field.type):
+            new: Any = resolve_path(value, base)
+            if resolved is not None and new != value:
+                resolved.append((value, new))
+        elif isinstance(value, msgspec.Struct):
+            new = resolve_paths(value, base, resolved)
+        elif isinstance(value, tuple) and any(isinstance(v, msgspec.Struct) for v in value):
+            new = tuple(resolve_paths(v, base, resolved) if isinstance(v, msgspec.Struct)
+                        else v for v in value)
+        else:
+            continue
+        if new != value:
+            changes[field.name] = new
+    return msgspec.structs.replace(cfg, **changes) if changes else cfg

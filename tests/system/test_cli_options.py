@@ -1,0 +1,58 @@
+"""Options every `aeb` command shares: `aeb --version`, and `--log-level` on every
+command, an invalid level being a clear argparse error (exit 2), never a traceback."""
+
+import importlib.metadata
+import subprocess
+import sys
+
+import pytest
+
+from tools.cli import COMMANDS, main
+from tools.launch.table import load_table, resolve_launches
+
+
+def test_version_is_the_installed_distributions():
+    out = subprocess.run([sys.executable, "-m", "tools.cli", "--version"], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0
+    assert importlib.metadata.version("aeb-radar-camera") in out.stdout
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_command_takes_a_log_level(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    assert "--log-level" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_an_invalid_level_is_a_clear_error(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--log-level", "LOUD"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --log-level: invalid level 'LOUD'" in err
+    assert "DEBUG, INFO, WARNING, ERROR" in err
+
+
+def test_levels_are_case_insensitive_and_up_passes_its_level_to_every_aeb_child(tmp_path):
+    (tmp_path / "svc.toml").write_text("")
+    (tmp_path / "table.toml").write_text(
+        '[[service]]\nname = "brake"\naeb = "brake"\nconfig = "svc.toml"\n'
+        '[[service]]\nname = "other"\nexec = ["true"]\n')
+    table, workdir = load_table(tmp_path / "table.toml")
+    launches = {launch.name: launch.argv for launch in
+                resolve_launches(table, workdir, "t", log_level="DEBUG")}
+    for name in ("router", "brake"):
+        argv = launches[name]
+        assert argv[argv.index("--log-level") + 1] == "DEBUG"
+    assert "--log-level" not in launches["other"]     # not an aeb command
+
+
+def test_a_lower_case_level_reaches_the_service(tmp_path):
+    from common.config.brake import BrakeConfig
+    from common.service import load_service_config, service_argparser
+
+    args = service_argparser("brake", "").parse_args(["--log-level", "debug"])
+    assert load_service_config(args, BrakeConfig).log.level.value == "DEBUG"

@@ -1,0 +1,57 @@
+"""`aeb up --check`: every process of a table validated exactly as it would start.
+
+Each `aeb` service (and the router) is run with the command line, environment and
+working directory the launcher would give it, plus `--check`: the service loads its
+config with the same overrides, reads every file it names (calibration, replay log, Zenoh
+config) and builds what it builds before touching the bus or a device, then exits 0 or
+2 naming the problem. Programs started with `exec` cannot be checked beyond existing.
+"""
+
+import os
+import subprocess
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from common.systemd import NOTIFY_ENV
+from tools.launch.table import Launch
+
+# the commands with a `--check` option
+CHECKABLE = frozenset({"radar", "camera", "fusion", "brake", "router"})
+CHECK_TIMEOUT_S = 120.0      # a cold start imports OpenCV and numpy on a loaded machine
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    name: str
+    ok: bool | None          # None: not checked
+    detail: str
+
+
+def check_launch(launch: Launch, timeout_s: float = CHECK_TIMEOUT_S) -> CheckResult:
+    """Run the launch's command with `--check`; never raises."""
+    if launch.command not in CHECKABLE:
+        what = f"aeb {launch.command}" if launch.command else "an exec program"
+        return CheckResult(launch.name, None, f"not checked ({what} has no --check)")
+    env = {k: v for k, v in os.environ.items() if k not in NOTIFY_ENV} | launch.env
+    try:
+        done = subprocess.run([*launch.argv, "--check"], cwd=launch.cwd, env=env,
+                              stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                              timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        return CheckResult(launch.name, False, f"--check did not finish in {timeout_s:.0f} s")
+    except OSError as exc:
+        return CheckResult(launch.name, False, f"cannot run: {exc}")
+    if done.returncode == 0:
+        said = done.stdout.strip().splitlines()
+        return CheckResult(launch.name, True,
+                           said[-1].removeprefix(f"{launch.command}: ") if said else "ok")
+    lines = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ln.startswith("error")] or lines[-3:]
+    return CheckResult(launch.name, False,
+                       f"exit {done.returncode}: " + " | ".join(errors or ["(no message)"]))
+
+
+def check_all(launches: list[Launch]) -> list[CheckResult]:
+    """Every launch checked, in parallel, results in table order."""
+    with ThreadPoolExecutor(max_workers=max(1, min(4, len(launches)))) as pool:
+        return list(pool.map(check_launch, launches))
