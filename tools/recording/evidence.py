@@ -13,7 +13,8 @@ folder, `<UTC time>_<instance>_<DECISION>_radar<seq>_track<id>/`, holds:
   against the thresholds, the density against the verifier's threshold, the corridor
   check, and the stage timestamps from the radar's last CAN frame to the brake;
 - event.json: the same, for tools; command.json, targets.json, tracks.json (the cycle);
-- history.json and history.png: the deciding track over the seconds before;
+- history.json and history.png: the deciding track over the seconds before (the plot
+  when matplotlib is installed);
 - frame.jpg (as recorded), frame_annotated.jpg (every ROI of the cycle), roi.png (the
   deciding ROI), roi_edges.png (the Canny edges the edge-density gate counts at the
   verifier's thresholds, for the edge-density verifiers);
@@ -218,10 +219,13 @@ class EvidenceCollector:
                       cmd: BrakeCommand) -> None:
         if not history:
             return
-        import matplotlib
+        try:
+            import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+        except ImportError:     # an install without the plots (no demo extra): JSON only
+            return
 
         t = [h["t_s"] for h in history]
         fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
