@@ -9,7 +9,10 @@ Sections (each a module with `run(quick, out_dir) -> list[Figure]`):
 - latency: last CAN frame -> brake bytes on the actuator, per stage, beside both floors
   (same-transport relays, bare Zenoh hops);
 - cost: CPU share and memory of each service while demo scenarios run;
-- eval: `aeb eval` on a recording, ROIs/s per core, the paper's 131,603 frames projected.
+- eval: `aeb eval` on a recording, ROIs/s per core, the paper's 131,603 frames projected;
+- record: `aeb record` at nominal rates, messages published vs recorded per key (30 s
+  here; `python -m benchmarks.bench_record --minutes 10` for the 10-minute run);
+- rerun: `aeb rerun fusion` in multiples of real time per core.
 """
 
 import argparse
@@ -31,6 +34,8 @@ SECTIONS: dict[str, str] = {
     "latency": "benchmarks.bench_latency",
     "cost": "benchmarks.bench_cost",
     "eval": "benchmarks.bench_eval",
+    "record": "benchmarks.bench_record",
+    "rerun": "benchmarks.bench_rerun",
 }
 
 

@@ -19,6 +19,7 @@ from common.messages import (
     EgoMotion,
     RadarStatus,
     RadarTracks,
+    RawCanFrames,
     VerifiedTargets,
 )
 
@@ -141,6 +142,13 @@ EGO_MOTION: KeySpec[EgoMotion] = KeySpec(
     "ego_motion", "vehicle/motion", EgoMotion,
     rate_hz=50.0, max_age_s=0.1, qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
 )
+# The radar's raw CAN frames, per bus, for recordings that re-run the radar. Dropped
+# rather than queued when the link is congested: the radar's CAN loop must never wait.
+RADAR_CAN: KeySpec[RawCanFrames] = KeySpec(
+    "radar_can", "can/{bus}/frames", RawCanFrames,
+    rate_hz=1 / RADAR_CYCLE_S, max_age_s=2 * RADAR_CYCLE_S + 0.01,
+    qos=QoS(Priority.DATA, Congestion.DROP),
+)
 HEALTH: KeySpec[Any] = KeySpec(
     "health", "health/{service}/{instance}", None,
     rate_hz=None, max_age_s=None, qos=QoS(),
@@ -151,5 +159,6 @@ REGISTRY: dict[str, KeySpec[Any]] = {
     for spec in (
         RADAR_TRACKS, RADAR_STATUS, CAMERA_JPEG, CAMERA_INFO,
         FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, HEALTH,
+        RADAR_CAN,
     )
 }

@@ -22,6 +22,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
+    "record": ("tools.recording.record", "record the bus into MCAP (opens in Foxglove)"),
+    "replay": ("tools.recording.replay", "publish a recording back on the bus"),
+    "rerun": ("tools.recording.rerun", "re-run fusion or radar on a recording, offline"),
+    "evidence": ("tools.recording.evidence", "a folder of evidence per WARNING and BRAKE"),
+    "foxglove": ("tools.foxglove.bridge", "live view of the bus in Foxglove (WebSocket)"),
     "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
     "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
     "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
@@ -35,9 +40,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
 # The extra (pyproject.toml) that installs what a command needs beyond the base install,
 # and the modules of those optional dependencies
 COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
-                 "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo"}
+                 "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
+                 "record": "record", "replay": "record", "rerun": "record",
+                 "evidence": "record", "foxglove": "record"}
 OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
-                    "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense"}
+                    "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense",
+                    "mcap": "record", "foxglove": "record"}
 
 
 DISTRIBUTION = "aeb-radar-camera"

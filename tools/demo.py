@@ -70,6 +70,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--candidate", action="store_true",
                         help="also run the candidate fusion instance (deploy/fusion-candidate"
                              ".toml) in shadow mode and print the A/B report at the end")
+    parser.add_argument("--raw-can", action="store_true",
+                        help="the radar also publishes its raw CAN frames (to record them "
+                             "with `aeb record` for `aeb rerun radar`)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
     add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
@@ -127,7 +130,7 @@ def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> 
     actuator: Any = None
     try:
         with closed_loop(out, args.port, args.camera_fps, args.candidate,
-                         log=sys.stdout) as loop:
+                         log=sys.stdout, raw_can=args.raw_can) as loop:
             ab = start_ab(loop.bus) if args.candidate else None
             sim = loop.sim
             for i, sc in enumerate(scenarios, 1):

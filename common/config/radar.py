@@ -159,6 +159,18 @@ class EgoMotionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     max_age_s: PositiveFloat = 0.2         # older samples are not forwarded
 
 
+class RawCanSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Publish every received CAN frame on `can/<bus>/frames` (RawCanFrames), so that a
+    recording can re-run the radar's decoding and tracking (`aeb rerun radar`)."""
+
+    publish: bool = False
+    bus: str = "radar"         # the key's name for this bus
+
+    def __post_init__(self) -> None:
+        if not _NAME.match(self.bus):
+            raise ValueError(f"raw_can.bus {self.bus!r} must be letters, digits, '_' or '-'")
+
+
 class RadarSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     can: CanSettings = msgspec.field(default_factory=CanSettings)
     replay: ReplaySettings = msgspec.field(default_factory=ReplaySettings)
@@ -170,6 +182,7 @@ class RadarSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     ego_motion: EgoMotionSettings = msgspec.field(default_factory=EgoMotionSettings)
     status_period_s: PositiveFloat = 1.0
     stats_period_s: NonNegFloat = 10.0    # a radar_stats log line per radar this often (0: never)
+    raw_can: RawCanSettings = msgspec.field(default_factory=RawCanSettings)
     # SCHED_FIFO for the CAN loop (decode, track, publish) and the Zenoh I/O threads
     realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
 

@@ -14,11 +14,13 @@ from common.messages.fusion import (
 from common.messages.header import SCHEMA_VERSION, Header
 from common.messages.radar import (
     BusState,
+    CanFrame,
     OutputMode,
     RadarState,
     RadarStatus,
     RadarTrack,
     RadarTracks,
+    RawCanFrames,
 )
 from common.messages.vehicle import EgoMotion
 
@@ -29,6 +31,7 @@ __all__ = [
     "BrakeStatus",
     "BusState",
     "CameraInfo",
+    "CanFrame",
     "CompressedFrame",
     "Decision",
     "DecodeError",
@@ -40,6 +43,7 @@ __all__ = [
     "RadarStatus",
     "RadarTrack",
     "RadarTracks",
+    "RawCanFrames",
     "Verification",
     "VerifiedTarget",
     "VerifiedTargets",

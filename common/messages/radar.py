@@ -105,3 +105,36 @@ class RadarStatus(msgspec.Struct, frozen=True):
     meas_counter_gaps: int = 0         # cycles the radar counted that never arrived
     tracker_resets: int = 0            # gaps or time jumps that restarted the tracker
     ego_motion_frames_sent: int = 0    # 0x300 / 0x301 frames written to this radar
+
+
+class CanFrame(msgspec.Struct, frozen=True, array_like=True):
+    """One CAN frame as the radar service received it (encoded as an array: a cycle has
+    hundreds; a field added later goes at the end, with a default, so that older readers
+    still decode it). `timestamp_s` is the interface's own time (python-can's `Message.timestamp`,
+    the log's time in a replay); `rx_wall_ns` / `rx_mono_ns` are the host's receive times
+    the service used. `flags`: CAN_EXTENDED | CAN_REMOTE | CAN_ERROR."""
+
+    timestamp_s: float
+    rx_wall_ns: int
+    rx_mono_ns: int
+    arb_id: int
+    data: bytes
+    flags: int = 0
+
+
+CAN_EXTENDED = 1
+CAN_REMOTE = 2
+CAN_ERROR = 4
+
+
+class RawCanFrames(msgspec.Struct, frozen=True):
+    """The raw frames of one CAN bus, in receive order, published when the radar is asked
+    to (`[radar.raw_can] publish = true`): every frame received since the previous batch,
+    one batch per radar cycle (after its tracks) and at least every cycle period while
+    frames flow. `header.stamp_ns` is the first frame's receive wall time."""
+
+    header: Header
+    bus: str                   # the configured bus name, the key's parameter
+    interface: str             # python-can interface name, or "replay"
+    channel: str
+    frames: tuple[CanFrame, ...]

@@ -11,7 +11,7 @@ import zenoh
 from common import systemd
 from common.bus import Bus, BusError, TypedPublisher
 from common.config.radar import RadarConfig
-from common.keys import EGO_MOTION, RADAR_STATUS, RADAR_TRACKS
+from common.keys import EGO_MOTION, RADAR_CAN, RADAR_STATUS, RADAR_TRACKS
 from common.log import kv, setup_logging
 from common.messages.radar import RadarStatus, RadarTracks
 from common.realtime import ThreadRealtime, apply_process
@@ -69,7 +69,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     with bus:
-        service = RadarShell(cfg.radar, ZenohRadarOutput(bus, sensors), watchdog=Watchdog())
+        raw = cfg.radar.raw_can
+        service = RadarShell(cfg.radar, ZenohRadarOutput(bus, sensors), watchdog=Watchdog(),
+                             raw_can=(bus.publisher(RADAR_CAN, bus=raw.bus).put
+                                      if raw.publish else None))
         if cfg.radar.ego_motion.forward:
             bus.subscribe(EGO_MOTION, lambda msg, key: service.on_ego_motion(msg))
         log.info(kv("radar_start", sensors=",".join(sensors),

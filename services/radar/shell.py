@@ -21,7 +21,16 @@ from common.config.radar import RadarSettings
 from common.counters import ReasonCounter
 from common.log import RateLimitedLog, kv
 from common.messages.header import Header
-from common.messages.radar import BusState, RadarStatus, RadarTracks
+from common.messages.radar import (
+    CAN_ERROR,
+    CAN_EXTENDED,
+    CAN_REMOTE,
+    BusState,
+    CanFrame,
+    RadarStatus,
+    RadarTracks,
+    RawCanFrames,
+)
 from common.messages.vehicle import EgoMotion
 from common.systemd import Watchdog
 from services.radar.ars408.codec import Frame
@@ -36,6 +45,9 @@ _log = logging.getLogger("radar")
 # flow; an idle bus wakes the loop at least every 50 ms for them.
 _HOUSEKEEPING_NS = 10_000_000
 _RECEIVE_TIMEOUT_S = 0.05
+# Raw frames not followed by a cycle (other traffic, a radar that stopped) still go out
+# once the oldest is one radar cycle old.
+_RAW_BATCH_MAX_AGE_NS = 75_000_000
 
 
 class RadarOutput(Protocol):
@@ -55,7 +67,10 @@ class RadarShell:
     ``unconfigured_sensor_id``, ``internal_error``, ``bus_failure``, and lines the slcan
     reader dropped: ``slcan_malformed``, ``slcan_length``, ``slcan_unknown``,
     ``slcan_not_ascii``, ``slcan_too_long``) and reported in every radar's status under a
-    ``bus:`` prefix."""
+    ``bus:`` prefix.
+
+    `raw_can`: where every received frame goes, in batches (RawCanFrames), when the
+    raw frames are published (`[radar.raw_can]`); None: they are not kept."""
 
     def __init__(
         self,
@@ -63,10 +78,13 @@ class RadarShell:
         output: RadarOutput,
         port_factory: Callable[[], CanPort] | None = None,
         watchdog: Watchdog | None = None,
+        raw_can: Callable[[RawCanFrames], None] | None = None,
     ) -> None:
         self.settings = settings
         self.watchdog = watchdog or Watchdog(env={})   # fed by the CAN loop
         self.output = output
+        self._raw_sink = raw_can
+        self._raw: list[CanFrame] = []
         self._factory = port_factory or (lambda: open_port(settings.can, settings.replay))
         self.interface, self.channel = describe(settings.can, settings.replay)
         self.cores = {s.sensor_id: RadarCore(s, settings) for s in settings.sensors}
@@ -127,6 +145,7 @@ class RadarShell:
             if self._last_frame_mono is not None:
                 backoff = can_cfg.reopen_backoff_initial_s   # it worked for a while
             lost = True
+        self._publish_raw()
         self._publish_all_status(mono_ns(), wall_ns())
         self.log_stats(mono_ns())
         return 0
@@ -163,6 +182,7 @@ class RadarShell:
 
     def _serve(self, port: CanPort, stop: threading.Event) -> bool:
         next_housekeeping = 0
+        # The schedule of tools/recording/rerun_radar.py, which re-plays this loop.
         while not stop.is_set():
             msg = port.recv(_RECEIVE_TIMEOUT_S)
             mono, wall = mono_ns(), wall_ns()
@@ -192,6 +212,7 @@ class RadarShell:
         self.ended = True
         for core in self.cores.values():
             self._publish_results(core, core.flush(), 0)
+        self._publish_raw()
         self._set_bus_state(BusState.ENDED, mono_ns())
         _log.info(kv("replay_ended", cycles=sum(c.cycles_total for c in self.cores.values())))
         self.log_stats(mono_ns())
@@ -202,7 +223,23 @@ class RadarShell:
 
     # -- frames -------------------------------------------------------------------------
 
+    def receive(self, msg: can.Message, wall_ns: int, mono_ns: int) -> None:
+        """One frame at the given receive times: the serve loop's step, also for a re-run
+        that passes recorded times (`aeb rerun radar`)."""
+        self._on_message(msg, wall_ns, mono_ns)
+
+    def tick(self, mono_ns: int, wall_ns: int) -> None:
+        """The serve loop's housekeeping at the given time (timed-out cycles closed,
+        status published), also for a re-run."""
+        self._housekeeping(mono_ns, wall_ns)
+
     def _on_message(self, msg: can.Message, wall: int, mono: int) -> None:
+        if self._raw_sink is not None:
+            self._raw.append(CanFrame(
+                msg.timestamp, wall, mono, msg.arbitration_id, bytes(msg.data),
+                (CAN_EXTENDED if msg.is_extended_id else 0)
+                | (CAN_REMOTE if msg.is_remote_frame else 0)
+                | (CAN_ERROR if msg.is_error_frame else 0)))
         if msg.is_error_frame:
             self.bus_rejected.add("error_frame")
             self._error_until = mono + int(self.settings.can.error_hold_s * NS_PER_S)
@@ -240,6 +277,22 @@ class RadarShell:
             return
         if results:
             self._publish_results(core, results, mono_ns() - mono)
+            # The cycle's frames right after its tracks, off the latency path.
+            self._publish_raw()
+
+    def _publish_raw(self, older_than_mono_ns: int | None = None) -> None:
+        """The frames received since the last batch (when published and there are any;
+        with `older_than_mono_ns`, only once the oldest is older than that)."""
+        frames = self._raw
+        if self._raw_sink is None or not frames or (
+                older_than_mono_ns is not None and frames[0].rx_mono_ns > older_than_mono_ns):
+            return
+        self._raw = []
+        raw = self.settings.raw_can
+        self._raw_sink(RawCanFrames(
+            header=self._header(f"can/{raw.bus}", raw.bus, frames[0].rx_wall_ns),
+            bus=raw.bus, interface=self.interface, channel=self.channel,
+            frames=tuple(frames)))
 
     def _publish_results(self, core: RadarCore, results: list[CycleResult],
                          processing_ns: int) -> None:
@@ -340,6 +393,7 @@ class RadarShell:
         return BusState.ACTIVE
 
     def _housekeeping(self, mono: int, wall: int) -> None:
+        self._publish_raw(older_than_mono_ns=mono - _RAW_BATCH_MAX_AGE_NS)
         self.watchdog.feed()
         if self._stats_period_ns and mono >= self._stats_due:
             if self._stats_due:

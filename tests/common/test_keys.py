@@ -35,6 +35,7 @@ def test_registry_has_every_key_of_the_design_with_rates_and_ages():
     assert set(REGISTRY) == {
         "radar_tracks", "radar_status", "camera_jpeg", "camera_info",
         "fusion_targets", "fusion_brake_cmd", "brake_status", "ego_motion", "health",
+        "radar_can",
     }
     for spec in REGISTRY.values():
         if spec.msg_type is not None:

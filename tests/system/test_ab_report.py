@@ -1,5 +1,5 @@
-"""`aeb ab-report`: pairing two fusion instances by radar cycle, the report, recordings,
-and the command live on a bus."""
+"""`aeb ab-report`: pairing two fusion instances by radar cycle, the report, MCAP
+recordings (and what is not one: defect 9 of issue 19), and the command live on a bus."""
 
 import json
 import subprocess
@@ -12,7 +12,8 @@ from common.messages import Decision, Verification, encode
 from tests.support import START_TIMEOUT_S, open_bus, python_module
 from tests.system.messages import brake_command, target, verified_targets
 from tools.ab.compare import Comparator, render
-from tools.ab.recording import RecordingError, read_records, write_record
+from tools.recording.format import channel_of_topic
+from tools.recording.writer import RecordingWriter
 
 
 def disagrees(seq: int) -> bool:
@@ -70,26 +71,51 @@ def test_cycles_only_one_instance_published_are_counted_not_compared():
         Comparator("primary", "primary")
 
 
-def test_recordings_round_trip_and_damage_is_reported(tmp_path):
-    path = tmp_path / "ab.rec"
-    targets, command = cycle("primary", 3)
-    with open(path, "wb") as f:
-        write_record(f, FUSION_TARGETS.name, "k1", 1, encode(targets))
-        write_record(f, FUSION_BRAKE_CMD.name, "k2", 2, encode(command))
-        f.write(b"\x00\x00\x01\x00partial")      # interrupted while writing
-    records = list(read_records(path))
-    assert [(r[0], r[1], r[2]) for r in records] == [
-        (FUSION_TARGETS.name, "k1", 1), (FUSION_BRAKE_CMD.name, "k2", 2)]
-    bad = tmp_path / "bad.rec"
-    bad.write_bytes(b"\x00\x00\x00\x03abc")
-    with pytest.raises(RecordingError, match="byte 0"):
-        list(read_records(bad))
+def ab_report(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(python_module("tools.cli", "ab-report", *args), capture_output=True,
+                          text=True, timeout=60)
+
+
+def test_the_report_of_an_mcap_recording(tmp_path):
+    path = tmp_path / "ab.mcap"
+    with RecordingWriter(path, metadata={"vehicle": "ego"}) as w:
+        t = 10**18
+        for seq in range(20):
+            for instance in ("primary", "candidate"):
+                targets, command = cycle(instance, seq)
+                for key, msg in ((FUSION_TARGETS.key("ego", instance=instance), targets),
+                                 (FUSION_BRAKE_CMD.key("ego", instance=instance), command)):
+                    t += 1000
+                    w.write(key, channel_of_topic(key), encode(msg), t, t)
+    proc = ab_report("--from", str(path), "--json")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert report["commands_compared"] == 20 and report["commands_disagreed"] == 5
+
+
+def test_a_file_that_is_not_a_recording_is_said_so_and_fails(tmp_path):
+    """Issue 19, defect 9: it printed "no disagreement" and exited 0."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("primary and candidate agreed on everything, I think\n")
+    proc = ab_report("--from", str(notes))
+    assert proc.returncode == 2
+    assert f"{notes} is not an MCAP recording" in proc.stderr
+    assert "no disagreement" not in proc.stdout
+    # A recording, but without the candidate's outputs: nothing to compare is no report.
+    path = tmp_path / "primary-only.mcap"
+    with RecordingWriter(path) as w:
+        key = FUSION_BRAKE_CMD.key("ego", instance="primary")
+        w.write(key, channel_of_topic(key), encode(cycle("primary", 0)[1]), 1, 1)
+    proc = ab_report("--from", str(path))
+    assert proc.returncode == 2 and "no output of fusion instance 'candidate'" in proc.stderr
+    missing = ab_report("--from", str(tmp_path / "none.mcap"))
+    assert missing.returncode == 2 and "no such file" in missing.stderr
 
 
 @pytest.mark.slow
 def test_ab_report_live_with_a_recording_that_reports_the_same(router, tmp_path):
     stop = threading.Event()
-    rec = tmp_path / "ab.rec"
+    rec = tmp_path / "ab.mcap"
     with open_bus(router, source="fusion") as bus:
         pubs = {(spec.name, inst): bus.publisher(spec, instance=inst)
                 for spec in (FUSION_TARGETS, FUSION_BRAKE_CMD)
@@ -131,7 +157,4 @@ def test_ab_report_live_with_a_recording_that_reports_the_same(router, tmp_path)
     text = subprocess.run(python_module("tools.cli", "ab-report", "--from", str(rec)),
                           capture_output=True, text=True, timeout=60)
     assert "A/B: primary (followed by the brake) vs candidate (shadow)" in text.stdout
-    missing = subprocess.run(python_module("tools.cli", "ab-report", "--from",
-                                           str(tmp_path / "none.rec")),
-                             capture_output=True, text=True, timeout=60)
-    assert missing.returncode == 2 and "not found" in missing.stderr
+

@@ -5,9 +5,13 @@ only the primary). This command pairs their outputs by radar cycle and reports e
 disagreement: the command's decision, and per track the verification and decision.
 
     aeb ab-report --duration 60                        # live, then the report
-    aeb ab-report --duration 600 --record ab.rec       # also keep what was received
-    aeb ab-report --from ab.rec                        # the report of a recording
-    aeb ab-report --from ab.rec --json
+    aeb ab-report --duration 600 --record ab.mcap      # also keep what was received
+    aeb ab-report --from drive.mcap                    # the report of a recording
+    aeb ab-report --from drive.mcap --json
+
+Recordings are MCAP (`aeb record`, or `--record` here: the two instances' targets and
+commands, as every recorder writes them). A file that is not one, or one that holds no
+output of either instance, is an error (exit 2), never an empty report.
 """
 
 import argparse
@@ -15,8 +19,7 @@ import json
 import sys
 import threading
 from dataclasses import asdict
-from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from common.bus import Bus, BusError
 from common.clock import wall_ns
@@ -26,7 +29,9 @@ from common.log import add_log_level, setup_logging
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, Report, render
 from tools.ab.feeder import Feeder
-from tools.ab.recording import RecordingError, read_records, write_record
+from tools.recording.format import channel_of_topic, publish_time
+from tools.recording.reader import Recording, RecordingError
+from tools.recording.writer import RecordingWriter
 
 SPECS: dict[str, KeySpec[Any]] = {s.name: s for s in (FUSION_TARGETS, FUSION_BRAKE_CMD)}
 
@@ -42,7 +47,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--duration", type=float, default=None,
                         help="listen this long (default: until Ctrl-C)")
     parser.add_argument("--record", default="", help="also write what was received here")
-    parser.add_argument("--from", dest="source", default="", help="report on a recording")
+    parser.add_argument("--from", dest="source", nargs="+", default=None,
+                        help="report on a recording (MCAP file(s) or a folder)")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--episodes", type=int, default=20, help="episodes to list")
     add_log_level(parser, "WARNING")
@@ -68,7 +74,9 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stop = stop_event_on_signals()
-    record: IO[bytes] | None = open(args.record, "wb") if args.record else None  # noqa: SIM115
+    record = RecordingWriter(args.record, metadata={"vehicle": args.vehicle,
+                                                    "recorder": "aeb ab-report"}) \
+        if args.record else None
     write_lock = threading.Lock()
     try:
         with bus:
@@ -80,7 +88,9 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> int:
                         # its report is this report.
                         with write_lock:
                             if record is not None:
-                                write_record(record, spec.name, key, wall_ns(), payload)
+                                now = wall_ns()
+                                record.write(key, channel_of_topic(key), payload, now,
+                                             publish_time(payload, now))
                             feeder.feed(spec.name, payload)
 
                     bus.subscribe_raw(spec, on_raw, instance=instance)
@@ -91,8 +101,30 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> int:
     return 0
 
 
+def read_recording(args: argparse.Namespace, feeder: Feeder) -> None:
+    """Feed both instances' recorded outputs in recorded order. Raises RecordingError
+    for what is not a recording, and for one without output of either instance."""
+    rec = Recording.open(args.source)
+    vehicle = rec.metadata().get("vehicle", args.vehicle)
+    topics = {spec.key(vehicle, instance=inst): spec.name for spec in SPECS.values()
+              for inst in (args.primary, args.candidate)}
+    channels = rec.channels()
+    for inst in (args.primary, args.candidate):
+        if not any(channels.get(t) and channels[t].messages for t, _ in _of(topics, inst)):
+            raise RecordingError(
+                f"{', '.join(map(str, rec.files))} holds no output of fusion instance "
+                f"{inst!r} (its keys: {', '.join(t for t, _ in _of(topics, inst))})")
+    for r in rec.records(topics):
+        feeder.feed(topics[r.topic], r.data)
+
+
+def _of(topics: dict[str, str], instance: str) -> list[tuple[str, str]]:
+    return [(t, n) for t, n in topics.items() if t.split("/")[3] == instance]
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Returns 0, or 2 for an unreadable recording or a bus that cannot be opened."""
+    """Returns 0, or 2 for what is not a recording (or holds neither instance's output)
+    and for a bus that cannot be opened."""
     args = parse_args(argv)
     setup_logging("ab-report", args.log_level)
     try:
@@ -102,12 +134,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     feeder = Feeder(comparator)
     if args.source:
-        if not Path(args.source).is_file():
-            print(f"error: recording {args.source} not found", file=sys.stderr)
-            return 2
         try:
-            for spec_name, _key, _rx, payload in read_records(args.source):
-                feeder.feed(spec_name, payload)
+            read_recording(args, feeder)
         except RecordingError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2

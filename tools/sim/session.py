@@ -107,11 +107,12 @@ class ClosedLoop:
 @contextmanager
 def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: bool = False,
                 log: IO[str] | None = None, realtime_priority: int = 0,
-                fusion_config: Path = FUSION_CONFIG) -> Iterator[ClosedLoop]:
+                fusion_config: Path = FUSION_CONFIG, raw_can: bool = False) -> Iterator[ClosedLoop]:
     """Start the stack and the simulator; stop everything on exit.
 
     `realtime_priority` > 0: SCHED_FIFO for the router and the radar's and brake's
     latency path (tools/sim/stack.py write_configs); fusion's comes from `fusion_config`.
+    `raw_can`: the radar also publishes its raw CAN frames (for `aeb record`).
 
     Service output goes to `out/stack.log`. Raises StackStartError when the stack does
     not come up or never arms, ConfigError for a bad table, BusError / OSError when the
@@ -133,7 +134,7 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     try:
         configs = write_configs(run_dir, endpoint, str(run_dir / "actuator"), link.path,
                                 camera_fps=camera_fps, fusion_config=fusion_config,
-                                realtime_priority=realtime_priority)
+                                realtime_priority=realtime_priority, raw_can=raw_can)
         table, workdir = load_table(write_table(run_dir, endpoint, configs, candidate,
                                                 realtime_priority))
         launches = resolve_launches(table, workdir, "demo")

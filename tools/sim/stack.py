@@ -46,7 +46,7 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
                   can_interface: str = "slcan", camera_fps: float = 30.0,
                   fusion_config: Path = FUSION_CONFIG,
                   heartbeat_ms: float | None = None,
-                  realtime_priority: int = 0) -> StackConfigs:
+                  realtime_priority: int = 0, raw_can: bool = False) -> StackConfigs:
     """Write radar, camera, fusion and brake TOMLs into `folder`; fusion's is the shipped
     one with `[fusion.realtime]` set (its endpoint comes from `--connect`). Returns every
     config's path.
@@ -55,7 +55,8 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     line on the actuator while commands flow is a command line (one per radar cycle),
     which lets a test pair cycles and lines exactly (tools/sim/latency.py).
     `realtime_priority` > 0: SCHED_FIFO for the latency path of radar, fusion and brake
-    (`[*.realtime]`, the brake's timer), as on a vehicle."""
+    (`[*.realtime]`, the brake's timer), as on a vehicle. `raw_can`: the radar publishes
+    its raw CAN frames (`[radar.raw_can]`), for recordings that re-run the radar."""
     rt = f"\n[{{}}.realtime]\npriority = {realtime_priority}\n" if realtime_priority else ""
     folder.mkdir(parents=True, exist_ok=True)
     zenoh = f"[zenoh]\nconnect = {_toml_list([endpoint])}\n"
@@ -66,7 +67,8 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
         "# SIMULATION: the radar service on the simulated ARS408's CAN link.\n"
         f'vehicle = "ego"\n{zenoh}\n[radar.can]\ninterface = "{can_interface}"\n'
         f'channel = "{can_channel}"\nbitrate = {bitrate}\noptions = {options}\n\n'
-        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n' + rt.format("radar"))
+        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n' + rt.format("radar")
+        + ("\n[radar.raw_can]\npublish = true\n" if raw_can else ""))
     camera = folder / "camera.toml"
     camera.write_text(
         "# SIMULATION: the camera service rendering the simulated world (synthetic plugin).\n"

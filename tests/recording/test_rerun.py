@@ -1,0 +1,148 @@
+"""`aeb rerun`: fusion's and the radar's pure cores over a recording, offline.
+
+The regression test of fusion's behaviour is here: fusion re-run on a simulator
+recording kept in tests/data/recording/ must show exactly the differences declared
+beside it, no more and no fewer. A change that changes fusion's behaviour declares its
+differences there (`aeb rerun fusion REC --compare --write-expected FILE`) and says why.
+"""
+
+import hashlib
+import json
+import subprocess
+import threading
+
+from common.config.fusion import FusionConfig
+from common.config.loader import load_config
+from common.config.radar import CanSettings, Pace, RadarSettings, RawCanSettings, ReplaySettings
+from common.keys import RADAR_CAN, RADAR_TRACKS
+from common.messages import RawCanFrames, Verification, encode
+from services.radar.shell import RadarShell
+from tests.can_support import RECORDING, RECORDING_CYCLES
+from tests.support import REPO, python_module
+from tests.system.messages import radar_tracks, track
+from tools.recording.compare import Difference, check_declared
+from tools.recording.format import stack_channel
+from tools.recording.reader import Recording
+from tools.recording.rerun_fusion import FusionRerun, normalised
+from tools.recording.writer import RecordingWriter
+
+DATA = REPO / "tests" / "data" / "recording"
+SIM = DATA / "pedestrian_standing_20kph.mcap"
+DECLARED = DATA / "pedestrian_standing_20kph.rerun-fusion.json"
+
+
+def rerun(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(python_module("tools.cli", "rerun", *args), capture_output=True,
+                          text=True, timeout=timeout, cwd=REPO)
+
+
+def test_fusion_rerun_on_the_simulator_recording_shows_only_the_declared_differences(tmp_path):
+    out = tmp_path / "found.json"
+    proc = rerun("fusion", str(SIM), "--compare", "--expect", str(DECLARED), "--quiet",
+                 "--write-expected", str(out))
+    declared = [Difference.from_json(d) for d in json.loads(DECLARED.read_text())["differences"]]
+    found = [Difference.from_json(d) for d in json.loads(out.read_text())["differences"]]
+    undeclared, missing = check_declared(found, declared)
+    assert not undeclared and not missing, proc.stdout
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "no difference beyond those declared" in proc.stdout
+    # Not vacuous: the recording warns, brakes and holds.
+    rec = Recording.open(SIM)
+    decisions = [r.data for r in rec.records(["aeb/ego/fusion/primary/brake_cmd"])]
+    assert len(decisions) == 83
+
+
+def test_fusion_rerun_is_deterministic_to_the_byte(tmp_path):
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    for path in (a, b):
+        proc = rerun("fusion", str(SIM), "-o", str(path), "--quiet")
+        assert proc.returncode == 0, proc.stderr
+    assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
+    channels = Recording.open(a).channels()
+    assert channels["aeb/ego/fusion/rerun/brake_cmd"].messages == 83
+    assert channels["/foxglove/ego/fusion/rerun/annotations/front"].messages > 10
+
+
+def test_another_threshold_gives_the_expected_differences(tmp_path):
+    result = tmp_path / "result.json"
+    proc = rerun("fusion", str(SIM), "--compare", "--quiet", "--json", str(result),
+                 "--set", "fusion.verifier.params.tau=0.1")
+    assert proc.returncode == 1          # differences, none declared
+    assert "tau=0.1" in proc.stdout
+    # Every track verified live with a density below 0.1 is now rejected; nothing else
+    # changes its verification, and cycles that braked on one of them no longer brake.
+    run = FusionRerun(load_config(REPO / "deploy" / "fusion.toml", FusionConfig))
+    lower = [(c.tracks.header.seq, t.track_id) for c in run.run(Recording.open(SIM))
+             if c.recorded is not None for t in c.recorded.targets
+             if t.verification is Verification.VERIFIED and (t.density or 0) < 0.1]
+    assert lower
+    fields = json.loads(result.read_text())["comparison"]["fields"]
+    assert fields["densities.verification"] == len(lower)
+    assert fields["decisions.decision"] > 0 and fields["commands.decision"] > 0
+    assert "densities.density" not in fields       # the same frames, the same densities
+
+
+def test_the_rerun_decodes_only_the_frames_cycles_use():
+    cfg = load_config(REPO / "deploy" / "fusion.toml", FusionConfig)
+    run = FusionRerun(cfg)
+    cycles = list(run.run(Recording.open(SIM)))
+    assert len(cycles) == 83
+    st = run.stats
+    gated = sum(1 for c in cycles if c.result is not None
+                for t in normalised(c.result).targets.targets if t.density is not None)
+    assert 0 < st.frames_decoded <= gated < st.frames_in_recording
+    assert st.frames_pinned >= gated
+
+
+def test_radar_rerun_on_the_simulator_recording_has_no_difference():
+    proc = rerun("radar", str(SIM), "--compare", "--quiet")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "cycles compared: 83, with a difference: 0" in proc.stdout
+
+
+def test_radar_rerun_on_the_real_ars408_drive_reproduces_its_tracks(tmp_path):
+    """The real recording through the radar service's shell with its raw frames
+    published, both into an MCAP; the re-run gives the same cycles."""
+    path = tmp_path / "ars408.mcap"
+    settings = RadarSettings(can=CanSettings(interface="replay"),
+                             replay=ReplaySettings(file=str(RECORDING), pace=Pace.FAST,
+                                                   exit_at_end=True),
+                             raw_can=RawCanSettings(publish=True))
+    writer = RecordingWriter(path, metadata={"vehicle": "ego"})
+    lock = threading.Lock()
+    t = [0]
+
+    def put(topic, msg, stamp):
+        with lock:
+            t[0] += 1
+            writer.write(topic, stack_channel(type(msg)), encode(msg), stamp + t[0], stamp)
+
+    class Out:
+        def tracks(self, sensor, msg):
+            put(RADAR_TRACKS.key("ego", sensor=sensor), msg, msg.header.stamp_ns)
+
+        def status(self, sensor, msg):
+            pass
+
+        def serving(self):
+            pass
+
+    def raw(batch: RawCanFrames) -> None:
+        put(RADAR_CAN.key("ego", bus="radar"), batch, batch.frames[-1].rx_wall_ns)
+
+    assert RadarShell(settings, Out(), raw_can=raw).run(threading.Event()) == 0
+    writer.close()
+    proc = rerun("radar", str(path), "--compare", "--quiet")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"cycles compared: {RECORDING_CYCLES}, with a difference: 0" in proc.stdout
+    assert "no difference" in proc.stdout
+
+
+def test_a_recording_without_raw_can_is_refused_for_the_radar(tmp_path):
+    path = tmp_path / "no-can.mcap"
+    with RecordingWriter(path) as w:
+        msg = radar_tracks(0, (track(1, 10.0),), stamp_ns=10**18)
+        w.write(RADAR_TRACKS.key("ego", sensor="front"), stack_channel(type(msg)), encode(msg),
+                10**18, 10**18)
+    proc = rerun("radar", str(path))
+    assert proc.returncode == 2 and "no raw CAN frames" in proc.stderr

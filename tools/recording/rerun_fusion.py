@@ -1,0 +1,351 @@
+"""Fusion's pure core over a recording, offline: no Zenoh, no clock of its own.
+
+Every radar cycle of the recording goes through `FusionCore.decide` and `report` in the
+recorded order, with the recorded time, and with the camera frames the live instance
+had. What the recording says about them, and so how exact the re-run is:
+
+- the time: the live core's `now` is the radar stamp plus the recorded `radar_age_ms`
+  (what its VerifiedTargets say); without a recorded output, the recorder's receive time;
+- the frames: the frames live fusion held are not published, but its VerifiedTargets
+  name the frame each track was checked in (`frame_seq`). The re-run's ring is the
+  recorded frames up to that one (at most the live ring's size), less any that would have
+  been nearer to the cycle than it (the live ring cannot have held them, or it would have
+  chosen them). Without a frame named (no recorded output, no track checked), the ring is
+  the frames the recorder had received before the cycle, made to agree with what the
+  recorded cycle says of the camera: when it had no usable frame, less those the cycle
+  would have used (they had not reached fusion yet); when it had one and the recorder
+  had none in time, with the next frames the recorder received (they reached fusion
+  first). Live fusion may still have held other frames (decoding lag, frames dropped on
+  its link): the comparison then shows it, typically as another `unavailable_reason`;
+- with several cameras, each camera's frame is named only for the tracks it decided.
+
+Frames are decoded only when the core reads a selected frame's pixels (a cycle that gates
+nothing decodes nothing), each at most once; a recorded frame that does not decode fails
+its cycle as the live shell fails one (counted) and is left out after that. The outputs
+are deterministic: the same recording and configuration give the same bytes.
+"""
+
+from collections import OrderedDict, deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgspec
+import numpy as np
+
+from common.config.fusion import FusionConfig
+from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from common.messages import (
+    BrakeCommand,
+    DecodeError,
+    RadarTracks,
+    VerifiedTargets,
+    VerifierStatus,
+    decode,
+)
+from services.fusion.core import CycleResult
+from services.fusion.frames import (
+    RING_SIZE,
+    DecodedFrame,
+    FrameError,
+    FrameFeed,
+    decode_frame,
+    select_frame,
+)
+from services.fusion.main import build_core
+from tools.recording.reader import Record, Recording
+
+# A cycle is re-run once the recording is this far past it: its frames and recorded
+# outputs have arrived by then (the recorder gets them from separate subscriptions).
+LOOKAHEAD_NS = 1_000_000_000
+# Recent frames kept per camera (undecoded), to build rings from.
+WINDOW_FRAMES = 64
+_DECODED_KEPT = 8
+_EARLY_KEPT = 64
+
+
+class _Head(msgspec.Struct):
+    seq: int
+    stamp_ns: int
+
+
+class _Frame(msgspec.Struct):
+    header: _Head      # the rest of the frame (the JPEG) is skipped, not copied
+
+
+_frame_decoder = msgspec.msgpack.Decoder(_Frame)
+
+
+def _frame_head(payload: bytes) -> _Head:
+    """A CompressedFrame's sequence number and stamp. Raises DecodeError."""
+    try:
+        return _frame_decoder.decode(payload).header
+    except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+        raise DecodeError(f"CompressedFrame: {exc}") from exc
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRef:
+    seq: int
+    stamp_ns: int
+    log_ns: int
+    payload: bytes
+
+
+@dataclass
+class Cycle:
+    """One radar cycle of the recording, its recorded outputs, and the re-run's."""
+
+    tracks: RadarTracks
+    log_ns: int
+    recorded_cmd: BrakeCommand | None = None
+    recorded: VerifiedTargets | None = None
+    recorded_log_ns: int | None = None
+    result: CycleResult | None = None
+
+
+@dataclass
+class RerunStats:
+    cycles: int = 0
+    frames_in_recording: int = 0
+    frames_decoded: int = 0
+    frames_undecodable: int = 0
+    frames_pinned: int = 0        # cycles whose frame was named by the recorded output
+    failed_cycles: int = 0        # the core raised: answered as the shell does
+    undecodable: dict[str, int] = field(default_factory=dict)
+    first_log_ns: int | None = None
+    last_log_ns: int | None = None
+
+
+class FusionRerun:
+    """`cfg`: the configuration to re-run with (the recorded instance's, or a changed
+    one); `instance`: whose recorded outputs to pin frames and time to and compare with
+    (default: the config's)."""
+
+    def __init__(self, cfg: FusionConfig, instance: str | None = None,
+                 vehicle: str = "ego") -> None:
+        self.cfg = cfg
+        self.s = cfg.fusion
+        self.instance = instance or self.s.instance
+        self.vehicle = vehicle
+        core, cals = build_core(cfg)
+        self.core = core
+        self.sizes = {name: (cal.width, cal.height) for name, cal in cals.items()}
+        self.cameras = [c.name for c in self.s.camera_inputs]
+        self.stats = RerunStats()
+        self._frames: dict[str, deque[FrameRef]] = {c: deque(maxlen=WINDOW_FRAMES)
+                                                    for c in self.cameras}
+        self._received: dict[str, int] = dict.fromkeys(self.cameras, 0)
+        self._decoded: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
+        self._bad: set[tuple[str, int]] = set()
+        self._early: dict[tuple[int, int], tuple[BrakeCommand | None, VerifiedTargets | None,
+                                                 int | None]] = {}
+        self._skew_ns = round(self.s.frames.max_skew_s * 1e9)
+        self._tracks_topic = RADAR_TRACKS.key(vehicle, sensor=self.s.radar_sensor)
+        self._cmd_topic = FUSION_BRAKE_CMD.key(vehicle, instance=self.instance)
+        self._targets_topic = FUSION_TARGETS.key(vehicle, instance=self.instance)
+        self._frame_topics = {CAMERA_JPEG.key(vehicle, camera=c): c for c in self.cameras}
+
+    @property
+    def topics(self) -> list[str]:
+        return [self._tracks_topic, self._cmd_topic, self._targets_topic,
+                *self._frame_topics]
+
+    def run(self, recording: Recording, start_ns: int | None = None,
+            end_ns: int | None = None) -> Iterator[Cycle]:
+        """Every cycle re-run, in recorded order."""
+        pending: deque[Cycle] = deque()
+        by_cycle: dict[tuple[int, int], Cycle] = {}
+        for rec in recording.records(self.topics, start_ns, end_ns):
+            st = self.stats
+            st.first_log_ns = rec.log_time_ns if st.first_log_ns is None else st.first_log_ns
+            st.last_log_ns = rec.log_time_ns
+            self._take(rec, pending, by_cycle)
+            while pending and pending[0].log_ns < rec.log_time_ns - LOOKAHEAD_NS:
+                yield self._rerun(pending.popleft(), by_cycle)
+        while pending:
+            yield self._rerun(pending.popleft(), by_cycle)
+
+    def _take(self, rec: Record, pending: deque[Cycle],
+              by_cycle: dict[tuple[int, int], Cycle]) -> None:
+        topic = rec.topic
+        camera = self._frame_topics.get(topic)
+        try:
+            if camera is not None:
+                self.stats.frames_in_recording += 1
+                head = _frame_head(rec.data)
+                self._frames[camera].append(FrameRef(head.seq, head.stamp_ns,
+                                                     rec.log_time_ns, rec.data))
+            elif topic == self._tracks_topic:
+                tracks = decode(rec.data, RadarTracks)
+                cycle = Cycle(tracks, rec.log_time_ns)
+                key = (tracks.header.seq, tracks.header.stamp_ns)
+                pending.append(cycle)
+                by_cycle[key] = cycle
+                # Outputs the recorder received before the cycle itself (its threads
+                # take each key's samples separately).
+                early = self._early.pop(key, None)
+                if early is not None:
+                    cycle.recorded_cmd, cycle.recorded, cycle.recorded_log_ns = early
+            elif topic == self._cmd_topic:
+                cmd = decode(rec.data, BrakeCommand)
+                key = (cmd.radar_seq, cmd.header.stamp_ns)
+                found = by_cycle.get(key)
+                if found is not None:
+                    found.recorded_cmd = cmd
+                else:
+                    self._keep_early(key, rec.log_time_ns, cmd=cmd)
+            elif topic == self._targets_topic:
+                targets = decode(rec.data, VerifiedTargets)
+                key = (targets.radar_seq, targets.header.stamp_ns)
+                found = by_cycle.get(key)
+                if found is not None:
+                    found.recorded = targets
+                    found.recorded_log_ns = rec.log_time_ns
+                else:
+                    self._keep_early(key, rec.log_time_ns, targets=targets)
+        except DecodeError:
+            self.stats.undecodable[topic] = self.stats.undecodable.get(topic, 0) + 1
+
+    def _keep_early(self, key: tuple[int, int], log_ns: int, cmd: BrakeCommand | None = None,
+                    targets: VerifiedTargets | None = None) -> None:
+        old_cmd, old_targets, old_log = self._early.get(key, (None, None, None))
+        self._early[key] = (cmd or old_cmd, targets or old_targets,
+                            log_ns if targets is not None else old_log)
+        while len(self._early) > _EARLY_KEPT:     # outputs of cycles never recorded
+            del self._early[next(iter(self._early))]
+
+    def _rerun(self, cycle: Cycle, by_cycle: dict[tuple[int, int], Cycle]) -> Cycle:
+        tracks = cycle.tracks
+        del by_cycle[(tracks.header.seq, tracks.header.stamp_ns)]
+        recorded = cycle.recorded
+        if recorded is not None and recorded.radar_age_ms is not None:
+            now_wall = tracks.header.stamp_ns + round(recorded.radar_age_ms * 1e6)
+        else:
+            now_wall = cycle.log_ns
+        now_mono = (cycle.recorded_cmd.header.pub_mono_ns if cycle.recorded_cmd is not None
+                    else cycle.log_ns)
+        feeds = [self._feed(c, tracks.header.stamp_ns, cycle) for c in self.cameras]
+        try:
+            decided = self.core.decide(tracks, feeds, now_wall, now_mono)
+            targets = self.core.report(decided)
+            result = CycleResult(targets, decided.command)
+        except Exception as exc:  # answered as the live shell answers a failing cycle
+            self.stats.failed_cycles += 1
+            result = self.core.failed_cycle(tracks, repr(exc), now_wall, now_mono)
+        self.stats.cycles += 1
+        cycle.result = result
+        return cycle
+
+    def _pinned_seq(self, camera: str, recorded: VerifiedTargets | None) -> int | None:
+        if recorded is None:
+            return None
+        single = len(self.cameras) == 1
+        for t in recorded.targets:
+            if t.frame_seq is not None and (t.camera == camera or (single and not t.camera)):
+                return t.frame_seq
+        return None
+
+    def _feed(self, camera: str, radar_stamp_ns: int, cycle: Cycle) -> FrameFeed:
+        frames = self._frames[camera]
+        pinned = self._pinned_seq(camera, cycle.recorded)
+        if pinned is not None and any(f.seq == pinned for f in frames):
+            self.stats.frames_pinned += 1
+            chosen = next(f for f in frames if f.seq == pinned)
+            gap = abs(chosen.stamp_ns - radar_stamp_ns)
+            ring = [f for f in frames if f.seq <= pinned
+                    and (f is chosen or abs(f.stamp_ns - radar_stamp_ns) > gap)]
+        else:
+            ring = [f for f in frames if f.log_ns <= cycle.log_ns]
+        ring = [f for f in ring if (camera, f.seq) not in self._bad][-RING_SIZE:]
+        received = sum(1 for f in frames if f.log_ns <= cycle.log_ns)
+        lazy = [LazyFrame(camera, f, self._decode) for f in ring]
+        recorded = cycle.recorded
+        if pinned is None and recorded is not None:
+            lazy = self._as_recorded(camera, lazy, frames, cycle, recorded)
+        return FrameFeed(tuple(lazy), received, self.stats.frames_undecodable)
+
+    def _as_recorded(self, camera: str, lazy: list["LazyFrame"], frames: deque[FrameRef],
+                     cycle: Cycle, recorded: VerifiedTargets) -> list["LazyFrame"]:
+        """A ring that agrees with what the recorded cycle says of the camera, where no
+        frame is named: none usable (those the recorder had in time had not reached
+        fusion yet), or one usable (it reached fusion before it reached the recorder)."""
+        stamp = cycle.tracks.header.stamp_ns
+
+        def usable(ring: list[LazyFrame]) -> DecodedFrame | None:
+            return select_frame(tuple(ring), stamp, self._skew_ns, self.s.frames.align)
+
+        if camera in recorded.cameras_unavailable:
+            while (late := usable(lazy)) is not None:
+                lazy = [f for f in lazy if f is not late]
+        elif recorded.verifier_status is VerifierStatus.OK and usable(lazy) is None:
+            for ref in (f for f in frames if f.log_ns > cycle.log_ns):
+                lazy = [*lazy, LazyFrame(camera, ref, self._decode)][-RING_SIZE:]
+                if usable(lazy) is not None:
+                    break
+        return lazy
+
+    def _decode(self, camera: str, ref: FrameRef) -> np.ndarray:
+        """A frame's pixels, on the first use by the core (each frame decoded once).
+        Raises FrameError, and the frame is then left out of later rings (the live
+        decoder never put it in its ring)."""
+        key = (camera, ref.seq)
+        gray = self._decoded.get(key)
+        if gray is not None:
+            self._decoded.move_to_end(key)
+            return gray
+        width, height = self.sizes[camera]
+        try:
+            gray = decode_frame(ref.payload, ref.log_ns, width, height).gray
+        except FrameError:
+            self.stats.frames_undecodable += 1
+            self._bad.add(key)
+            raise
+        self.stats.frames_decoded += 1
+        self._decoded[key] = gray
+        if len(self._decoded) > _DECODED_KEPT:
+            self._decoded.popitem(last=False)
+        return gray
+
+
+class LazyFrame(DecodedFrame):
+    """A recorded frame the core sees as decoded: times at once, pixels decoded when the
+    core first reads `gray` (a cycle that gates nothing in this camera decodes nothing).
+    The receive time is the recorder's (`rx_mono_ns` orders frames for the paper's
+    "newest frame" policy)."""
+
+    __slots__ = ("_load", "_pixels", "_ref")
+    _load: Callable[[str, FrameRef], np.ndarray]
+    _pixels: np.ndarray | None
+    _ref: FrameRef
+
+    def __init__(self, camera: str, ref: FrameRef,
+                 load: Callable[[str, FrameRef], np.ndarray]) -> None:
+        for name, value in (("camera", camera), ("seq", ref.seq), ("stamp_ns", ref.stamp_ns),
+                            ("rx_mono_ns", ref.log_ns), ("_ref", ref), ("_load", load),
+                            ("_pixels", None)):
+            object.__setattr__(self, name, value)
+
+    @property
+    def gray(self) -> np.ndarray:
+        pixels: np.ndarray | None = self._pixels
+        if pixels is None:
+            pixels = self._load(self.camera, self._ref)
+            object.__setattr__(self, "_pixels", pixels)
+        return pixels
+
+
+def normalised(result: CycleResult) -> CycleResult:
+    """The outputs with the fields only a live shell fills (processing time) set as
+    the re-run has them: zero."""
+    return CycleResult(msgspec.structs.replace(result.targets, processing_ns=0),
+                       result.command)
+
+
+def config_params(cfg: FusionConfig) -> dict[str, Any]:
+    """What distinguishes a configuration, for the re-run's metadata."""
+    s = cfg.fusion
+    return {"instance": s.instance, "verifier": s.verifier.name,
+            "verifier_params": dict(s.verifier.params),
+            "decision": msgspec.to_builtins(s.decision),
+            "frames": msgspec.to_builtins(s.frames)}
