@@ -81,10 +81,9 @@ class Detections:
     def take(self, index: npt.NDArray[Any]) -> "Detections":
         """Detections selected by a boolean mask or an index array."""
         if index.dtype == np.bool_:
-            return Detections(np.compress(index, self.floats, axis=1),
-                              np.compress(index, self.ints, axis=1))
-        return Detections(np.take(self.floats, index, axis=1),
-                          np.take(self.ints, index, axis=1))
+            return Detections(self.floats.compress(index, axis=1),
+                              self.ints.compress(index, axis=1))
+        return Detections(self.floats.take(index, axis=1), self.ints.take(index, axis=1))
 
     @staticmethod
     def empty() -> "Detections":
@@ -303,16 +302,18 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
         return det
     fl = det.floats
     ii, jj = pairs_within_self(fl[X], fl[Y], s.distance_m)
+    if len(ii) == 0:
+        return det
     vx, vy = fl[VX], fl[VY]
-    dvx = vx[ii] - vx[jj]
-    dvy = vy[ii] - vy[jj]
+    dvx = vx.take(ii) - vx.take(jj)
+    dvy = vy.take(ii) - vy.take(jj)
     similar = dvx * dvx + dvy * dvy <= s.velocity_mps**2
-    if not similar.any():
+    if not np.count_nonzero(similar):
         return det
     # The seed walk is sequential (a seed takes its mates before the next seed looks),
     # over the few similar pairs.
     neighbours: defaultdict[int, list[int]] = defaultdict(list)
-    for i, j in zip(ii[similar].tolist(), jj[similar].tolist(), strict=True):
+    for i, j in zip(ii.compress(similar).tolist(), jj.compress(similar).tolist(), strict=True):
         neighbours[i].append(j)
         neighbours[j].append(i)
     adjacent = neighbours.get
