@@ -218,12 +218,13 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         if dupes:
             rejected[f"duplicate_id:{general_spec.dbc_name}"] = dupes
         keep = cols.valid & unique
-    f = cols.phys[_GENERAL_F_ROWS]
-    i = np.full((5, len(ids)), UNKNOWN, dtype=np.int64)
-    i[RADAR_ID:DYN_PROP + 1] = cols.raw[_GENERAL_I_ROWS]
+    f = cols.phys.take(_GENERAL_F_ROWS, axis=0)
+    i = np.empty((5, len(ids)), dtype=np.int64)
+    i[RADAR_ID:DYN_PROP + 1] = cols.raw.take(_GENERAL_I_ROWS, axis=0)
+    i[DYN_PROP + 1:] = UNKNOWN          # not sent yet: quality and extended frames
     rows: I | None = None
     if keep is not None:
-        f, i = np.compress(keep, f, axis=1), np.compress(keep, i, axis=1)
+        f, i = f.compress(keep, axis=1), i.compress(keep, axis=1)
         rows = np.full(len(keys), -2, dtype=np.int64)
         rows[keep] = np.arange(f.shape[1])
     return GeneralFrames(Detections(f, i), ids, keys, rows, rejected)
@@ -273,9 +274,10 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     the optional existence-probability and cluster-validity filters."""
     if not len(det):
         return det
-    x, y = det.x, det.y
+    fl = det.floats
+    x, y = fl[X], fl[Y]
     r2 = x * x + y * y
-    keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (det.rcs > s.min_rcs_dbsm)
+    keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (fl[RCS] > s.min_rcs_dbsm)
     if s.forward_only:
         keep &= x > 0
     if s.min_prob_of_exist > 0:
@@ -284,7 +286,7 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
         keep &= (p == UNKNOWN) | (p >= s.min_prob_of_exist)
     if s.drop_cluster_invalid_states:
         keep &= ~np.isin(det.ints[INVALID_STATE], np.asarray(s.drop_cluster_invalid_states))
-    return det.take(keep)
+    return det if np.count_nonzero(keep) == len(keep) else det.take(keep)
 
 
 def merge(det: Detections, s: MergeSettings) -> Detections:
