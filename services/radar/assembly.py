@@ -12,6 +12,7 @@ Whether quality / extended frames are sent is fixed by config or learned from th
 (what the previous cycle carried); until it is known, a cycle waits for the next status.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common.config.radar import CycleSettings, Expect
@@ -34,7 +35,7 @@ class ClosedBy:
     END = "end"
 
 
-@dataclass
+@dataclass(slots=True)
 class RawCycle:
     """The frames of one cycle, undecoded. A None entry is a frame that arrived but was
     rejected (wrong DLC): it counts as arrived, and makes the cycle incomplete."""
@@ -76,10 +77,6 @@ class RawCycle:
     def frames_for(self, role: int) -> list[bytes | None]:
         return self.lists[role]
 
-    def has_list(self, role: int) -> bool:
-        """Every announced frame of list `role` arrived."""
-        return len(self.lists[role]) == self.announced
-
     def all_arrived(self, quality: bool | None, extended: bool | None) -> bool:
         """All announced frames arrived, counting unknown expectations as expected."""
         n = self.announced
@@ -104,18 +101,18 @@ class CycleAssembler:
     object cycle or the reverse), ``excess`` (more frames than announced),
     ``after_complete`` (a frame of an already emitted cycle that nobody expected)."""
 
-    def __init__(self, settings: CycleSettings, rejected: ReasonCounter | None = None) -> None:
+    def __init__(self, settings: CycleSettings, rejected: ReasonCounter | None = None,
+                 on_list_in: Callable[[RawCycle, int], None] | None = None) -> None:
+        """`on_list_in(cycle, role)` is called when every announced frame of one of the
+        open cycle's lists has arrived and the cycle still waits for others (a list
+        that completes the cycle arrives with it)."""
         self.settings = settings
         self.rejected = rejected if rejected is not None else ReasonCounter()
+        self._on_list_in = on_list_in
         self._timeout_ns = int(settings.timeout_s * 1e9)
         self._current: RawCycle | None = None
         self._emitted = False
         self._learned: dict[tuple[OutputMode, int], bool] = {}
-
-    @property
-    def open_cycle(self) -> RawCycle | None:
-        """The cycle being assembled, not emitted yet (its lists so far)."""
-        return None if self._emitted else self._current
 
     def _expectation(self, mode: OutputMode, role: int) -> bool | None:
         if role == ListRole.EXTENDED and mode is OutputMode.CLUSTERS:
@@ -193,6 +190,8 @@ class CycleAssembler:
             cycle.remaining -= 1
             if cycle.remaining == 0:
                 return self._close(ClosedBy.COMPLETE)
+        if len(frames) == cycle.announced and self._on_list_in is not None:
+            self._on_list_in(cycle, role)
         return []
 
     def poll(self, mono_ns: int) -> list[RawCycle]:
