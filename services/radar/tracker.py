@@ -202,9 +202,8 @@ class KalmanTracker:
         else:
             drows = _EMPTY
         if len(drows) < len(det):
-            unmatched = np.ones(len(det), dtype=np.bool_)
-            unmatched[drows] = False
-            self._birth(det, unmatched.nonzero()[0] if len(drows) else None)
+            taken = np.bincount(drows, minlength=len(det))
+            self._birth(det, (taken == 0).nonzero()[0] if len(drows) else None)
 
     def predict(self, dt: float) -> None:
         """x' = F x, P' = F P F^T + Q, on every track."""
@@ -242,9 +241,9 @@ class KalmanTracker:
         ti, di = self._candidates(det)
         if len(ti) == 0:
             return _EMPTY, _EMPTY
-        g = self._gain.take(ti, axis=1)
+        g = self._gain[2:10].take(ti, axis=1)          # alpha, gamma, beta, beta
         e = det.floats[STATE].take(di, axis=1) - self.state[STATE].take(ti, axis=1)
-        d2 = (e * (g[2:6] * e - g[6:10] * e.take(_SWAP, axis=0))).sum(axis=0)   # e' S^-1 e
+        d2 = (e * (g[0:4] * e - g[4:8] * e.take(_SWAP, axis=0))).sum(axis=0)   # e' S^-1 e
         inside = ((d2 <= self._chi2) & ((e[POS] * e[POS]).sum(axis=0) <= self._cap**2)
                   ).nonzero()[0]
         if len(inside) == 0:

@@ -181,14 +181,15 @@ def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[
     buf = pad.join(datas) + pad
     if len(buf) != 8 * n:
         buf = b"".join(bytes(d).ljust(8, b"\0") for d in datas)
-    return np.frombuffer(buf, dtype=">i8").astype(np.int64)
+    return np.frombuffer(buf, dtype=np.int64).byteswap()     # big-endian payloads
 
 
 class _Layout(NamedTuple):
     """A message's signals as column vectors, so that every signal decodes in one matrix
     operation. `checked` lists the rows that have a valid range, `lo` and `span` that
     range in raw units: raw - lo from 0 to span (the same frames as the range on
-    raw * scale + offset, found by trying every raw value)."""
+    raw * scale + offset, found by trying every raw value); `lo` None when every range
+    starts at raw 0."""
 
     attrs: tuple[tuple[str, bool], ...]
     shifts: npt.NDArray[np.int64]
@@ -196,7 +197,7 @@ class _Layout(NamedTuple):
     scales: npt.NDArray[np.float64]
     offsets: npt.NDArray[np.float64]
     checked: npt.NDArray[np.intp]
-    lo: npt.NDArray[np.int64]
+    lo: npt.NDArray[np.int64] | None
     span: npt.NDArray[np.uint64]
 
 
@@ -227,7 +228,8 @@ def _layout(spec: MessageSpec) -> _Layout:
             scales=np.array([[s.scale] for s in sigs]),
             offsets=np.array([[s.offset] for s in sigs]),
             checked=np.array(checked, dtype=np.intp),
-            lo=np.array([[lo] for lo, _ in ranges], dtype=np.int64),
+            lo=np.array([[lo] for lo, _ in ranges], dtype=np.int64)
+            if any(lo for lo, _ in ranges) else None,
             span=np.array([[hi - lo] for lo, hi in ranges], dtype=np.uint64),
         )
     return found
@@ -240,8 +242,11 @@ def decode_columns(spec: MessageSpec, datas: Sequence[bytes | bytearray]) -> Col
     raw = (words(datas, spec.dlc) >> lay.shifts) & lay.masks
     if not len(lay.checked):
         return Columns(lay, raw, None, {})
+    checked = raw.take(lay.checked, axis=0)
+    if lay.lo is not None:
+        checked = checked - lay.lo
     # Below lo, raw - lo wraps to a huge unsigned value: one comparison tests both bounds.
-    ok = (raw.take(lay.checked, axis=0) - lay.lo).view(np.uint64) <= lay.span
+    ok = checked.view(np.uint64) <= lay.span
     if np.count_nonzero(ok) == ok.size:
         return Columns(lay, raw, None, {})
     valid = cast(BoolArray, ok.all(axis=0))
