@@ -55,6 +55,7 @@ class RawCycle:
     awaited: tuple[bool, bool, bool] = (True, True, True)   # by ListRole
     closed_by: str = ""
     complete: bool = False
+    rejected_frames: int = 0       # None entries, counted as the assembler adds them
 
     def __post_init__(self) -> None:
         n = self.announced
@@ -86,9 +87,6 @@ class RawCycle:
             return False
         return not (extended is not False and len(self.extended) < n)
 
-    @property
-    def has_rejected(self) -> bool:
-        return any(d is None for d in (*self.general, *self.quality, *self.extended))
 
 
 def _fixed(expect: Expect) -> bool | None:
@@ -139,7 +137,7 @@ class CycleAssembler:
         quality = self._expectation(cycle.mode, ListRole.QUALITY)
         extended = self._expectation(cycle.mode, ListRole.EXTENDED)
         cycle.closed_by = closed_by
-        cycle.complete = cycle.all_arrived(quality, extended) and not cycle.has_rejected
+        cycle.complete = cycle.all_arrived(quality, extended) and not cycle.rejected_frames
         self._emitted = True
         return [cycle]
 
@@ -184,6 +182,8 @@ class CycleAssembler:
             return []
         frames.append(data)
         cycle.last_frame_mono_ns = mono_ns
+        if data is None:
+            cycle.rejected_frames += 1
         # Unknown expectations count as awaited: such a cycle completes only when every
         # possible frame arrived, else it waits for the next status message.
         if cycle.awaited[role]:

@@ -168,8 +168,9 @@ def _attach(
         rejected[reason] = rejected.get(reason, 0) + n
     ids = cols.raw[0]
     values = cols.raw[_signal_index(spec, column)[0]]
+    # The same IDs in the same order (both int64 rows): one copy.
     if (rows_of_keys is None and cols.all_valid and len(ids) == len(general_ids)
-            and bool((ids == general_ids).all())):
+            and ids.tobytes() == general_ids.tobytes()):
         target[:] = values
         return
     qkeys = occurrence_keys(ids)[cols.valid]

@@ -30,6 +30,7 @@ K = P S^-1).
 """
 
 from functools import lru_cache
+from itertools import starmap
 
 import numpy as np
 import numpy.typing as npt
@@ -90,6 +91,8 @@ _TRANSITION_AT = np.ravel_multi_index((
      VAR_V.start + 1]), (N_STATE, N_STATE))
 _IDENTITY = np.eye(N_STATE)
 _MESSAGE_ROWS = np.array([X, Y, VX, VY, TRACK_RCS, VAR_P.start, VAR_P.start + 1])
+# The object class by radar ID (8 bits) before a cycle's classes are looked up.
+_NO_CLASS_BY_ID = np.full(256, -1, dtype=np.int64)
 # A track at the origin has no range rate: its numerator is 0, so 0 / _TINY = 0.
 _TINY = np.finfo(np.float64).tiny
 
@@ -312,7 +315,7 @@ class KalmanTracker:
         cycle's detections, classes attached after the tracker ran), by radar ID."""
         if not len(self) or not len(det):
             return
-        lut = np.full(256, -1, dtype=np.int64)
+        lut = _NO_CLASS_BY_ID.copy()
         lut[det.radar_id] = det.ints[OBJ_CLASS]
         meta = self.meta
         rid = meta[META_RADAR_ID]
@@ -328,7 +331,7 @@ class KalmanTracker:
         rr = (st[X] * st[VX] + st[Y] * st[VY]) / np.maximum(r, _TINY)
         x, y, vx, vy, rcs, x_var, y_var = st.take(_MESSAGE_ROWS, axis=0).tolist()
         m = self.meta.tolist()
-        return [RadarTrack(*fields) for fields in zip(
+        return list(starmap(RadarTrack, zip(
             m[ID], x, y, vx, vy, r.tolist(), rr.tolist(), rcs, map(bool, m[CONFIRMED]),
             m[HITS], m[MISSES], x_var, y_var, m[META_RADAR_ID], m[META_DYN_PROP],
-            m[META_OBJ_CLASS], strict=True)]
+            m[META_OBJ_CLASS], strict=True)))
