@@ -103,16 +103,18 @@ def _every_pair(n: int, m: int) -> tuple[I, I]:
     return np.repeat(np.arange(n), m), np.tile(np.arange(m), n)
 
 
+def _one_to_one(ti: I, di: I) -> bool:
+    """No track and no detection in two pairs."""
+    t_rows, d_rows = ti.tolist(), di.tolist()
+    return len(set(t_rows)) == len(t_rows) and len(set(d_rows)) == len(d_rows)
+
+
 def greedy_pairs(ti: I, di: I, cost: F) -> tuple[I, I]:
     """Greedy global nearest neighbour: pairs in order of cost (ties: lower track row,
     then lower detection row), each taken unless its track or detection already is.
 
     A pair alone on its track and on its detection is taken whatever its cost, so only
-    the contested pairs go through the sequential loop; when no track and no detection
-    is in two pairs, every pair is taken."""
-    t_rows, d_rows = ti.tolist(), di.tolist()
-    if len(set(t_rows)) == len(t_rows) and len(set(d_rows)) == len(d_rows):
-        return ti, di
+    the contested pairs go through the sequential loop."""
     alone = (np.bincount(ti).take(ti) == 1) & (np.bincount(di).take(di) == 1)
     contested = (~alone).nonzero()[0]
     ct, cd = ti.take(contested), di.take(contested)
@@ -251,7 +253,10 @@ class KalmanTracker:
                   ).nonzero()[0]
         if len(inside) == 0:
             return _EMPTY, _EMPTY
-        ti, di, cost = ti.take(inside), di.take(inside), d2.take(inside)
+        ti, di = ti.take(inside), di.take(inside)
+        if _one_to_one(ti, di):
+            return ti, di                # nothing to choose: the costs do not matter
+        cost = d2.take(inside)
         if self.s.radar_id_bonus > 0:
             rid = det.ints[RADAR_ID].take(di)
             same = (self.meta[META_RADAR_ID].take(ti) == rid) & (rid >= 0)
