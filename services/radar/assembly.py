@@ -12,6 +12,7 @@ Whether quality / extended frames are sent is fixed by config or learned from th
 (what the previous cycle carried); until it is known, a cycle waits for the next status.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common.config.radar import CycleSettings, Expect
@@ -34,7 +35,7 @@ class ClosedBy:
     END = "end"
 
 
-@dataclass
+@dataclass(slots=True)
 class RawCycle:
     """The frames of one cycle, undecoded. A None entry is a frame that arrived but was
     rejected (wrong DLC): it counts as arrived, and makes the cycle incomplete."""
@@ -54,6 +55,7 @@ class RawCycle:
     awaited: tuple[bool, bool, bool] = (True, True, True)   # by ListRole
     closed_by: str = ""
     complete: bool = False
+    rejected_frames: int = 0       # None entries, counted as the assembler adds them
 
     def __post_init__(self) -> None:
         n = self.announced
@@ -76,10 +78,6 @@ class RawCycle:
     def frames_for(self, role: int) -> list[bytes | None]:
         return self.lists[role]
 
-    def has_list(self, role: int) -> bool:
-        """Every announced frame of list `role` arrived."""
-        return len(self.lists[role]) == self.announced
-
     def all_arrived(self, quality: bool | None, extended: bool | None) -> bool:
         """All announced frames arrived, counting unknown expectations as expected."""
         n = self.announced
@@ -89,9 +87,6 @@ class RawCycle:
             return False
         return not (extended is not False and len(self.extended) < n)
 
-    @property
-    def has_rejected(self) -> bool:
-        return any(d is None for d in (*self.general, *self.quality, *self.extended))
 
 
 def _fixed(expect: Expect) -> bool | None:
@@ -104,18 +99,18 @@ class CycleAssembler:
     object cycle or the reverse), ``excess`` (more frames than announced),
     ``after_complete`` (a frame of an already emitted cycle that nobody expected)."""
 
-    def __init__(self, settings: CycleSettings, rejected: ReasonCounter | None = None) -> None:
+    def __init__(self, settings: CycleSettings, rejected: ReasonCounter | None = None,
+                 on_list_in: Callable[[RawCycle, int], None] | None = None) -> None:
+        """`on_list_in(cycle, role)` is called when every announced frame of one of the
+        open cycle's lists has arrived and the cycle still waits for others (a list
+        that completes the cycle arrives with it)."""
         self.settings = settings
         self.rejected = rejected if rejected is not None else ReasonCounter()
+        self._on_list_in = on_list_in
         self._timeout_ns = int(settings.timeout_s * 1e9)
         self._current: RawCycle | None = None
         self._emitted = False
         self._learned: dict[tuple[OutputMode, int], bool] = {}
-
-    @property
-    def open_cycle(self) -> RawCycle | None:
-        """The cycle being assembled, not emitted yet (its lists so far)."""
-        return None if self._emitted else self._current
 
     def _expectation(self, mode: OutputMode, role: int) -> bool | None:
         if role == ListRole.EXTENDED and mode is OutputMode.CLUSTERS:
@@ -142,7 +137,7 @@ class CycleAssembler:
         quality = self._expectation(cycle.mode, ListRole.QUALITY)
         extended = self._expectation(cycle.mode, ListRole.EXTENDED)
         cycle.closed_by = closed_by
-        cycle.complete = cycle.all_arrived(quality, extended) and not cycle.has_rejected
+        cycle.complete = cycle.all_arrived(quality, extended) and not cycle.rejected_frames
         self._emitted = True
         return [cycle]
 
@@ -187,12 +182,16 @@ class CycleAssembler:
             return []
         frames.append(data)
         cycle.last_frame_mono_ns = mono_ns
+        if data is None:
+            cycle.rejected_frames += 1
         # Unknown expectations count as awaited: such a cycle completes only when every
         # possible frame arrived, else it waits for the next status message.
         if cycle.awaited[role]:
             cycle.remaining -= 1
             if cycle.remaining == 0:
                 return self._close(ClosedBy.COMPLETE)
+        if len(frames) == cycle.announced and self._on_list_in is not None:
+            self._on_list_in(cycle, role)
         return []
 
     def poll(self, mono_ns: int) -> list[RawCycle]:

@@ -114,7 +114,7 @@ class RadarCore:
         self.sensor = sensor
         self.settings = settings
         self.rejected = ReasonCounter()
-        self.assembler = CycleAssembler(settings.cycle, self.rejected)
+        self.assembler = CycleAssembler(settings.cycle, self.rejected, self._list_in)
         self.tracker = KalmanTracker(settings.tracker)
         self.writer = ConfigWriter(sensor.configure, sensor.sensor_id)
         self.radar_state: RadarState | None = None
@@ -150,12 +150,7 @@ class RadarCore:
                 self.rejected.add(f"wrong_dlc:{spec.dbc_name}")
                 usable = None   # arrived, so the cycle need not wait for it; marks it incomplete
             done = self.assembler.on_list_frame(mode, list_role, usable, mono_ns)
-            if done:
-                return [self.process(c) for c in done]
-            cycle = self.assembler.open_cycle
-            if cycle is not None and cycle.has_list(list_role):
-                self._list_in(cycle, list_role)
-            return []
+            return [self.process(c) for c in done] if done else []
         try:
             record = decode(spec, data)
         except FrameError as exc:
@@ -219,9 +214,9 @@ class RadarCore:
         return [self.process(c) for c in cycles]
 
     def _list_in(self, cycle: RawCycle, role: int) -> None:
-        """All frames of one of the open cycle's lists are in: track the cycle once its
-        general list is (unless the prefilter waits for the quality list), decode the
-        quality list into a tracked cycle's detections."""
+        """All frames of one of the open cycle's lists are in (the assembler says so):
+        track the cycle once its general list is (unless the prefilter waits for the
+        quality list), decode the quality list into a tracked cycle's detections."""
         tracked = self._tracked if self._tracked is not None and \
             self._tracked.cycle is cycle else None
         if role == ListRole.GENERAL and tracked is None and not self._filter_needs_extras:

@@ -81,10 +81,9 @@ class Detections:
     def take(self, index: npt.NDArray[Any]) -> "Detections":
         """Detections selected by a boolean mask or an index array."""
         if index.dtype == np.bool_:
-            return Detections(np.compress(index, self.floats, axis=1),
-                              np.compress(index, self.ints, axis=1))
-        return Detections(np.take(self.floats, index, axis=1),
-                          np.take(self.ints, index, axis=1))
+            return Detections(self.floats.compress(index, axis=1),
+                              self.ints.compress(index, axis=1))
+        return Detections(self.floats.take(index, axis=1), self.ints.take(index, axis=1))
 
     @staticmethod
     def empty() -> "Detections":
@@ -169,8 +168,9 @@ def _attach(
         rejected[reason] = rejected.get(reason, 0) + n
     ids = cols.raw[0]
     values = cols.raw[_signal_index(spec, column)[0]]
+    # The same IDs in the same order (both int64 rows): one copy.
     if (rows_of_keys is None and cols.all_valid and len(ids) == len(general_ids)
-            and bool((ids == general_ids).all())):
+            and ids.tobytes() == general_ids.tobytes()):
         target[:] = values
         return
     qkeys = occurrence_keys(ids)[cols.valid]
@@ -219,12 +219,13 @@ def decode_general(cycle: RawCycle) -> GeneralFrames:
         if dupes:
             rejected[f"duplicate_id:{general_spec.dbc_name}"] = dupes
         keep = cols.valid & unique
-    f = cols.phys[_GENERAL_F_ROWS]
-    i = np.full((5, len(ids)), UNKNOWN, dtype=np.int64)
-    i[RADAR_ID:DYN_PROP + 1] = cols.raw[_GENERAL_I_ROWS]
+    f = cols.phys.take(_GENERAL_F_ROWS, axis=0)
+    i = np.empty((5, len(ids)), dtype=np.int64)
+    i[RADAR_ID:DYN_PROP + 1] = cols.raw.take(_GENERAL_I_ROWS, axis=0)
+    i[DYN_PROP + 1:] = UNKNOWN          # not sent yet: quality and extended frames
     rows: I | None = None
     if keep is not None:
-        f, i = np.compress(keep, f, axis=1), np.compress(keep, i, axis=1)
+        f, i = f.compress(keep, axis=1), i.compress(keep, axis=1)
         rows = np.full(len(keys), -2, dtype=np.int64)
         rows[keep] = np.arange(f.shape[1])
     return GeneralFrames(Detections(f, i), ids, keys, rows, rejected)
@@ -274,9 +275,10 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
     the optional existence-probability and cluster-validity filters."""
     if not len(det):
         return det
-    x, y = det.x, det.y
+    fl = det.floats
+    x, y = fl[X], fl[Y]
     r2 = x * x + y * y
-    keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (det.rcs > s.min_rcs_dbsm)
+    keep = (r2 > s.min_range_m**2) & (r2 <= s.max_range_m**2) & (fl[RCS] > s.min_rcs_dbsm)
     if s.forward_only:
         keep &= x > 0
     if s.min_prob_of_exist > 0:
@@ -285,7 +287,7 @@ def prefilter(det: Detections, s: PrefilterSettings) -> Detections:
         keep &= (p == UNKNOWN) | (p >= s.min_prob_of_exist)
     if s.drop_cluster_invalid_states:
         keep &= ~np.isin(det.ints[INVALID_STATE], np.asarray(s.drop_cluster_invalid_states))
-    return det.take(keep)
+    return det if np.count_nonzero(keep) == len(keep) else det.take(keep)
 
 
 def merge(det: Detections, s: MergeSettings) -> Detections:
@@ -303,16 +305,18 @@ def merge(det: Detections, s: MergeSettings) -> Detections:
         return det
     fl = det.floats
     ii, jj = pairs_within_self(fl[X], fl[Y], s.distance_m)
+    if len(ii) == 0:
+        return det
     vx, vy = fl[VX], fl[VY]
-    dvx = vx[ii] - vx[jj]
-    dvy = vy[ii] - vy[jj]
+    dvx = vx.take(ii) - vx.take(jj)
+    dvy = vy.take(ii) - vy.take(jj)
     similar = dvx * dvx + dvy * dvy <= s.velocity_mps**2
-    if not similar.any():
+    if not np.count_nonzero(similar):
         return det
     # The seed walk is sequential (a seed takes its mates before the next seed looks),
     # over the few similar pairs.
     neighbours: defaultdict[int, list[int]] = defaultdict(list)
-    for i, j in zip(ii[similar].tolist(), jj[similar].tolist(), strict=True):
+    for i, j in zip(ii.compress(similar).tolist(), jj.compress(similar).tolist(), strict=True):
         neighbours[i].append(j)
         neighbours[j].append(i)
     adjacent = neighbours.get

@@ -6,6 +6,8 @@ per point; `candidates_in_boxes` (the tracker's gate) buckets points into strips
 sorted by y, so that a box around a point is three runs of the sorted keys.
 """
 
+from functools import lru_cache
+
 import numpy as np
 import numpy.typing as npt
 
@@ -31,6 +33,12 @@ def _expand(lo: I, counts: I, owner: I, total: int) -> tuple[I, I]:
     return i, first + np.arange(total)
 
 
+@lru_cache(maxsize=64)
+def _upper_triangle(n: int) -> npt.NDArray[np.bool_]:
+    """(n, n) mask of i < j: each unordered pair once."""
+    return np.triu(np.ones((n, n), dtype=np.bool_), k=1)
+
+
 def pairs_within_self(x: F, y: F, radius: float) -> tuple[I, I]:
     """Index pairs (i, j) of one point set, each unordered pair once, whose distance is
     at most `radius`.
@@ -43,7 +51,7 @@ def pairs_within_self(x: F, y: F, radius: float) -> tuple[I, I]:
     if n * n <= _DENSE_MAX:
         dx = x[:, None] - x[None, :]
         dy = y[:, None] - y[None, :]
-        i, j = np.nonzero(np.triu(dx * dx + dy * dy <= radius * radius, k=1))
+        i, j = ((dx * dx + dy * dy <= radius * radius) & _upper_triangle(n)).nonzero()
         return i, j
     order = np.argsort(x, kind="stable")
     xs, ys = x[order], y[order]

@@ -17,7 +17,9 @@ With a constant-velocity model, white-acceleration noise per axis and diagonal
 measurement and initial noise, x and y never correlate: the 4x4 covariance is two 2x2
 blocks [[var_p, cov_pv], [cov_pv, var_v]], one per axis, and every step is a closed-form
 formula over all tracks at once. The state is one float matrix (`state`) and one integer
-matrix (`meta`), a row per quantity and a column per track.
+matrix (`meta`), a row per quantity and a column per track. The prediction is linear in
+the rows of `state` (x' = F x and P' = F P F^T + Q written on the blocks): one matrix
+product and the noise.
 
 The chi-square gate bounds each position axis (|dx| <= sqrt(chi2 S_xx), |dy| <=
 sqrt(chi2 S_yy)), so only the pairs inside those boxes get the 4-d Mahalanobis distance;
@@ -26,6 +28,9 @@ them without looking at every pair. The update reuses the gate's S^-1:
 x' = z - R S^-1 (z - x), P' = R S^-1 P (the same as x + K (z - x), (I - K) P with
 K = P S^-1).
 """
+
+from functools import lru_cache
+from itertools import starmap
 
 import numpy as np
 import numpy.typing as npt
@@ -40,31 +45,68 @@ I = npt.NDArray[np.int64]  # noqa: E741
 B = npt.NDArray[np.bool_]
 
 _EMPTY = np.zeros(0, dtype=np.int64)
-# Up to this many track x detection pairs (16 x 16, the usual road) the gate tests every
-# pair; above, it finds the candidates on a strip grid first, which costs more for a few
-# tracks and less from about 20 x 20 on.
-_DENSE_MAX = 256
+# Up to this many track x detection pairs the gate tests every pair; above, it finds the
+# candidates on a strip grid first, which costs more for a few tracks and less for many.
+_DENSE_MAX = 2048
 
-# Rows of KalmanTracker.state: the state [x, y, vx, vy]; per axis (x, y) the 2x2
-# covariance block [[var_p, cov_pv], [cov_pv, var_v]]; the last detection's RCS.
+# Rows of KalmanTracker.state: the state [x, y, vx, vy] and the last detection's RCS (the
+# rows of a detection's floats, in the same order); per axis (x, y) the 2x2 covariance
+# block [[var_p, cov_pv], [cov_pv, var_v]].
 POS = slice(0, 2)
 VEL = slice(2, 4)
 STATE = slice(0, 4)
-COV = slice(4, 10)
-VAR_P = slice(4, 6)
-COV_PV = slice(6, 8)
-VAR_V = slice(8, 10)
-TRACK_RCS = 10
+TRACK_RCS = 4
+MEASURED = slice(0, 5)
+COV = slice(5, 11)
+VAR_P = slice(5, 7)
+COV_PV = slice(7, 9)
+VAR_V = slice(9, 11)
 N_STATE = 11
+assert (X, Y, VX, VY, RCS) == (0, 1, 2, 3, TRACK_RCS)
 # Rows of KalmanTracker.meta.
 ID, HITS, MISSES, CONFIRMED, META_RADAR_ID, META_DYN_PROP, META_OBJ_CLASS = range(7)
 N_META = 7
 # Detection rows carried into a track's meta rows META_RADAR_ID.. (radar ID, DynProp, class)
 _DET_META = slice(RADAR_ID, OBJ_CLASS + 1)
-# Detection rows of the measurement [x, y] and [vx, vy]: the same rows as the state's.
-_Z_POS = slice(X, Y + 1)
-_Z_VEL = slice(VX, VY + 1)
-assert (X, Y, VX, VY) == (0, 1, 2, 3) and (_Z_POS, _Z_VEL) == (POS, VEL)
+
+# Rows of KalmanTracker._gain: S^-1 = [[alpha, -beta], [-beta, gamma]] per axis and
+# track, from S = P + R = [[a, b], [b, v]] (rows a, b, v of `S` below, two each):
+# alpha = v / det, beta = b / det, gamma = a / det, laid out as alpha, alpha, gamma,
+# beta, beta, beta (two rows each, x and y), so that every product below is on slices:
+# - S^-1 e of an innovation e = [dp; dv]: gain[2:6] * e - gain[6:10] * [dv; dp];
+# - P' = R S^-1 P on the covariance rows [var_p; cov_pv; var_v]: R times
+#   gain[0:6] * P - gain[6:12] * [cov_pv; var_v; cov_pv].
+_GAIN_FROM_S = np.array([4, 5, 4, 5, 0, 1, 2, 3, 2, 3, 2, 3])
+_GAIN_AXIS = np.array([0, 1] * 6)
+_SWAP = np.array([2, 3, 0, 1])
+_COV_SECOND = np.array([2, 3, 4, 5, 2, 3])
+# The entries of the prediction's matrix A (state' = A @ state + q) off the identity, with
+# Q from piecewise-constant white acceleration, per axis: position' = position + dt
+# velocity; var_p' = var_p + 2 dt cov_pv + dt^2 var_v; cov_pv' = cov_pv + dt var_v. The
+# noise q on the covariance rows: dt^4 / 4, dt^3 / 2, dt^2 times the acceleration variance.
+_TRANSITION_AT = np.ravel_multi_index((
+    [X, Y, VAR_P.start, VAR_P.start + 1, VAR_P.start, VAR_P.start + 1, COV_PV.start,
+     COV_PV.start + 1],
+    [VX, VY, COV_PV.start, COV_PV.start + 1, VAR_V.start, VAR_V.start + 1, VAR_V.start,
+     VAR_V.start + 1]), (N_STATE, N_STATE))
+_IDENTITY = np.eye(N_STATE)
+_MESSAGE_ROWS = np.array([X, Y, VX, VY, TRACK_RCS, VAR_P.start, VAR_P.start + 1])
+# The object class by radar ID (8 bits) before a cycle's classes are looked up.
+_NO_CLASS_BY_ID = np.full(256, -1, dtype=np.int64)
+# A track at the origin has no range rate: its numerator is 0, so 0 / _TINY = 0.
+_TINY = np.finfo(np.float64).tiny
+
+
+@lru_cache(maxsize=512)
+def _every_pair(n: int, m: int) -> tuple[I, I]:
+    """(track rows, detection rows) of every pair of n tracks and m detections."""
+    return np.repeat(np.arange(n), m), np.tile(np.arange(m), n)
+
+
+def _one_to_one(ti: I, di: I) -> bool:
+    """No track and no detection in two pairs."""
+    t_rows, d_rows = ti.tolist(), di.tolist()
+    return len(set(t_rows)) == len(t_rows) and len(set(d_rows)) == len(d_rows)
 
 
 def greedy_pairs(ti: I, di: I, cost: F) -> tuple[I, I]:
@@ -73,37 +115,45 @@ def greedy_pairs(ti: I, di: I, cost: F) -> tuple[I, I]:
 
     A pair alone on its track and on its detection is taken whatever its cost, so only
     the contested pairs go through the sequential loop."""
-    alone = (np.bincount(ti)[ti] == 1) & (np.bincount(di)[di] == 1)
-    contested = np.flatnonzero(~alone)
-    if len(contested) == 0:
-        return ti, di
-    ct, cd = ti[contested], di[contested]
-    order = np.lexsort((cd, ct, cost[contested]))
+    alone = (np.bincount(ti).take(ti) == 1) & (np.bincount(di).take(di) == 1)
+    contested = (~alone).nonzero()[0]
+    ct, cd = ti.take(contested), di.take(contested)
+    order = np.lexsort((cd, ct, cost.take(contested)))
     used_t: set[int] = set()
     used_d: set[int] = set()
     mt: list[int] = []
     md: list[int] = []
-    for t, d in zip(ct[order].tolist(), cd[order].tolist(), strict=True):
+    for t, d in zip(ct.take(order).tolist(), cd.take(order).tolist(), strict=True):
         if t in used_t or d in used_d:
             continue
         used_t.add(t)
         used_d.add(d)
         mt.append(t)
         md.append(d)
-    return (np.concatenate([ti[alone], np.asarray(mt, dtype=np.int64)]),
-            np.concatenate([di[alone], np.asarray(md, dtype=np.int64)]))
+    return (np.concatenate([ti.compress(alone), np.array(mt, dtype=np.int64)]),
+            np.concatenate([di.compress(alone), np.array(md, dtype=np.int64)]))
 
 
 class KalmanTracker:
-    """`state` (11, n): a row per quantity ([x, y, vx, vy], the per-axis covariance
-    blocks, the RCS), a column per track; `meta` (7, n): track ID, consecutive hits,
+    """`state` (11, n): a row per quantity ([x, y, vx, vy], the RCS, the per-axis
+    covariance blocks), a column per track; `meta` (7, n): track ID, consecutive hits,
     consecutive misses, confirmed, and the last detection's radar ID, DynProp and class."""
 
     def __init__(self, settings: TrackerSettings) -> None:
         self.s = settings
-        # Measurement noise per axis (x, y) as columns: R = diag(r_pos, r_vel); P0 = R.
-        self._r_pos = np.array([[settings.pos_x_std_m**2], [settings.pos_y_std_m**2]])
-        self._r_vel = np.array([[settings.vel_x_std_mps**2], [settings.vel_y_std_mps**2]])
+        r_pos = [settings.pos_x_std_m**2, settings.pos_y_std_m**2]
+        r_vel = [settings.vel_x_std_mps**2, settings.vel_y_std_mps**2]
+        # Measurement noise R = diag(r_pos, r_vel) per axis, as columns: on the state
+        # rows, on the covariance rows (S = P + R; cov_pv gets none; P0 = R), and the
+        # factor of each covariance row in P' = R S^-1 P.
+        self._r_state = np.array([[*r_pos, *r_vel]]).T
+        self._r_cov = np.array([[*r_pos, 0.0, 0.0, *r_vel]]).T
+        self._r_posterior = np.array([[*r_pos, *r_pos, *r_vel]]).T
+        # A new track's meta rows ID..CONFIRMED (the ID set at birth).
+        self._meta_born = np.array([[0, 1, 0, int(settings.confirm_hits <= 1)]]).T
+        # Misses that delete a track, by its CONFIRMED row (0, 1).
+        self._miss_limits = np.array([settings.delete_tentative_after_misses,
+                                      settings.delete_after_misses])
         self._chi2 = settings.gate_chi2
         self._cap = settings.gate_max_distance_m
         self.next_id = 1
@@ -114,11 +164,8 @@ class KalmanTracker:
     def _clear(self) -> None:
         self.state: F = np.zeros((N_STATE, 0))
         self.meta: I = np.zeros((N_META, 0), dtype=np.int64)
-        # S^-1 = [[alpha, -beta], [-beta, gamma]] per axis (rows x, y) and track, from
-        # the innovation covariance S of this cycle (see _innovation).
-        self._alpha: F = np.zeros((2, 0))
-        self._beta: F = np.zeros((2, 0))
-        self._gamma: F = np.zeros((2, 0))
+        # S^-1 per axis and track from this cycle's innovation covariance (_GAIN_FROM_S).
+        self._gain: F = np.zeros((12, 0))
 
     def __len__(self) -> int:
         return int(self.state.shape[1])
@@ -144,157 +191,141 @@ class KalmanTracker:
         """Advance to time `t_s` (seconds, the cycle's source clock) with this cycle's
         detections."""
         last, self.last_t = self.last_t, t_s
-        if last is not None:
+        if last is not None and len(self):
             dt = t_s - last
             if 0 < dt <= self.s.max_gap_s:
                 self.predict(dt)
-            elif len(self):
+            else:
                 # A gap (bus loss) or time going backwards (replay loop): predictions
                 # from before it are worthless, start again.
                 self.resets += 1
                 self._clear()
-        rows, drows = self.associate(det)
-        self._update(rows, det, drows)
-        self._count(rows)
-        if len(rows) < len(det):
-            unmatched = np.ones(len(det), dtype=np.bool_)
-            unmatched[drows] = False
-            self._birth(det, np.flatnonzero(unmatched))
+        if len(self):
+            rows, drows = self.associate(det)
+            self._update(rows, det, drows)
+            self._count(rows)
+        else:
+            drows = _EMPTY
+        if len(drows) < len(det):
+            taken = np.bincount(drows, minlength=len(det))
+            self._birth(det, (taken == 0).nonzero()[0] if len(drows) else None)
 
     def predict(self, dt: float) -> None:
-        """x' = F x, P' = F P F^T + Q, with Q from piecewise-constant white acceleration,
-        on each axis's block."""
-        if not len(self):
-            return
-        st = self.state
-        q = self.s.accel_std_mps2**2
-        st[POS] = st[POS] + dt * st[VEL]
-        p, c, v = st[VAR_P], st[COV_PV], st[VAR_V]
-        st[VAR_P] = p + 2 * dt * c + dt * dt * v + q * dt**4 / 4
-        st[COV_PV] = c + dt * v + q * dt**3 / 2
-        st[VAR_V] = v + q * dt * dt
+        """x' = F x, P' = F P F^T + Q, on every track."""
+        a = _IDENTITY.copy()
+        a.put(_TRANSITION_AT, (dt, dt, 2 * dt, 2 * dt, dt * dt, dt * dt, dt, dt))
+        w = self.s.accel_std_mps2**2
+        q = np.zeros((N_STATE, 1))
+        q[COV, 0] = (w * dt**4 / 4, w * dt**4 / 4, w * dt**3 / 2, w * dt**3 / 2, w * dt * dt,
+                     w * dt * dt)
+        self.state = a @ self.state + q
 
-    def _innovation(self) -> F:
-        """S = P + R = [[a, b], [b, v]] per track and axis: stores S^-1 (alpha = v / det,
-        beta = b / det, gamma = a / det), and returns the gate's half-widths on position,
-        sqrt(chi2 a) capped (2, n)."""
-        st = self.state
-        a = st[VAR_P] + self._r_pos
-        b = st[COV_PV]
-        v = st[VAR_V] + self._r_vel
-        det = a * v - b * b
-        self._alpha, self._beta, self._gamma = v / det, b / det, a / det
-        return np.minimum(np.sqrt(self._chi2 * a), self._cap)
+    def _innovation(self) -> None:
+        """S^-1 per track and axis from S = P + R (the rows of `_gain`)."""
+        s = self.state[COV] + self._r_cov
+        det = s[0:2] * s[4:6] - s[2:4] * s[2:4]
+        self._gain = s.take(_GAIN_FROM_S, axis=0) / det.take(_GAIN_AXIS, axis=0)
 
-    def _gated(self, ti: I, di: I, dp: F, dv: F) -> tuple[I, I, F]:
-        """The pairs (track ti, detection di) with innovation dp, dv (2, k) inside the
-        gate, and their Mahalanobis distance."""
-        a, b, g = (np.take(c, ti, axis=1) for c in (self._alpha, self._beta, self._gamma))
-        d2 = (a * dp * dp - 2.0 * b * dp * dv + g * dv * dv).sum(axis=0)
-        ok = np.flatnonzero((d2 <= self._chi2) & ((dp * dp).sum(axis=0) <= self._cap**2))
-        return ti[ok], di[ok], d2[ok]
-
-    def _candidates(self, det: Detections, half: F) -> tuple[I, I]:
+    def _candidates(self, det: Detections) -> tuple[I, I]:
         """Track x detection pairs that may lie inside the gate: every pair when there
-        are few, else those inside the gate's per-axis boxes (a strip grid)."""
+        are few, else those inside the gate's per-axis boxes, sqrt(chi2 S_pp) capped
+        (a strip grid)."""
         n, m = len(self), len(det)
         if n * m <= _DENSE_MAX:
-            return np.repeat(np.arange(n), m), np.tile(np.arange(m), n)
+            return _every_pair(n, m)
         st = self.state
-        return candidates_in_boxes(st[X], st[Y], float(half[X].max()), half[Y], det.x, det.y)
+        half = np.minimum(np.sqrt(self._chi2 * (st[VAR_P] + self._r_cov[0:2])), self._cap)
+        return candidates_in_boxes(st[X], st[Y], float(half[0].max()), half[1], det.x, det.y)
 
     def associate(self, det: Detections) -> tuple[I, I]:
         """(track rows, detection rows) matched, by greedy nearest neighbour on the gated
         Mahalanobis cost."""
         if not len(self) or not len(det):
             return _EMPTY, _EMPTY
-        ti, di = self._candidates(det, self._innovation())
+        self._innovation()
+        ti, di = self._candidates(det)
         if len(ti) == 0:
             return _EMPTY, _EMPTY
-        diff = np.take(det.floats[STATE], di, axis=1) - np.take(self.state[STATE], ti, axis=1)
-        ti, di, cost = self._gated(ti, di, diff[POS], diff[VEL])
-        if len(ti) == 0:
+        g = self._gain[2:10].take(ti, axis=1)          # alpha, gamma, beta, beta
+        e = det.floats[STATE].take(di, axis=1) - self.state[STATE].take(ti, axis=1)
+        d2 = (e * (g[0:4] * e - g[4:8] * e.take(_SWAP, axis=0))).sum(axis=0)   # e' S^-1 e
+        inside = ((d2 <= self._chi2) & ((e[POS] * e[POS]).sum(axis=0) <= self._cap**2)
+                  ).nonzero()[0]
+        if len(inside) == 0:
             return _EMPTY, _EMPTY
+        ti, di = ti.take(inside), di.take(inside)
+        if _one_to_one(ti, di):
+            return ti, di                # nothing to choose: the costs do not matter
+        cost = d2.take(inside)
         if self.s.radar_id_bonus > 0:
-            rid = det.ints[RADAR_ID][di]
-            same = (self.meta[META_RADAR_ID][ti] == rid) & (rid >= 0)
+            rid = det.ints[RADAR_ID].take(di)
+            same = (self.meta[META_RADAR_ID].take(ti) == rid) & (rid >= 0)
             cost = cost - self.s.radar_id_bonus * same
         return greedy_pairs(ti, di, cost)
 
     def _update(self, rows: I, det: Detections, drows: I) -> None:
         """Kalman update of tracks `rows` with detections `drows`, after `associate`,
-        whose S^-1 it reuses.
-
-        With K = P S^-1 per axis and R = diag(r_p, r_v) the update is x' = z - R S^-1 (z
-        - x), P' = R S^-1 P, written out on each axis's block below."""
+        whose S^-1 it reuses: x' = z - R S^-1 (z - x), P' = R S^-1 P on each axis's
+        block."""
         if len(rows) == 0:
             return
-        alpha, beta, gamma = (np.take(c, rows, axis=1)
-                              for c in (self._alpha, self._beta, self._gamma))
-        rp, rv = self._r_pos, self._r_vel
-        old = np.take(self.state, rows, axis=1)
-        z = np.take(det.floats, drows, axis=1)
-        zp, zv = z[_Z_POS], z[_Z_VEL]
-        dp, dv = zp - old[POS], zv - old[VEL]
-        p, c, v = old[VAR_P], old[COV_PV], old[VAR_V]
-        new = np.empty((N_STATE, len(rows)))
-        new[POS] = -rp * (alpha * dp - beta * dv) + zp
-        new[VEL] = -rv * (gamma * dv - beta * dp) + zv
-        new[VAR_P] = rp * (alpha * p - beta * c)
-        new[COV_PV] = rp * (alpha * c - beta * v)
-        new[VAR_V] = rv * (gamma * v - beta * c)
-        new[TRACK_RCS] = z[RCS]
-        self.state[:, rows] = new
-        self.meta[META_RADAR_ID:, rows] = np.take(det.ints[_DET_META], drows, axis=1)
+        z = det.floats.take(drows, axis=1)       # the new [x, y, vx, vy, rcs]
+        old = self.state.take(rows, axis=1)
+        g = self._gain.take(rows, axis=1)
+        e = z[STATE] - old[STATE]
+        z[STATE] -= self._r_state * (g[2:6] * e - g[6:10] * e.take(_SWAP, axis=0))
+        cov = old[COV]
+        posterior = self._r_posterior * (g[0:6] * cov - g[6:12] * cov.take(_COV_SECOND, axis=0))
+        self.state[:, rows] = np.concatenate([z, posterior])
+        self.meta[META_RADAR_ID:, rows] = det.ints[_DET_META].take(drows, axis=1)
 
     def _count(self, rows: I) -> None:
         """Hits and misses after an update of `rows`; confirmation; deletion."""
-        if not len(self):
-            return
-        s, meta = self.s, self.meta
-        matched = np.zeros(len(self), dtype=np.bool_)
-        matched[rows] = True
+        meta = self.meta
+        n = meta.shape[1]
         hits, misses = meta[HITS], meta[MISSES]      # views: updated in place
         hits += 1
-        hits *= matched                  # consecutive: a miss starts again from 0
         misses += 1
-        misses *= ~matched
-        meta[CONFIRMED] |= hits >= s.confirm_hits
-        limit = np.where(meta[CONFIRMED] > 0, s.delete_after_misses,
-                         s.delete_tentative_after_misses)
-        keep = misses < limit
-        if not keep.all():
-            self.state = np.compress(keep, self.state, axis=1)
-            self.meta = np.compress(keep, meta, axis=1)
+        misses[rows] = 0
+        if len(rows) < n:
+            hits *= misses == 0          # consecutive: a miss starts again from 0
+        meta[CONFIRMED] |= hits >= self.s.confirm_hits
+        if len(rows) == n:
+            return                       # nobody missed: nobody is deleted
+        keep = misses < self._miss_limits.take(meta[CONFIRMED])
+        if np.count_nonzero(keep) < n:
+            self.state = self.state.compress(keep, axis=1)
+            self.meta = meta.compress(keep, axis=1)
 
-    def _birth(self, det: Detections, drows: I) -> None:
-        k = len(drows)
-        fd = np.take(det.floats, drows, axis=1)
+    def _birth(self, det: Detections, drows: I | None) -> None:
+        """A tentative track for each detection `drows` (None: every detection)."""
+        fd = det.floats if drows is None else det.floats.take(drows, axis=1)
+        di = det.ints[_DET_META] if drows is None else det.ints[_DET_META].take(drows, axis=1)
+        k = fd.shape[1]
         new = np.empty((N_STATE, k))
-        new[STATE] = fd[STATE]
-        new[VAR_P] = self._r_pos      # P0 = R
-        new[COV_PV] = 0.0
-        new[VAR_V] = self._r_vel
-        new[TRACK_RCS] = fd[RCS]
-        meta = np.zeros((N_META, k), dtype=np.int64)
+        new[MEASURED] = fd
+        new[COV] = self._r_cov           # P0 = R
+        meta = np.empty((N_META, k), dtype=np.int64)
+        meta[:META_RADAR_ID] = self._meta_born
         meta[ID] = np.arange(self.next_id, self.next_id + k)
-        meta[HITS] = 1
-        meta[CONFIRMED] = self.s.confirm_hits <= 1
-        meta[META_RADAR_ID:] = np.take(det.ints[_DET_META], drows, axis=1)
+        meta[META_RADAR_ID:] = di
         self.next_id += k
-        self.state = np.concatenate([self.state, new], axis=1)
-        self.meta = np.concatenate([self.meta, meta], axis=1)
+        if len(self):
+            new = np.concatenate([self.state, new], axis=1)
+            meta = np.concatenate([self.meta, meta], axis=1)
+        self.state, self.meta = new, meta
 
     def annotate_class(self, det: Detections) -> None:
         """Set the object class of the tracks updated or born this cycle from `det` (the
         cycle's detections, classes attached after the tracker ran), by radar ID."""
         if not len(self) or not len(det):
             return
-        lut = np.full(256, -1, dtype=np.int64)
+        lut = _NO_CLASS_BY_ID.copy()
         lut[det.radar_id] = det.ints[OBJ_CLASS]
         meta = self.meta
-        fresh = (meta[MISSES] == 0) & (meta[META_RADAR_ID] >= 0)
-        meta[META_OBJ_CLASS, fresh] = lut[meta[META_RADAR_ID, fresh]]
+        rid = meta[META_RADAR_ID]
+        fresh = (meta[MISSES] == 0) & (rid >= 0)
+        meta[META_OBJ_CLASS] = np.where(fresh, lut.take(rid, mode="clip"), meta[META_OBJ_CLASS])
 
     def tracks(self) -> list[RadarTrack]:
         """Every track, confirmed or not, as messages."""
@@ -302,11 +333,10 @@ class KalmanTracker:
             return []
         st = self.state
         r = np.hypot(st[X], st[Y])
-        rr = np.divide(st[X] * st[VX] + st[Y] * st[VY], r, out=np.zeros_like(r), where=r > 0)
-        x, y, vx, vy = st[STATE].tolist()
-        x_var, y_var = st[VAR_P].tolist()
+        rr = (st[X] * st[VX] + st[Y] * st[VY]) / np.maximum(r, _TINY)
+        x, y, vx, vy, rcs, x_var, y_var = st.take(_MESSAGE_ROWS, axis=0).tolist()
         m = self.meta.tolist()
-        return [RadarTrack(*fields) for fields in zip(
-            m[ID], x, y, vx, vy, r.tolist(), rr.tolist(), st[TRACK_RCS].tolist(),
-            (self.meta[CONFIRMED] > 0).tolist(), m[HITS], m[MISSES], x_var, y_var,
-            m[META_RADAR_ID], m[META_DYN_PROP], m[META_OBJ_CLASS], strict=True)]
+        return list(starmap(RadarTrack, zip(
+            m[ID], x, y, vx, vy, r.tolist(), rr.tolist(), rcs, map(bool, m[CONFIRMED]),
+            m[HITS], m[MISSES], x_var, y_var, m[META_RADAR_ID], m[META_DYN_PROP],
+            m[META_OBJ_CLASS], strict=True)))

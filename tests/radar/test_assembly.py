@@ -133,18 +133,19 @@ def test_cluster_cycles_never_wait_for_extended_frames():
     assert c.complete and c.mode is CL and c.last_frame_mono_ns == 4
 
 
-def test_the_open_cycle_shows_its_lists_as_they_complete():
-    asm = CycleAssembler(CycleSettings(expect_quality=Expect.YES, expect_extended=Expect.YES))
-    assert asm.open_cycle is None
+def test_each_list_is_reported_as_it_completes():
+    lists_in: list[tuple[int, int]] = []
+    asm = CycleAssembler(CycleSettings(expect_quality=Expect.YES, expect_extended=Expect.YES),
+                         on_list_in=lambda cycle, role: lists_in.append((cycle.meas_counter, role)))
     asm.on_status(OBJ, 2, 1, 0.0, 0, 0)
-    c = asm.open_cycle
-    assert c is not None and c.meas_counter == 1
-    lists_in = []
+    seen = []
     for i, role in enumerate((G, G, Q, Q, E)):
         assert asm.on_list_frame(OBJ, role, D, i) == []
-        lists_in.append([r for r in (G, Q, E) if c.has_list(r)])
-    assert lists_in == [[], [G], [G], [G, Q], [G, Q]]
-    [done] = asm.on_list_frame(OBJ, E, D, 5)
-    assert done is c and asm.open_cycle is None      # emitted: no longer open
+        seen.append(list(lists_in))
+    assert seen == [[], [(1, G)], [(1, G)], [(1, G), (1, Q)], [(1, G), (1, Q)]]
+    [done] = asm.on_list_frame(OBJ, E, D, 5)     # the list that completes the cycle
+    assert done.meas_counter == 1 and lists_in == [(1, G), (1, Q)]
+    assert asm.on_list_frame(OBJ, E, D, 6) == []     # excess: nothing reported again
     asm.on_status(OBJ, 1, 2, 0.0, 0, 0)
-    assert asm.open_cycle is not None and asm.open_cycle.meas_counter == 2
+    asm.on_list_frame(OBJ, G, D, 7)
+    assert lists_in[-1] == (2, G)

@@ -9,7 +9,7 @@ import pytest
 from common.config.radar import TrackerSettings
 from services.radar.detections import Detections
 from services.radar.neighbours import candidates_in_boxes, pairs_within_self
-from services.radar.tracker import KalmanTracker, greedy_pairs
+from services.radar.tracker import COV_PV, VAR_P, VAR_V, KalmanTracker, greedy_pairs
 
 
 def plain_greedy(ti, di, cost):
@@ -96,8 +96,8 @@ def test_update_equals_the_textbook_kalman_update():
         p = np.zeros((4, 4))
         for axis in range(2):
             a = 2 * axis
-            p[a, a], p[a, a + 1], p[a + 1, a], p[a + 1, a + 1] = (
-                st[4 + axis, k], st[6 + axis, k], st[6 + axis, k], st[8 + axis, k])
+            var_p, cov_pv, var_v = (st[row.start + axis, k] for row in (VAR_P, COV_PV, VAR_V))
+            p[a, a], p[a, a + 1], p[a + 1, a], p[a + 1, a + 1] = var_p, cov_pv, cov_pv, var_v
         x = st[[0, 2, 1, 3], k]
         z = det.floats[[0, 2, 1, 3], k]
         gain = p @ np.linalg.inv(p + r)
@@ -107,7 +107,7 @@ def test_update_equals_the_textbook_kalman_update():
         assert got[[0, 2, 1, 3]] == pytest.approx(x_new, rel=1e-9, abs=1e-12)
         for axis in range(2):
             a = 2 * axis
-            assert [got[4 + axis], got[6 + axis], got[8 + axis]] == pytest.approx(
+            assert [got[row.start + axis] for row in (VAR_P, COV_PV, VAR_V)] == pytest.approx(
                 [p_new[a, a], p_new[a, a + 1], p_new[a + 1, a + 1]], rel=1e-9, abs=1e-15)
 
 

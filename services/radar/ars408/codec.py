@@ -129,28 +129,42 @@ class Columns:
     """Many frames of one message decoded: one row per signal, plus which frames are valid.
 
     `raw` (int64) and `phys` (float64) are (signals, frames) matrices in signal order (a
-    signal is a contiguous row); `values` maps attribute names to those rows (integers
-    from `raw`). `rejected` maps ``out_of_range:<signal>`` to the number of frames it
-    invalidated.
+    signal is a contiguous row; `phys` is computed when first asked for); `values` maps
+    attribute names to those rows (integers from `raw`). `valid` marks the frames whose
+    every signal is within its valid range (`all_valid`: all of them); `rejected` maps
+    ``out_of_range:<signal>`` to the number of frames it invalidated.
     """
 
-    __slots__ = ("_attrs", "all_valid", "phys", "raw", "rejected", "valid")
+    __slots__ = ("_layout", "_phys", "_valid", "all_valid", "raw", "rejected")
 
-    def __init__(self, attrs: tuple[tuple[str, bool], ...], valid: BoolArray, all_valid: bool,
-                 rejected: dict[str, int], raw: npt.NDArray[np.int64],
-                 phys: npt.NDArray[np.float64]) -> None:
-        self._attrs = attrs
-        self.valid = valid
-        self.all_valid = all_valid
-        self.rejected = rejected
+    def __init__(self, layout: "_Layout", raw: npt.NDArray[np.int64], valid: BoolArray | None,
+                 rejected: dict[str, int]) -> None:
+        """`valid` None: every frame is."""
+        self._layout = layout
         self.raw = raw
-        self.phys = phys
+        self._valid = valid
+        self.all_valid = valid is None
+        self.rejected = rejected
+        self._phys: npt.NDArray[np.float64] | None = None
+
+    @property
+    def phys(self) -> npt.NDArray[np.float64]:
+        if self._phys is None:
+            self._phys = self.raw * self._layout.scales + self._layout.offsets
+        return self._phys
+
+    @property
+    def valid(self) -> BoolArray:
+        if self._valid is None:
+            return np.ones(self.raw.shape[1], dtype=np.bool_)
+        return self._valid
 
     @property
     def values(self) -> dict[str, npt.NDArray[Any]]:
         """Every signal by attribute name."""
-        return {attr: self.raw[k] if is_int else self.phys[k]
-                for k, (attr, is_int) in enumerate(self._attrs)}
+        phys = self.phys
+        return {attr: self.raw[k] if is_int else phys[k]
+                for k, (attr, is_int) in enumerate(self._layout.attrs)}
 
 
 def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[np.int64]:
@@ -161,22 +175,21 @@ def words(datas: Sequence[bytes | bytearray], spec_dlc: int = 8) -> npt.NDArray[
     n = len(datas)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    buf = b"".join(datas)
-    size = len(buf)
-    if size == 8 * n:
-        return np.frombuffer(buf, dtype=">i8").astype(np.int64)
-    if size == spec_dlc * n:
-        # Every frame has the message's DLC (0x60C has 7 bytes, 0x702 5).
-        padded = np.zeros((n, 8), dtype=np.uint8)
-        padded[:, :spec_dlc] = np.frombuffer(buf, dtype=np.uint8).reshape(n, spec_dlc)
-        return padded.view(">i8").ravel().astype(np.int64)
-    buf = b"".join(bytes(d).ljust(8, b"\0") for d in datas)
-    return np.frombuffer(buf, dtype=">i8").astype(np.int64)
+    # Frames of the message's DLC (0x60C has 7 bytes, 0x702 5) joined by the padding
+    # each needs: every frame ends up 8 bytes long, unless one was longer.
+    pad = bytes(8 - spec_dlc)
+    buf = pad.join(datas) + pad
+    if len(buf) != 8 * n:
+        buf = b"".join(bytes(d).ljust(8, b"\0") for d in datas)
+    return np.frombuffer(buf, dtype=np.int64).byteswap()     # big-endian payloads
 
 
 class _Layout(NamedTuple):
     """A message's signals as column vectors, so that every signal decodes in one matrix
-    operation; `checked` lists the rows that have a valid range."""
+    operation. `checked` lists the rows that have a valid range, `lo` and `span` that
+    range in raw units: raw - lo from 0 to span (the same frames as the range on
+    raw * scale + offset, found by trying every raw value); `lo` None when every range
+    starts at raw 0."""
 
     attrs: tuple[tuple[str, bool], ...]
     shifts: npt.NDArray[np.int64]
@@ -184,8 +197,19 @@ class _Layout(NamedTuple):
     scales: npt.NDArray[np.float64]
     offsets: npt.NDArray[np.float64]
     checked: npt.NDArray[np.intp]
-    lo: npt.NDArray[np.float64]
-    hi: npt.NDArray[np.float64]
+    lo: npt.NDArray[np.int64] | None
+    span: npt.NDArray[np.uint64]
+
+
+def _raw_range(sig: Signal) -> tuple[int, int]:
+    """The raw values whose physical value is valid, as (first, last): an interval,
+    since raw * scale + offset grows with raw."""
+    assert sig.valid is not None and sig.scale > 0
+    raw = np.arange(sig.mask + 1, dtype=np.int64)
+    phys = raw * np.float64(sig.scale) + np.float64(sig.offset)
+    ok = np.flatnonzero((phys >= sig.valid[0] - _EPS) & (phys <= sig.valid[1] + _EPS))
+    assert len(ok) and ok[-1] - ok[0] + 1 == len(ok), sig.dbc_name
+    return int(ok[0]), int(ok[-1])
 
 
 _layouts: dict[str, _Layout] = {}
@@ -196,6 +220,7 @@ def _layout(spec: MessageSpec) -> _Layout:
     if found is None:
         sigs = spec.signals
         checked = [k for k, s in enumerate(sigs) if s.valid is not None]
+        ranges = [_raw_range(sigs[k]) for k in checked]
         found = _layouts[spec.dbc_name] = _Layout(
             attrs=tuple((s.attr, s.is_integer) for s in sigs),
             shifts=np.array([[s.shift] for s in sigs], dtype=np.int64),
@@ -203,8 +228,9 @@ def _layout(spec: MessageSpec) -> _Layout:
             scales=np.array([[s.scale] for s in sigs]),
             offsets=np.array([[s.offset] for s in sigs]),
             checked=np.array(checked, dtype=np.intp),
-            lo=np.array([[sigs[k].valid[0] - _EPS] for k in checked]),   # type: ignore[index]
-            hi=np.array([[sigs[k].valid[1] + _EPS] for k in checked]),   # type: ignore[index]
+            lo=np.array([[lo] for lo, _ in ranges], dtype=np.int64)
+            if any(lo for lo, _ in ranges) else None,
+            span=np.array([[hi - lo] for lo, hi in ranges], dtype=np.uint64),
         )
     return found
 
@@ -213,24 +239,23 @@ def decode_columns(spec: MessageSpec, datas: Sequence[bytes | bytearray]) -> Col
     """`decode` of many DLC-checked payloads of one message at once: every signal of
     every frame as one (signals, n) matrix operation."""
     lay = _layout(spec)
-    w = words(datas, spec.dlc)
-    raw = (w >> lay.shifts) & lay.masks
-    phys = raw * lay.scales + lay.offsets
+    raw = (words(datas, spec.dlc) >> lay.shifts) & lay.masks
+    if not len(lay.checked):
+        return Columns(lay, raw, None, {})
+    checked = raw.take(lay.checked, axis=0)
+    if lay.lo is not None:
+        checked = checked - lay.lo
+    # Below lo, raw - lo wraps to a huge unsigned value: one comparison tests both bounds.
+    ok = checked.view(np.uint64) <= lay.span
+    if np.count_nonzero(ok) == ok.size:
+        return Columns(lay, raw, None, {})
+    valid = cast(BoolArray, ok.all(axis=0))
     rejected: dict[str, int] = {}
-    if len(lay.checked):
-        checked = phys[lay.checked]
-        ok = (checked >= lay.lo) & (checked <= lay.hi)
-        valid = cast(BoolArray, ok.all(axis=0))
-        all_valid = bool(valid.all())
-        if not all_valid:
-            bad_rows = ~valid
-            for k, row in enumerate(lay.checked.tolist()):
-                bad = int(np.count_nonzero(bad_rows & ~ok[k]))
-                if bad:
-                    rejected[f"out_of_range:{spec.signals[row].dbc_name}"] = bad
-                # A frame counts once, under its first bad signal.
-                bad_rows &= ok[k]
-    else:
-        valid = np.ones(len(w), dtype=np.bool_)
-        all_valid = True
-    return Columns(lay.attrs, valid, all_valid, rejected, raw, phys)
+    bad_rows = ~valid
+    for k, row in enumerate(lay.checked.tolist()):
+        bad = int(np.count_nonzero(bad_rows & ~ok[k]))
+        if bad:
+            rejected[f"out_of_range:{spec.signals[row].dbc_name}"] = bad
+        # A frame counts once, under its first bad signal.
+        bad_rows &= ok[k]
+    return Columns(lay, raw, valid, rejected)
