@@ -146,3 +146,18 @@ def test_a_recording_without_raw_can_is_refused_for_the_radar(tmp_path):
                 10**18, 10**18)
     proc = rerun("radar", str(path))
     assert proc.returncode == 2 and "no raw CAN frames" in proc.stderr
+
+
+def test_numbers_compare_to_rounding_unless_exact():
+    import msgspec
+
+    from tools.recording.compare import Comparison
+
+    recorded = radar_tracks(1, (track(1, x=12.0),))
+    t = recorded.tracks[0]
+    last_bit = msgspec.structs.replace(t, x_m=t.x_m * (1 + 2e-16))
+    moved = msgspec.structs.replace(t, x_m=t.x_m + 1e-6)
+    for rerun, rounded, exact in ((last_bit, 0, 1), (moved, 1, 1)):
+        other = msgspec.structs.replace(recorded, tracks=(rerun,))
+        assert len(Comparison().add_tracks(1, 0, recorded, other)) == rounded
+        assert len(Comparison(exact=True).add_tracks(1, 0, recorded, other)) == exact

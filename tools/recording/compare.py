@@ -7,11 +7,16 @@ compared: what the live shell measured or counted (headers, `processing_ns`, the
 counters), `radar_age_ms` (an input of the re-run), and the verifier's name and
 parameters (a configuration, not a behaviour: reported once, beside the table).
 
+Numbers are compared to rounding (relative 1e-9) unless the comparison is exact: a
+change in the last bit of a float (a matrix product summed in another order) is not a
+change of behaviour; `aeb rerun --exact` compares bit for bit.
+
 Differences are grouped for the summary: commands, decisions (a track's decision),
 densities (its verification and density), tracks (everything else of a track: position,
 ROI, TTC, reasons, presence) and cycles (the verifier's status).
 """
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,6 +33,7 @@ RADAR_CYCLE_FIELDS = ("mode", "meas_counter", "complete", "n_detections", "n_pre
                       "last_frame_mono_ns")
 RADAR_TRACK_FIELDS = tuple(f for f in RadarTrack.__struct_fields__ if f != "track_id")
 GROUPS = ("commands", "decisions", "densities", "tracks", "cycles")
+REL_TOLERANCE = 1e-9
 
 
 def _group(what: str, name: str) -> str:
@@ -94,6 +100,7 @@ class Comparison:
     fields: Counter[str] = field(default_factory=Counter)     # "group.field" -> count
     differences: list[Difference] = field(default_factory=list)
     verifiers: Counter[tuple[str, str]] = field(default_factory=Counter)  # (recorded, re-run)
+    exact: bool = False              # floats bit for bit instead of to REL_TOLERANCE
 
     def add(self, seq: int, stamp_ns: int, recorded_cmd: BrakeCommand | None,
             rerun_cmd: BrakeCommand, recorded: VerifiedTargets | None,
@@ -107,12 +114,12 @@ class Comparison:
         if recorded_cmd is not None:
             self.compared["commands"] += 1
             found += _fields(seq, stamp_ns, "command", -1, recorded_cmd, rerun_cmd,
-                             COMMAND_FIELDS)
+                             COMMAND_FIELDS, self.exact)
             self.differing["commands"] += bool(found)
         if recorded is not None:
             self.verifiers[(_verifier(recorded), _verifier(rerun))] += 1
             self.compared["cycles"] += 1
-            cycle = _fields(seq, stamp_ns, "cycle", -1, recorded, rerun, CYCLE_FIELDS)
+            cycle = _fields(seq, stamp_ns, "cycle", -1, recorded, rerun, CYCLE_FIELDS, self.exact)
             self.differing["cycles"] += bool(cycle)
             found += cycle + self._tracks(seq, stamp_ns, recorded, rerun)
         self.cycles_differing += bool(found)
@@ -129,7 +136,8 @@ class Comparison:
             return []
         self.cycles += 1
         self.compared["cycles"] += 1
-        found = _fields(seq, stamp_ns, "cycle", -1, recorded, rerun, RADAR_CYCLE_FIELDS)
+        found = _fields(seq, stamp_ns, "cycle", -1, recorded, rerun, RADAR_CYCLE_FIELDS,
+                        self.exact)
         self.differing["cycles"] += bool(found)
         a = {t.track_id: t for t in recorded.tracks}
         b = {t.track_id: t for t in rerun.tracks}
@@ -138,7 +146,8 @@ class Comparison:
             ta, tb = a.get(tid), b.get(tid)
             diffs = ([Difference(seq, stamp_ns, "track", tid, "present", ta is not None,
                                  tb is not None)] if ta is None or tb is None
-                     else _fields(seq, stamp_ns, "track", tid, ta, tb, RADAR_TRACK_FIELDS))
+                     else _fields(seq, stamp_ns, "track", tid, ta, tb, RADAR_TRACK_FIELDS,
+                                   self.exact))
             self.differing["tracks"] += bool(diffs)
             found += diffs
         self.cycles_differing += bool(found)
@@ -161,7 +170,7 @@ class Comparison:
                                         ta is not None, tb is not None))
                 self.differing["tracks"] += 1
                 continue
-            diffs = _fields(seq, stamp_ns, "track", tid, ta, tb, TRACK_FIELDS)
+            diffs = _fields(seq, stamp_ns, "track", tid, ta, tb, TRACK_FIELDS, self.exact)
             for g in ("decisions", "densities", "tracks"):
                 self.differing[g] += any(d.group == g for d in diffs)
             found += diffs
@@ -173,12 +182,23 @@ def _verifier(t: VerifiedTargets) -> str:
     return f"{t.verifier}({params})"
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Equal, floats to REL_TOLERANCE (in lists and dicts too)."""
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or math.isclose(a, b, rel_tol=REL_TOLERANCE, abs_tol=1e-12)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(map(_same, a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return bool(a == b)
+
+
 def _fields(seq: int, stamp_ns: int, what: str, track_id: int, a: Any, b: Any,
-            names: tuple[str, ...]) -> list[Difference]:
+            names: tuple[str, ...], exact: bool) -> list[Difference]:
     out = []
     for name in names:
         va, vb = _plain(getattr(a, name)), _plain(getattr(b, name))
-        if va != vb:
+        if va != vb and (exact or not _same(va, vb)):
             out.append(Difference(seq, stamp_ns, what, track_id, name, va, vb))
     return out
 

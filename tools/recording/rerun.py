@@ -117,6 +117,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="no Foxglove views in the output file")
     parser.add_argument("--compare", action="store_true",
                         help="compare with the recorded outputs, cycle by cycle")
+    parser.add_argument("--exact", action="store_true",
+                        help="compare numbers bit for bit (default: to a relative 1e-9)")
     parser.add_argument("--expect", default="", help="differences declared allowed (JSON)")
     parser.add_argument("--write-expected", default="",
                         help="write the differences found as a declaration (JSON)")
@@ -145,7 +147,7 @@ def run_fusion(args: argparse.Namespace, rec: Recording,
     first, last, start, end = _window(rec, args)
     span_start = start if start is not None else first
     progress = Progress((end if end is not None else last) - span_start, not args.quiet)
-    comparison = Comparison()
+    comparison = Comparison(exact=args.exact)
     writer = _writer(args, {"source": ",".join(map(str, rec.files)), "service": "fusion",
                             "config": json.dumps(config_params(cfg))})
     converter = None if args.no_views else Converter(vehicle, cfg.fusion.decision)
@@ -200,7 +202,7 @@ def run_radar(args: argparse.Namespace, rec: Recording,
     from tools.recording.rerun_radar import RadarRerun
 
     cfg = load_with_overrides(args.config or DEPLOY / "radar.toml", RadarConfig, args.set)
-    rerun = RadarRerun(cfg.radar, vehicle)
+    rerun = RadarRerun(cfg.radar, vehicle, exact=args.exact)
     _, _, start, end = _window(rec, args)
     writer = _writer(args, {"source": ",".join(map(str, rec.files)), "service": "radar"})
     converter = None if args.no_views else Converter(vehicle)

@@ -51,11 +51,12 @@ class _Collect:
 
 
 class RadarRerun:
-    def __init__(self, settings: RadarSettings, vehicle: str = "ego") -> None:
+    def __init__(self, settings: RadarSettings, vehicle: str = "ego",
+                 exact: bool = False) -> None:
         self.settings = settings
         self.vehicle = vehicle
         self.can_topic = RADAR_CAN.key(vehicle, bus=settings.raw_can.bus)
-        self.comparison = Comparison()
+        self.comparison = Comparison(exact=exact)
         self.frames = 0
         self.cycles = 0
         self.batches_missed = 0
