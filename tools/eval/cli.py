@@ -33,6 +33,7 @@ from typing import Any
 
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, load_config, parse_config
+from common.log import add_log_level, setup_logging
 from services.fusion.verifiers import VerifierConfigError
 from tools.eval import labels as labelfile
 from tools.eval import plots, tables
@@ -121,6 +122,7 @@ def _add_report(p: argparse.ArgumentParser, sources: bool = True) -> None:
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb eval", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_log_level(parser, "INFO")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_extract(sub.add_parser("rois", help="ROIs and every verifier's scores"))
     run = sub.add_parser("run", help="rois, then report")
@@ -310,6 +312,7 @@ def _interrupt(signum: int, frame: object) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    setup_logging("eval", args.log_level)
     if threading.current_thread() is threading.main_thread():
         # SIGTERM stops like Ctrl-C: the worker processes are stopped, not left behind.
         signal.signal(signal.SIGTERM, _interrupt)

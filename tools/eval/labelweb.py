@@ -23,6 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from common.log import add_log_level, setup_logging
 from tools.eval.frames import FrameLoadError, load_bgr
 from tools.eval.label_page import PAGE
 from tools.eval.labels import (
@@ -245,11 +246,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8765, help="0: any free port")
+    add_log_level(p, "INFO")
     return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    setup_logging("label", args.log_level)
     from common.service import stop_event_on_signals
 
     try:
