@@ -243,21 +243,32 @@ def measure(minutes: float, out_dir: Path) -> dict[str, Any]:
                 raise RuntimeError("the publisher failed")
             usage = sampler.stop()
             published: dict[str, int] = json.loads(pub_out.read_text())
-            # Until the recorder has written all it received (or a minute passes).
+            # Until the recorder has written all that the plain subscriber received, and
+            # the subscriber has received nothing new for 2 s (or a minute passes): the
+            # baseline is the count that check was made against.
             deadline = time.monotonic() + 60
+            dropped: dict[str, int] = {}
+            baseline: dict[str, int] = {}
+            quiet_since = time.monotonic()
             while time.monotonic() < deadline:
+                seen = dict(counter.counts)
+                if seen != baseline:
+                    baseline, quiet_since = seen, time.monotonic()
                 got = bus.query(RECORDER_STATUS, 2.0, instance=str(rec.pid))
+                if got:
+                    dropped = got[0][0].dropped
                 if got and got[0][0].queued == 0 and all(
-                        got[0][0].messages.get(k, 0) >= min(n, counter.counts.get(k, 0))
-                        for k, n in published.items()):
+                        got[0][0].messages.get(k, 0) >= min(n, baseline.get(k, 0))
+                        for k, n in published.items()) and (
+                        baseline == published or time.monotonic() - quiet_since >= 2.0):
                     break
                 time.sleep(0.2)
-            baseline = dict(counter.counts)
         rec.send_signal(signal.SIGINT)
         rec.wait(120)
         in_file = {t: c.messages for t, c in Recording.open(mcap).channels().items()}
         size = mcap.stat().st_size
         return {"published": published, "recorded": in_file, "baseline": baseline,
+                "dropped": dropped,
                 "bytes": size, "minutes": minutes,
                 "recorder_cpu_pct": usage["recorder"].cpu_pct,
                 "recorder_rss_mb": usage["recorder"].rss_max / 2**20,

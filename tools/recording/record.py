@@ -62,6 +62,7 @@ class RecorderStatus(msgspec.Struct, frozen=True):
     messages: dict[str, int]     # per key
     derived: int
     queued: int                  # received, not written yet
+    dropped: dict[str, int] = msgspec.field(default_factory=dict)  # gaps in the keys' seq
 
 
 # A tool's key, not the vehicle's: answered on request only.
@@ -193,8 +194,9 @@ class Recorder:
                 self._queue.put((str(sample.key_expr), sample.payload.to_bytes(), wall_ns()))
 
     def status(self) -> RecorderStatus:
-        return RecorderStatus({k: s.messages for k, s in list(self.stats.keys.items())},
-                              self.stats.derived, self._queue.qsize())
+        keys = list(self.stats.keys.items())
+        return RecorderStatus({k: s.messages for k, s in keys}, self.stats.derived,
+                              self._queue.qsize(), {k: s.dropped for k, s in keys if s.dropped})
 
     def submit(self, key: str, payload: bytes, log_ns: int) -> None:
         """A payload from another source (the CAN reader), recorded as if received on
