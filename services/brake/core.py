@@ -17,6 +17,7 @@ from collections import Counter, deque
 from dataclasses import dataclass
 
 from common.config.brake import BrakeSettings
+from common.counters import saturated, saturating_add
 from common.messages import BrakeCommand, BrakeState, Decision, FailsafePolicy
 from services.brake.commands import Accepted, CommandValidator, Rejection
 from services.brake.protocol import (
@@ -226,8 +227,8 @@ class BrakeCore:
             since_ns=self.since_ns, last_cmd_seq=self._last_seq,
             last_cmd_rx_ns=self._last_rx or 0, commanded_level_pct=self.commanded_level_pct,
             actuator_position_pct=self.position_pct, actuator_state=self.actuator_state,
-            actuator_connected=self._link_up, rejected=dict(self.rejected),
-            counters=dict(self.counters),
+            actuator_connected=self._link_up, rejected=saturated(self.rejected),
+            counters=saturated(self.counters),
         )
 
     # ---- levels -------------------------------------------------------------------
@@ -258,7 +259,7 @@ class BrakeCore:
         cmd = acc.cmd
         self.counters["commands"] += 1
         if acc.gap:
-            self.counters["seq_gaps"] += acc.gap
+            saturating_add(self.counters, "seq_gaps", acc.gap)
         if acc.restart:
             self.counters["stream_restarts"] += 1
         contiguous = alive and acc.gap == 0

@@ -29,6 +29,7 @@ from common import systemd
 from common.bus import Bus, TypedPublisher
 from common.clock import mono_ns, wall_ns
 from common.config.brake import AgeClock, BrakeConfig
+from common.counters import saturated
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
@@ -327,6 +328,6 @@ class BrakeShell:
             actuator_position_pct=v.actuator_position_pct, actuator_state=v.actuator_state,
             actuator_connected=v.actuator_connected, cmd_to_serial_us=self.cmd_to_serial_us,
             radar_to_serial_us=self.radar_to_serial_us, rejected=v.rejected,
-            counters={**v.counters, **self.errors}, state_since_mono_ns=v.since_ns,
+            counters=saturated({**v.counters, **self.errors}), state_since_mono_ns=v.since_ns,
             last_cmd_rx_mono_ns=v.last_cmd_rx_ns, command_state=v.command_state,
         )
