@@ -11,14 +11,17 @@ from pathlib import Path
 from typing import Any
 
 from common.bus import Bus
+from common.command_auth import CommandSigner
+from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeState, BrakeStatus
 from services.brake.shell import TIMER_PERIOD_S
+from tests.brake.helpers import TEST_KEY, write_test_key
+from tests.brake.secure import SecureProfile, secure_router
 from tests.support import (
     START_TIMEOUT_S,
     HealthWatch,
     ServiceProcess,
-    open_bus,
     python_module,
     router_process,
 )
@@ -35,6 +38,8 @@ def toml_text(tables: dict[str, dict[str, Any]]) -> str:
             return "true" if v else "false"
         if isinstance(v, str):
             return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
         return repr(v)
 
     out = []
@@ -97,13 +102,20 @@ class BrakeRig:
     commands: Log          # what the primary publishers put on the bus, as seen here
     deadline_ms: float
     period_ms: float
+    secure: SecureProfile | None = None
 
     def publisher(self, level: float = 0.0, period_ms: float = 20.0,
-                  instance: str = "primary", name: str = "publisher") -> ServiceProcess:
+                  instance: str = "primary", name: str = "publisher",
+                  key: Path | None = None) -> ServiceProcess:
+        """A fusion-like process signing with `key` (default: the test key); on the
+        secure profile with the certificate of `instance`."""
+        zenoh = [] if self.secure is None else ["--zenoh-config", str(self.secure.client(
+            "fusion" if instance == "primary" else f"fusion-{instance}"))]
         return ServiceProcess(
             name, python_module("tests.brake.publisher", "--connect", self.endpoint,
                                 "--level", str(level), "--period-ms", str(period_ms),
-                                "--instance", instance),
+                                "--instance", instance,
+                                "--key", str(key or write_test_key(self.log_dir)), *zenoh),
             self.log_dir,
         )
 
@@ -111,21 +123,28 @@ class BrakeRig:
                     timeout_s: float = 30.0, what: str = "") -> tuple[int, BrakeStatus]:
         return self.status.wait(pred, timeout_s, start, what)
 
-    def wait_live(self, start: int, level: float = 0.0, timeout_s: float = 30.0) -> int:
-        """Index of the first status from `start` that follows the stream at `level`."""
+    def wait_live(self, start: int, level: float = 0.0, timeout_s: float = 30.0,
+                  since_ns: int = 0) -> int:
+        """Index of the first status from `start` that follows the stream at `level`, on
+        a command received after `since_ns` (this host's monotonic clock): a stream that
+        just started is not followed while the previous one's session is live."""
         want = BrakeState.BRAKING if level > 0 else BrakeState.ARMED
         i, _ = self.wait_status(
-            lambda s: s.state is want and s.commanded_level_pct == level, start, timeout_s,
+            lambda s: (s.state is want and s.commanded_level_pct == level
+                       and s.last_cmd_rx_mono_ns >= since_ns), start, timeout_s,
             f"{want.value} at {level}%")
         return i
 
 
 @contextmanager
-def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
+def brake_rig(log_dir: Path, secure: bool = False, **brake: Any) -> Iterator[BrakeRig]:
     """Everything started and the brake service's liveliness token seen. `brake` holds
-    [brake] fields; nested tables as `serial={...}`, `actuator={...}`."""
+    [brake] fields; nested tables as `serial={...}`, `actuator={...}`. `secure`: the
+    secure profile (TLS router with access control; this process observes as the
+    monitor, which may read everything and write nothing)."""
     nested = {k: brake.pop(k) for k in ("serial", "actuator") if k in brake}
     link = log_dir / "actuator"
+    brake.setdefault("command_keys", [str(write_test_key(log_dir))])
     tables: dict[str, dict[str, Any]] = {
         "brake": brake,
         "brake.serial": {"port": str(link), **nested.get("serial", {})},
@@ -133,16 +152,22 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
     if "actuator" in nested:
         tables["brake.actuator"] = nested["actuator"]
     config = log_dir / "brake.toml"
-    config.write_text(toml_text(tables))
     with ExitStack() as stack:
-        endpoint = stack.enter_context(router_process(log_dir))
+        profile = stack.enter_context(secure_router(log_dir)) if secure else None
+        endpoint = profile.endpoint if profile else stack.enter_context(
+            router_process(log_dir))
+        if profile is not None:
+            tables = {"zenoh": {"config_file": str(profile.client("brake"))}, **tables}
+        config.write_text(toml_text(tables))
         sim, pair = SimActuator.on_pty(link, seed=7)
         stack.callback(pair.remove)
         stack.enter_context(sim)
         proc = ServiceProcess("brake", python_module("services.brake", "--config", str(config),
                                                       "--connect", endpoint), log_dir)
         stack.callback(proc.stop)
-        bus = stack.enter_context(open_bus(endpoint, source="test"))
+        bus = stack.enter_context(Bus.open(ZenohSettings(
+            mode=ZenohMode.CLIENT, connect=(endpoint,),
+            config_file=str(profile.client("monitor")) if profile else ""), "ego", "test"))
         status, commands = Log(), Log()
         bus.subscribe(BRAKE_STATUS, status)
         bus.subscribe(FUSION_BRAKE_CMD, commands, instance="primary")
@@ -153,7 +178,7 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
             raise AssertionError(f"brake did not start:\n{proc.output()}") from None
         yield BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
                        float(brake.get("deadline_ms", 200.0)),
-                       TIMER_PERIOD_S * 1000)
+                       TIMER_PERIOD_S * 1000, profile)
         assert proc.alive(), f"brake process died:\n{proc.output()}"
 
 
@@ -173,6 +198,8 @@ class Stream:
 
     def __init__(self, bus: Bus, level: float = 0.0, period_ms: float = 20.0) -> None:
         self.pub = bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        self.signer = CommandSigner(TEST_KEY)    # a new session, as a fusion start
+        self.started_ns = 0
         self.level = level
         self.period_s = period_ms / 1000
         self.seq = 0
@@ -183,6 +210,7 @@ class Stream:
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def __enter__(self) -> "Stream":
+        self.started_ns = time.monotonic_ns()
         self._thread.start()
         return self
 
@@ -199,12 +227,16 @@ class Stream:
             raise TimeoutError("stream thread did not run the injection")
         return result[0]
 
+    def put(self, msg: BrakeCommand) -> None:
+        """Publish `msg` signed in this stream's session."""
+        self.pub.put_bytes(self.signer.sign(msg))
+
     def _run(self) -> None:
         from tests.brake.helpers import command
 
         while not self._stop.is_set():
             msg = command(self.seq, self.level)
-            self.pub.put(msg)
+            self.put(msg)
             self.sent.append(msg)
             self.seq += 1
             with self._lock:
