@@ -86,7 +86,11 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             }
         values.update(settings.overrides)
         for key, value in values.items():
-            conf.insert_json5(key, json.dumps(value))
+            try:
+                conf.insert_json5(key, json.dumps(value))
+            except zenoh.ZError as exc:
+                raise BusError(f"invalid zenoh configuration: {key} = {value!r}: "
+                               f"{exc}") from exc
     except (zenoh.ZError, TypeError, ValueError) as exc:
         # ZError: a key, value or file zenoh refuses; TypeError/ValueError: an override
         # that is not JSON
