@@ -56,11 +56,14 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     camera: str = _DEFAULT_CAMERA
     # |frame capture - radar cycle| allowed; farther frames make the verifier unavailable.
-    max_skew_s: Positive = 0.1
+    max_skew_s: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.1
     # True: the frame nearest the radar cycle, with each track predicted (constant
     # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
     align: bool = True
     decode: DecodePolicy = DecodePolicy.EVERY_FRAME
+    # A camera whose picture has not changed for this long while the radar sees the scene
+    # move relative to the ego is frozen: unavailable ("camera frozen"). 0: never.
+    frozen_after_s: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.5
 
 
 class CameraInput(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
