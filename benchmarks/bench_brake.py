@@ -209,7 +209,7 @@ def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
         _wait(lambda: _port_open(port), 60, "router")
         config = work / "brake.toml"
         write_key(work / "primary.key", KEY)
-        config.write_text(f'[brake]\nmax_age_ms = 1000.0\n'
+        config.write_text(f'[brake]\ndeadline_ms = 1000.0\nmax_age_ms = 1000.0\n'
                           f'command_keys = ["{work / "primary.key"}"]\n[brake.serial]\n'
                           f'port = "{work / "actuator"}"\n')
         sim.start()
