@@ -99,6 +99,11 @@ def test_kitti_negatives_background_rows_and_lidar_structure(kitti_split):
     for r in background:
         x, y, w, h = r.roi
         assert any((p.roi[1], p.roi[2], p.roi[3]) == (y, w, h) for p in positives.values())
+        # Its column is the positive's column moved with the ROI, not the padded ROI:
+        # a verifier of the column sees a background column of the object's size.
+        pos = next(p for p in positives.values() if (p.roi[1], p.roi[2], p.roi[3]) == (y, w, h))
+        assert r.column[1:] == pos.column[1:] and r.column != r.roi
+        assert r.column[0] - x == pos.column[0] - pos.roi[0]
         for bx0, by0, bx1, by1 in occupied:
             assert x + w - 1 < bx0 or x > bx1 or y + h - 1 < by0 or y > by1
     # The wall is the only lidar structure: ground, the boxes' own points are not.

@@ -239,9 +239,19 @@ def background_candidates(frame: DatasetFrame, sc: Scaled, positives: list[Candi
                         s.background_max_overlap)
         if len(got) < s.background_per_object:
             sc.counters["background_no_room"] = sc.counters.get("background_no_room", 0) + 1
-        out += [Candidate(KIND_BACKGROUND, len(out) + k, roi, roi, pos.range_m, "", "NO")
+        out += [Candidate(KIND_BACKGROUND, len(out) + k, roi, shifted_column(pos, roi),
+                          pos.range_m, "", "NO")
                 for k, roi in enumerate(got)]
     return out
+
+
+def shifted_column(pos: Candidate, roi: Roi) -> Roi:
+    """The positive's column moved with its ROI to `roi` (same rows, same size), so that
+    a verifier that looks at the column sees a background column of the object's size."""
+    dx = roi.x - pos.roi.x
+    x0 = min(max(pos.column.x + dx, roi.x), roi.x + roi.w - 1)
+    x1 = min(pos.column.x + dx + pos.column.w, roi.x + roi.w)
+    return Roi(x0, pos.column.y, max(1, x1 - x0), pos.column.h)
 
 
 def ground_plane(points: np.ndarray, rng: np.random.Generator, iterations: int = 80,
