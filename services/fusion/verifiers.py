@@ -262,3 +262,8 @@ class AdaptiveEdgeDensity:
 def _adaptive(params: Mapping[str, ParamValue]) -> Verifier:
     return AdaptiveEdgeDensity(
         _parse(params, AdaptiveEdgeDensityParams, "adaptive_edge_density"))
+
+
+# Verifiers of their own modules register themselves on import; importing them here
+# makes every name available wherever the registry is.
+from services.fusion import appearance  # noqa: E402, F401
