@@ -45,10 +45,6 @@ class TrainingError(ValueError):
     """Training data that cannot train a classifier; the message says why."""
 
 
-def frame_key(r: RoiRecord) -> str:
-    return f"{r.session}:{r.frame}"
-
-
 def fold_of(key: str, folds: int) -> int:
     """The fold of a frame: stable across runs and machines (CRC-32 of its key)."""
     return zlib.crc32(key.encode()) % folds
@@ -60,14 +56,14 @@ def features(records: list[RoiRecord], window: tuple[int, int], context: float
     cannot be rebuilt are reported on stderr and left out."""
     by_frame: dict[str, list[int]] = defaultdict(list)
     for i, r in enumerate(records):
-        by_frame[frame_key(r)].append(i)
+        by_frame[r.frame_key].append(i)
     rows, kept = [], []
     for n, idx in enumerate(by_frame.values(), 1):
         first = records[idx[0]]
         try:
             gray = load_gray(first.frame_ref)
         except FrameLoadError as exc:
-            print(f"frame {frame_key(first)} left out: {exc}", file=sys.stderr)
+            print(f"frame {first.frame_key} left out: {exc}", file=sys.stderr)
             continue
         for i in idx:
             r = records[i]
@@ -182,19 +178,19 @@ def train(args: argparse.Namespace) -> HogLinearModel:
     given = labelfile.read_labels(args.labels) if args.labels else None
     labels = labelfile.resolve(records, given)
     usable = [r for r in records if labels.get(r.id) in (labelfile.YES, labelfile.NO)]
-    held = [r for r in usable if args.folds > 1 and fold_of(frame_key(r), args.folds)
+    held = [r for r in usable if args.folds > 1 and fold_of(r.frame_key, args.folds)
             == args.fold]
-    held_keys = {frame_key(r) for r in held}
-    chosen = [r for r in usable if frame_key(r) not in held_keys]
+    held_keys = {r.frame_key for r in held}
+    chosen = [r for r in usable if r.frame_key not in held_keys]
     if not chosen:
         raise TrainingError(f"no labelled ROI to train on in {args.rois}")
     print(f"training on {len(chosen)} labelled ROIs of "
-          f"{len({frame_key(r) for r in chosen})} frames ({len(held)} ROIs of "
+          f"{len({r.frame_key for r in chosen})} frames ({len(held)} ROIs of "
           f"{len(held_keys)} frames held out)", file=sys.stderr)
     x, kept = features(chosen, window, args.context)
     kept_records = [chosen[i] for i in kept]
     y = np.array([1.0 if labels[r.id] == labelfile.YES else 0.0 for r in kept_records])
-    groups = [frame_key(r) for r in kept_records]
+    groups = [r.frame_key for r in kept_records]
     oof = out_of_fold(x, y, groups, args.l2, args.cv_folds)
     tau = tau_for_recall(oof, y, args.recall)
     coef, bias = fit_logistic(x, y, args.l2)

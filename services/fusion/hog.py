@@ -24,30 +24,30 @@ _SIGMA = (BLOCK + BLOCK) / 8.0  # OpenCV's default winSigma
 _GAMMA = np.sqrt(np.arange(256, dtype=np.float32))
 
 
-def _block_weights() -> np.ndarray:
-    """(2, 2, BLOCK, BLOCK): the weight of each pixel of a block in cell (cx, cy): the
-    Gaussian window times the bilinear split between neighbouring cells."""
-    idx = np.arange(BLOCK, dtype=np.float32)
-    d = idx - BLOCK * 0.5
-    gauss = np.exp(-(d[:, None] ** 2 + d[None, :] ** 2) / (2.0 * _SIGMA ** 2))
+def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
+    """The weight of each pixel of a block for its cells, separable as OpenCV's is (a
+    Gaussian window times the bilinear split between neighbouring cells, each a product
+    over the two axes): (first, second) half of the block, each (2 cells, CELL) along one
+    axis. Pixels in a block's outer half cells vote only for their own cell, with the
+    bilinear weight, as in OpenCV."""
+    idx = np.arange(BLOCK, dtype=np.float64)
+    gauss = np.exp(-((idx - BLOCK * 0.5) ** 2) / (2.0 * _SIGMA ** 2))
     pos = (idx + 0.5) / CELL - 0.5              # position in cell units
     lower = np.floor(pos)
     frac = pos - lower
-    # Weight towards cell 0 and cell 1 along one axis (pixels in the outer half cells
-    # vote only for their own cell, with the bilinear weight, as OpenCV does).
-    along = np.zeros((2, BLOCK), np.float32)
+    along = np.zeros((2, BLOCK))
     for c in (0, 1):
         along[c] = np.where(lower == c, 1.0 - frac, 0.0) + np.where(lower + 1 == c, frac, 0.0)
-    # [cx, cy, row, col]
-    w = along[None, :, :, None] * along[:, None, None, :] * gauss[None, None]
-    return w.astype(np.float32)
+    w = (along * gauss).astype(np.float32)
+    return np.ascontiguousarray(w[:, :CELL]), np.ascontiguousarray(w[:, CELL:])
 
 
-_WEIGHTS = _block_weights().reshape(4, BLOCK * BLOCK)
+_FIRST, _SECOND = _cell_weights()
+_BIN_IDS = np.arange(BINS)
 
 
 def orientation_votes(gray: np.ndarray) -> np.ndarray:
-    """(H, W, BINS) float32: each pixel's gradient magnitude split between its two
+    """(BINS, H, W) float32: each pixel's gradient magnitude split between its two
     nearest orientation bins. Raises ValueError for an image that is not 2-D uint8."""
     if gray.ndim != 2 or gray.dtype != np.uint8:
         raise ValueError(f"HOG needs a 2-D uint8 image, got {gray.dtype} {gray.shape}")
@@ -58,15 +58,32 @@ def orientation_votes(gray: np.ndarray) -> np.ndarray:
     mag, ang = cv2.cartToPolar(dx, dy, angleInDegrees=False)
     a = ang * np.float32(BINS / np.pi) - np.float32(0.5)
     lo = np.floor(a)
-    frac = a - lo
-    b0 = lo.astype(np.int64) % BINS
-    b1 = (b0 + 1) % BINS
-    h, w = gray.shape
-    votes = np.zeros((h * w, BINS), np.float32)
-    rows = np.arange(h * w)
-    votes[rows, b0.ravel()] += (mag * (1.0 - frac)).ravel()
-    votes[rows, b1.ravel()] += (mag * frac).ravel()
-    return votes.reshape(h, w, BINS)
+    upper = mag * (a - lo)
+    lower = mag - upper
+    # Angles lie in [0, 2 pi): a in [-0.5, 18), its floor -1..17, the bin that mod 9.
+    b0 = lo.astype(np.int8)
+    b0[b0 < 0] += BINS
+    b0[b0 >= BINS] -= BINS
+    votes = np.empty((BINS, *gray.shape), np.float32)
+    prev = b0 == BINS - 1                       # b1 = b0 + 1 wraps from the last bin
+    spare = np.empty_like(lower)
+    for k in range(BINS):
+        here = b0 == k
+        np.multiply(lower, here, out=votes[k])
+        votes[k] += np.multiply(upper, prev, out=spare)
+        prev = here
+    return votes
+
+
+def _blocks_along(v: np.ndarray, axis: int) -> np.ndarray:
+    """Weighted sums over each block's pixels along `axis` (cut to whole cells): that
+    axis becomes (blocks, 2 cells), appended last."""
+    v = np.moveaxis(v, axis, -1)
+    n = v.shape[-1] // CELL
+    cells = v[..., :n * CELL].reshape(*v.shape[:-1], n, CELL)
+    first = np.tensordot(cells[..., :-1, :], _FIRST, axes=([-1], [1]))  # (..., blocks, 2)
+    second = np.tensordot(cells[..., 1:, :], _SECOND, axes=([-1], [1]))
+    return first + second
 
 
 def block_grid(gray: np.ndarray) -> np.ndarray:
@@ -76,12 +93,11 @@ def block_grid(gray: np.ndarray) -> np.ndarray:
     h, w = gray.shape[:2]
     if h < BLOCK or w < BLOCK:
         raise ValueError(f"HOG needs at least {BLOCK}x{BLOCK} pixels, got {w}x{h}")
-    votes = orientation_votes(gray)
-    win = np.lib.stride_tricks.sliding_window_view(votes, (BLOCK, BLOCK), axis=(0, 1))
-    win = win[::STRIDE, ::STRIDE]                # (nby, nbx, BINS, BLOCK, BLOCK)
-    nby, nbx = win.shape[:2]
-    pixels = win.reshape(nby, nbx, BINS, BLOCK * BLOCK)
-    hist = np.einsum("yxbp,cp->xycb", pixels, _WEIGHTS, optimize=True)
+    votes = orientation_votes(gray)             # (BINS, H, W)
+    across = _blocks_along(votes, 2)            # (BINS, H, nbx, cx)
+    both = _blocks_along(across, 1)             # (BINS, nbx, cx, nby, cy)
+    hist = np.ascontiguousarray(both.transpose(1, 3, 2, 4, 0))  # (nbx, nby, cx, cy, BINS)
+    nbx, nby = hist.shape[:2]
     hist = hist.reshape(nbx, nby, 4 * BINS)
     size = 4 * BINS
     scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + size * 0.1)
@@ -106,8 +122,13 @@ def window_scores(grid: np.ndarray, weights: np.ndarray, bias: float,
     nbx, nby, size = grid.shape
     if nbx < wx or nby < wy:
         raise ValueError(f"a {nbx}x{nby}-block grid holds no {wx}x{wy}-block window")
-    w = np.asarray(weights, np.float32).reshape(wx, wy, size)
-    views = np.lib.stride_tricks.sliding_window_view(grid, (wx, wy), axis=(0, 1))
-    # views: (nbx - wx + 1, nby - wy + 1, size, wx, wy)
-    scores = np.einsum("xysij,ijs->yx", views, w, optimize=True)
-    return scores + np.float32(bias)
+    w = np.asarray(weights, np.float32).reshape(wx * wy, size)
+    # Every block against every weight block at once, then each window sums its own.
+    # einsum, not a BLAS product: BLAS threads on a loaded machine cost more than this.
+    parts = np.einsum("ps,ks->pk", grid.reshape(nbx * nby, size), w).reshape(nbx, nby, wx, wy)
+    px, py = nbx - wx + 1, nby - wy + 1
+    scores = np.zeros((px, py), np.float32)
+    for i in range(wx):
+        for j in range(wy):
+            scores += parts[i:i + px, j:j + py, i, j]
+    return scores.T + np.float32(bias)

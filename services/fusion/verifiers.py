@@ -273,4 +273,4 @@ def _adaptive(params: Mapping[str, ParamValue]) -> Verifier:
 
 
 # Registers the verifiers defined in their own modules (they import this one).
-from services.fusion import appearance, depth_check  # noqa: E402,F401
+from services.fusion import appearance, combined, depth_check  # noqa: E402,F401

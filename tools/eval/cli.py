@@ -117,6 +117,9 @@ def _add_report(p: argparse.ArgumentParser, sources: bool = True) -> None:
                    help="bootstrap resamples whole frames, sessions or single ROIs")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap samples")
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--held-out", metavar="WEIGHTS",
+                   help="only the ROIs of frames these hog_linear weights were not trained "
+                        "on (the weights file's trained_on.frames)")
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -257,9 +260,23 @@ def _load(args: argparse.Namespace) -> tuple[list[RoiRecord], dict[str, dict[str
     return records, params, Path(args.out) if args.out else folder
 
 
+def held_out(records: list[RoiRecord], weights: str) -> list[RoiRecord]:
+    """The records of frames that `weights` was not trained on. Raises
+    VerifierConfigError for a weights file that cannot be read."""
+    from services.fusion.appearance import HogLinearModel
+
+    trained = set(HogLinearModel.load(weights).trained_on.get("frames", []))
+    kept = [r for r in records if r.frame_key not in trained]
+    print(f"held out of {weights}: {len(kept)} of {len(records)} ROIs "
+          f"({len({r.frame_key for r in kept})} frames)", file=sys.stderr)
+    return kept
+
+
 def _report(args: argparse.Namespace, records: list[RoiRecord],
             params: dict[str, dict[str, Any]], out: Path, compare: bool) -> int:
     settings = _report_settings(args)
+    if args.held_out:
+        records = held_out(records, args.held_out)
     given = labelfile.read_labels(args.labels) if args.labels else None
     labels = labelfile.resolve(records, given)
     chosen = {k: v for k, v in params.items() if not args.only or k in args.only}
