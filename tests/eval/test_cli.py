@@ -29,7 +29,9 @@ def test_run_on_a_recording_and_a_data_set_in_two_processes(inputs, tmp_path, ca
     assert {r.kind for r in records} == {"track", "background", "object", "lidar"}
     run = json.loads((out / "run.json").read_text())
     assert run["workers"] == 2 and run["counters"]["frames"] == 3
-    assert set(run["verifiers"]) == {"edge_density", "adaptive_edge_density"}
+    # Every verifier that works with its defaults (hog_linear, combined need weights).
+    assert set(run["verifiers"]) == {"edge_density", "adaptive_edge_density", "depth",
+                                     "hog_people"}
     assert (out / "truth-labels.tsv").read_text().count("\tYES\t") == sum(
         r.truth == "YES" for r in records)
     report = json.loads((out / "report.json").read_text())
