@@ -80,7 +80,9 @@ def test_scores_are_the_verifiers_on_the_decoded_frame(rec):
         gray = decode_gray(frames[r.frame_ref.seq])
         expected = gate.verify(Observation(gray, Roi(*r.roi), Roi(*r.column), r.range_m))
         assert r.scores["edge_density"].score == expected.score == r.density
-        assert set(r.scores) == {"adaptive_edge_density", "edge_density"}
+        assert set(r.scores) == {"adaptive_edge_density", "edge_density", "depth",
+                                 "hog_people"}
+        assert r.scores["hog_people"].score is not None
         assert r.scores["edge_density"].us > 0
     # Full-frame timing once per frame used.
     timed = [r for r in records if r.frame_canny_us is not None]

@@ -156,8 +156,9 @@ def _calibrations(items: list[str], cameras: list[str]) -> dict[str, str]:
 
 def _extract(args: argparse.Namespace) -> tuple[list[RoiRecord], RunInfo, int]:
     """Raises ConfigError, VerifierConfigError, SourceError for bad arguments."""
+    left_out: dict[str, str] = {}
     specs: list[VerifierSpec] = ([parse_spec(v) for v in args.verifier] if args.verifier
-                                 else default_specs())
+                                 else default_specs(left_out))
     cfg = (load_config(args.fusion_config, FusionConfig) if args.fusion_config
            else parse_config({}, FusionConfig))
     fusion = cfg.fusion
@@ -177,6 +178,9 @@ def _extract(args: argparse.Namespace) -> tuple[list[RoiRecord], RunInfo, int]:
     where = args.scheduler or f"{min(args.jobs, len(tasks))} local processes"
     print(f"{len(tasks)} tasks on {where}; verifiers: "
           f"{', '.join(s.label for s in specs)}", file=sys.stderr, flush=True)
+    for name, why in left_out.items():
+        print(f"verifier {name} left out ({why}): name it with --verifier",
+              file=sys.stderr, flush=True)
     t0 = time.monotonic()
     progress = Progress(len(tasks))
     results = execute(tasks, args.jobs, args.scheduler, progress.update)

@@ -5,7 +5,6 @@ A verifier is named by its registry name and parameters: `edge_density` (default
 where the data has none.
 """
 
-import sys
 import time
 from dataclasses import dataclass, field
 
@@ -65,15 +64,17 @@ def parse_spec(text: str) -> VerifierSpec:
     return VerifierSpec(text.strip(), name.strip(), params)
 
 
-def default_specs() -> list[VerifierSpec]:
+def default_specs(left_out: dict[str, str] | None = None) -> list[VerifierSpec]:
     """Every registered verifier that works with its default parameters (`hog_linear`
-    needs a weights file: name it with --verifier)."""
+    and `combined` need a weights file: name them with --verifier); the others go into
+    `left_out` (name -> why) when given."""
     out = []
     for name in available():
         try:
             create(name)
         except VerifierConfigError as exc:
-            print(f"verifier {name} left out: {exc}", file=sys.stderr)
+            if left_out is not None:
+                left_out[name] = str(exc)
             continue
         out.append(VerifierSpec(name, name))
     return out
