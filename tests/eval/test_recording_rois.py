@@ -103,6 +103,9 @@ def test_simulator_truth_labels_tracks_and_places_background_off_the_objects(rec
     for r in background:
         pos = next(p for p in box if p.id == r.id.rsplit(":", 1)[0])
         assert (r.roi[1], r.roi[2], r.roi[3]) == (pos.roi[1], pos.roi[2], pos.roi[3])
+        # The positive's column moved with the ROI, not the padded ROI itself.
+        assert r.column[1:] == pos.column[1:] and r.column != r.roi
+        assert r.column[0] - r.roi[0] == pos.column[0] - pos.roi[0]
         world = truth.world_at(r.t_ns)
         assert world is not None
         for x0, y0, x1, y1 in sim_truth.object_boxes(world, r.t_ns, CAL):

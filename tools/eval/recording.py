@@ -275,13 +275,17 @@ def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
         got = free_rois(Roi(*pos.roi), occupied, cal.width, s.background_per_object, rng)
         if len(got) < s.background_per_object:
             _bump(counters, "background_no_room")
+        # The positive's column, moved with its ROI (what a verifier of the column sees).
+        px, py, pw, ph = pos.column
+        dx, dy = px - pos.roi[0], py - pos.roi[1]
         for k, roi in enumerate(got):
-            obs = Observation(gray, roi, roi, pos.range_m)
+            column = Roi(roi.x + dx, roi.y + dy, pw, ph)
+            obs = Observation(gray, roi, column, pos.range_m)
             scores = scorer.score(obs)
             out.append(RoiRecord(
                 id=f"{pos.id}:bg{k}", source=pos.source, session=pos.session,
                 frame=pos.frame, t_ns=pos.t_ns, camera=pos.camera, image_w=pos.image_w,
-                image_h=pos.image_h, roi=roi, column=roi, range_m=pos.range_m,
+                image_h=pos.image_h, roi=roi, column=column, range_m=pos.range_m,
                 kind="background", frame_ref=pos.frame_ref,
                 truth="NO", density=scorer.density(obs, scores), lighting=light[0],
                 frame_median=light[1], scores=scores))
