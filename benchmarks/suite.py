@@ -28,6 +28,7 @@ from common.log import add_log_level, setup_logging
 
 SECTIONS: dict[str, str] = {
     "gate": "benchmarks.bench_gate",
+    "verifiers": "benchmarks.bench_verifiers",
     "radar": "benchmarks.bench_radar",
     "fusion": "benchmarks.bench_fusion",
     "brake": "benchmarks.bench_brake",
