@@ -15,6 +15,25 @@ class CompressedFrame(msgspec.Struct, frozen=True):
     jpeg: bytes
 
 
+class DepthFrame(msgspec.Struct, frozen=True):
+    """One depth image aligned to a colour frame (common/depth_image.py encodes it).
+
+    `header.stamp_ns` is the capture time of the colour frame it is aligned to (the same
+    stamp as that `CompressedFrame`: fusion pairs them by it). Pixel (u, v) of the depth
+    image covers pixels (u, v) * (colour size / depth size) of the colour frame (the
+    depth may be published at a lower resolution). `data` is uint16 depth in `units_m`
+    (0: no return) coded with `codec` ("zstd" or "png", both lossless).
+    """
+
+    header: Header
+    camera: str
+    width: int
+    height: int
+    codec: str
+    data: bytes
+    units_m: float = 0.001
+
+
 class CameraInfo(msgspec.Struct, frozen=True):
     """Size, intrinsics and radar-to-camera extrinsics.
 
