@@ -16,9 +16,10 @@ import cv2
 import numpy as np
 import zstandard
 
+from common.messages.camera import DEPTH_CODECS as CODECS
+
 DEPTH_UNITS_M = 0.001
 MAX_UNITS = 65535
-CODECS = ("zstd", "png")
 DEFAULT_CODEC = "zstd"
 ZSTD_LEVEL = 1
 PNG_LEVEL = 1

@@ -4,6 +4,9 @@ import msgspec
 
 from common.messages.header import Header
 
+# DepthFrame.codec values (common/depth_image.py implements them).
+DEPTH_CODECS = ("zstd", "png")
+
 
 class CompressedFrame(msgspec.Struct, frozen=True):
     """One JPEG frame. `header.stamp_ns` is the capture time (wall clock)."""
@@ -66,3 +69,4 @@ class CameraInfo(msgspec.Struct, frozen=True):
     frames_decimated: int = 0  # skipped because the source is faster than `fps`
     reopens: int = 0           # times the source failed while streaming and was reopened
     errors: dict[str, int] = msgspec.field(default_factory=dict)  # read_errors by reason
+    depth_published: int = 0   # DepthFrames published (0: the source has no depth)
