@@ -236,7 +236,8 @@ def test_depth_goes_out_beside_its_frame_decimated_lossless_and_a_bad_one_is_cou
         for i, depth in enumerate(script):
             src.script.put(Frame(img, 1000 + i, depth))
             # One at a time: a frame waiting in the slot would be replaced by the next.
-            wait_for(lambda n=i + 1: len(frames) == n and pipe.core.pending is None, 30,
+            n = i + 1
+            wait_for(lambda: len(frames) == n and pipe.core.pending is None, 30,  # noqa: B023
                      what=f"frame {i} published")
         wait_for(lambda: pipe.core.stats.errors.snapshot().get("depth_error") == 2, 30)
     assert len(depths) == 1 and pipe.core.stats.depth_published == 1
