@@ -121,3 +121,37 @@ def test_without_depth_a_depth_verifier_finds_the_camera_unavailable_and_says_wh
     got = run(make_core(verifier={"name": "edge_density"}), track(x=10.0, vx=-8.0),
               frames=feed(with_depth(None)))
     assert got.targets.verifier_status is VerifierStatus.OK
+
+
+class SubscribingBus:
+    """What FusionShell.start needs: records each raw subscription's key and callback."""
+
+    def __init__(self) -> None:
+        self.subs: dict[str, object] = {}
+
+    def publisher(self, spec, **params):
+        return None
+
+    def subscribe_raw(self, spec, callback, **params):
+        self.subs[spec.name] = callback
+        return type("Sub", (), {"undeclare": lambda self: None})()
+
+    subscribe = subscribe_raw
+
+
+@pytest.mark.parametrize(("verifier", "subscribed"), [("depth", True),
+                                                      ("edge_density", False)])
+def test_the_shell_subscribes_to_depth_only_for_a_verifier_that_needs_it(verifier, subscribed):
+    from services.fusion.shell import FusionShell
+
+    bus = SubscribingBus()
+    core = make_core(verifier={"name": verifier})
+    dec = FrameDecoder(W, H, logging.getLogger("test"))
+    shell = FusionShell(bus, core.s, core, dec, logging.getLogger("test"))  # type: ignore[arg-type]
+    shell.start()
+    try:
+        assert ("camera_depth" in bus.subs) is subscribed
+        if subscribed:
+            assert bus.subs["camera_depth"] == dec.submit_depth
+    finally:
+        shell.stop()
