@@ -74,6 +74,7 @@ class Combined:
 
     def __init__(self, p: CombinedParams) -> None:
         self.p = p
+        self.uses_depth = p.use_depth   # fusion brings depth when the camera has it
         self.depth: Verifier | None = (create("depth", {"tau": p.depth_tau})
                                        if p.use_depth else None)
         self.look: Verifier | None = None

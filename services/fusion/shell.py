@@ -40,6 +40,7 @@ from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.rhythm import RadarRhythm
+from services.fusion.verifiers import wants_depth
 
 
 class FusionShell:
@@ -83,7 +84,7 @@ class FusionShell:
         for name, decoder in zip(self.camera_names, self.decoders, strict=True):
             decoder.start()
             self._subs.append(self.bus.subscribe_raw(CAMERA_JPEG, decoder.submit, camera=name))
-            if self.core.verifier.needs_depth:
+            if wants_depth(self.core.verifier):
                 self._subs.append(self.bus.subscribe_raw(CAMERA_DEPTH, decoder.submit_depth,
                                                          camera=name))
         self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,

@@ -92,6 +92,13 @@ class Verifier(Protocol):
         ...
 
 
+def wants_depth(v: Verifier) -> bool:
+    """Whether fusion should bring this verifier the camera's depth: it needs depth, or it
+    uses depth when a frame has some (`uses_depth = True`: the combined verifier, which
+    falls back to appearance without it)."""
+    return bool(v.needs_depth or getattr(v, "uses_depth", False))
+
+
 VerifierFactory = Callable[[Mapping[str, ParamValue]], Verifier]
 _REGISTRY: dict[str, VerifierFactory] = {}
 

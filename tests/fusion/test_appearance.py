@@ -231,3 +231,36 @@ def test_combined_refuses_bad_params():
     depth_only = create("combined", {"appearance": "none"})
     assert not depth_only.verify(Observation(np.zeros((10, 10), np.uint8), Roi(0, 0, 5, 5),
                                              Roi(1, 1, 2, 2), 5.0)).verified
+
+
+def test_in_fusion_the_combined_verifier_gets_depth_when_the_camera_has_it(monkeypatch):
+    import logging
+
+    from common.messages import VerifierStatus
+    from services.fusion.frames import FrameDecoder
+    from services.fusion.shell import FusionShell
+    from tests.fusion.helpers import feed, make_core, run, track
+    from tests.fusion.test_depth_check import car
+    from tests.fusion.test_depth_fusion import SubscribingBus, with_depth
+
+    monkeypatch.setitem(_REGISTRY, "hog_linear", fake_look)
+    spec = {"name": "combined", "params": {"weights": "fake.json"}}
+    t = track(x=10.0, vx=-8.0)
+    with_car = with_depth(render_depth(CAL, boxes=(car(10.0),)))
+    got = run(make_core(verifier=spec), t, frames=feed(with_car))
+    detail = got.targets.targets[0].gate_detail
+    assert detail["depth_available"] == 1.0 and "depth_ratio" in detail
+    # A frame without depth: still usable, appearance alone decides and says so.
+    got = run(make_core(verifier=spec), t, frames=feed(with_depth(None)))
+    assert got.targets.verifier_status is VerifierStatus.OK
+    assert got.targets.targets[0].gate_detail["depth_available"] == 0.0
+    # The shell subscribes to depth for it (it uses depth without needing it).
+    bus = SubscribingBus()
+    core = make_core(verifier=spec)
+    dec = FrameDecoder(CAL.width, CAL.height, logging.getLogger("test"))
+    shell = FusionShell(bus, core.s, core, dec, logging.getLogger("test"))  # type: ignore[arg-type]
+    shell.start()
+    try:
+        assert bus.subs["camera_depth"] == dec.submit_depth
+    finally:
+        shell.stop()
