@@ -44,7 +44,7 @@ def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
     else:
         ego_x = world.ego_x_m + v * dt + 0.5 * a * dt * dt
     bodies = [Body(o.index, ObjectKind(o.kind), o.x_m, o.y_m, o.yaw_deg, o.length_m,
-                   o.width_m, o.height_m, o.vx_mps, o.vy_mps).shifted(dt)
+                   o.width_m, o.height_m, o.vx_mps, o.vy_mps, o.z_m).shifted(dt)
               for o in world.objects]
     return bodies, ego_x
 
