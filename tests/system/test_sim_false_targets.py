@@ -180,3 +180,20 @@ def test_background_edge_density_is_that_of_real_images_and_obstacles_still_pass
 def test_plain_test_scenes_keep_a_sparse_background(cal):
     s = survey(Renderer(cal, seed=3, roadside=False))
     assert float(np.median(s.background)) < 0.03
+
+
+def test_the_evaluation_labels_a_false_target_track_as_a_negative():
+    from common.messages import Header
+    from tools.eval.sim_truth import label_track
+    from tools.sim.messages import SimObject, SimWorld
+
+    objects = (SimObject(0, "plate", 20.0, 0.0, 0.0, 0.8, 0.8, 0.02, 0.0, 0.0),
+               SimObject(1, "box", 30.3, 0.0, 0.0, 0.6, 0.6, 0.6, 0.0, 0.0),
+               SimObject(2, "sign", 40.1, 0.0, 0.0, 0.2, 9.0, 1.6, 0.0, 0.0, 5.0))
+    world = SimWorld(header=Header(0, "sim", 1_000, 1_000), scenario="t", run=1, active=True,
+                     t_s=0.0, ego_x_m=0.0, ego_speed_mps=0.0, ego_accel_mps2=0.0, gap_m=None,
+                     ttc_s=None, objects=objects, seed=0, brightness=1.0, noise=0.0)
+    assert label_track(world, 1_000, 19.6, 0.0) == ("NO", "plate")
+    assert label_track(world, 1_000, 30.0, 0.0) == ("YES", "box")
+    assert label_track(world, 1_000, 40.0, 0.0) == ("NO", "sign")
+    assert label_track(world, 1_000, 50.0, 0.0) == ("NO", "")
