@@ -50,7 +50,9 @@ MAX_GROUND_M = 250.0
 HAZE_M = 120.0
 ROADSIDE_Y_M = 9.5              # hedges and house fronts this far left and right
 BACKDROP_M = 150.0              # the far tree line, this far ahead of the camera
-BACKDROP_WIDTH_M = 600.0
+BACKDROP_WIDTH_M = 400.0
+BACKDROP_RES_M = 0.1
+_GEOMETRY_ROWS = 40             # rows per band when building the roadside geometry
 BACKDROP_CLARITY = 0.8          # its contrast through the haze (a clear day)
 _MIP_FACTORS = (1, 4, 16)        # texture levels: 2 cm, 8 cm, 32 cm per texel
 _SHADE_REAR, _SHADE_SIDE, _SHADE_TOP = 1.0, 0.78, 1.12
@@ -228,11 +230,14 @@ class Renderer:
         t = np.clip(elev / 35.0, 0.0, 1.0)[..., None]
         top = np.array([215, 170, 120], np.float64)
         sky = sprites.HAZE_BGR * (1 - t) + top * t
-        background = np.where(ground, sprites.HAZE_BGR, sky)
+        background = np.where(ground, sprites.HAZE_BGR, sky).astype(np.float32)
+        del sky
         if backdrop_px is not None:
             colour, alpha = backdrop_px
-            a = (alpha * BACKDROP_CLARITY)[..., None]
-            background = background * (1 - a) + colour * a
+            a = (alpha * np.float32(BACKDROP_CLARITY))[..., None]
+            background *= 1 - a
+            background += colour * a
+            del colour, alpha, a
         self._background = background.round().astype(np.uint8)
 
     def _roadside_geometry(self, rays: np.ndarray, depth: np.ndarray, dist: np.ndarray
@@ -240,61 +245,74 @@ class Renderer:
         """Hedges and house fronts at +-ROADSIDE_Y_M and the backdrop BACKDROP_M ahead:
         where each pixel's ray meets them before the ground. Sets the wall bands (texture
         level, box, texture coordinates, weights), hides the ground behind them; returns
-        the depth and horizontal distance with them, and the backdrop's colour and alpha
-        per pixel (it stands still relative to the ego, like a far skyline)."""
+        the depth and horizontal distance with them (`depth` and `dist` updated in
+        place), and the backdrop's colour and alpha per pixel (it stands still relative
+        to the ego, like a far skyline). Computed a band of rows at a time: whole-image
+        float64 temporaries would raise the camera process's peak memory by tens of MB."""
         cam = self.cam_pos
-        rx, ry, rz = rays[..., 0], rays[..., 1], rays[..., 2]
-        near = np.where(depth > 0, depth, np.inf)
-        # Walls: y = +-ROADSIDE_Y_M, z in [0, SCENERY_HEIGHT_M].
-        side = np.where(ry >= 0, ROADSIDE_Y_M, -ROADSIDE_Y_M)
-        sw = np.where(np.abs(ry) > 1e-9, (side - cam[1]) / np.where(np.abs(ry) > 1e-9, ry, 1.0),
-                      1e9)
-        zw = cam[2] + sw * rz
-        wall = (sw > 0) & (zw >= 0) & (zw <= sprites.SCENERY_HEIGHT_M) & (sw < near) & (
-            sw * rx < MAX_GROUND_M)
-        near = np.where(wall, sw, near)
-        wx = cam[0] + sw * rx
-        # The backdrop: x = cam x + BACKDROP_M, drawn where nothing nearer is hit.
-        sb = np.where(rx > 1e-9, BACKDROP_M / np.where(rx > 1e-9, rx, 1.0), np.inf)
-        zb = cam[2] + sb * rz
-        yb = cam[1] + sb * ry
+        h, w = self.height, self.width
         tex = sprites.backdrop_texture(np.random.default_rng((self._seed, 7)),
-                                       BACKDROP_WIDTH_M, 0.08)
+                                       BACKDROP_WIDTH_M, BACKDROP_RES_M)
         th, tw = tex.shape[:2]
-        col = ((BACKDROP_WIDTH_M / 2 - yb) / 0.08).astype(np.float32)
-        row = ((sprites.BACKDROP_HEIGHT_M - zb) / 0.08).astype(np.float32)
-        inside = (sb < near) & (zb >= 0) & (zb <= sprites.BACKDROP_HEIGHT_M) & (col >= 0) & (
-            col < tw) & (row >= 0) & (row < th)
-        sampled = cv2.remap(tex, np.where(inside, col, -1).astype(np.float32),
-                            np.where(inside, row, -1).astype(np.float32), cv2.INTER_AREA,
-                            borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0))
-        alpha = np.where(inside, sampled[..., 3] / 255.0, 0.0)
-        solid = alpha > 0.5
-        near = np.where(solid, sb, near)
+        wall = np.zeros((h, w), bool)
+        solid = np.zeros((h, w), bool)
+        zw = np.zeros((h, w), np.float32)
+        wx = np.zeros((h, w), np.float32)
+        level = np.zeros((h, w), np.uint8)
+        colour = np.zeros((h, w, 3), np.uint8)
+        alpha = np.zeros((h, w), np.float32)
+        for r0 in range(0, h, _GEOMETRY_ROWS):
+            r1 = min(r0 + _GEOMETRY_ROWS, h)
+            rx, ry, rz = rays[r0:r1, :, 0], rays[r0:r1, :, 1], rays[r0:r1, :, 2]
+            d = depth[r0:r1]
+            near = np.where(d > 0, d, np.inf)
+            # Walls: y = +-ROADSIDE_Y_M, z in [0, SCENERY_HEIGHT_M].
+            side = np.where(ry >= 0, ROADSIDE_Y_M, -ROADSIDE_Y_M)
+            steep = np.abs(ry) > 1e-9
+            sw = np.where(steep, (side - cam[1]) / np.where(steep, ry, 1.0), 1e9)
+            z = cam[2] + sw * rz
+            hit = (sw > 0) & (z >= 0) & (z <= sprites.SCENERY_HEIGHT_M) & (sw < near) & (
+                sw * rx < MAX_GROUND_M)
+            near = np.where(hit, sw, near)
+            wall[r0:r1], zw[r0:r1], wx[r0:r1] = hit, z, cam[0] + sw * rx
+            footprint = sw / self.cal.k[0, 0] / sprites.SCENERY_RES_M   # texels per pixel
+            level[r0:r1] = np.where(footprint > 6.0, 2, np.where(footprint > 1.5, 1, 0))
+            dist[r0:r1] = np.where(hit, np.hypot(sw * rx, sw * ry), dist[r0:r1])
+            # The backdrop: x = cam x + BACKDROP_M, where nothing nearer is hit.
+            ahead = rx > 1e-9
+            sb = np.where(ahead, BACKDROP_M / np.where(ahead, rx, 1.0), np.inf)
+            zb = cam[2] + sb * rz
+            col = ((BACKDROP_WIDTH_M / 2 - (cam[1] + sb * ry)) / BACKDROP_RES_M)
+            row = ((sprites.BACKDROP_HEIGHT_M - zb) / BACKDROP_RES_M)
+            inside = (sb < near) & (col >= 0) & (col < tw) & (row >= 0) & (row < th)
+            sampled = cv2.remap(tex, np.where(inside, col, -1).astype(np.float32),
+                                np.where(inside, row, -1).astype(np.float32),
+                                cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                                borderValue=(0, 0, 0, 0))
+            a = np.where(inside, sampled[..., 3] / np.float32(255.0), 0.0)
+            opaque = a > 0.5
+            solid[r0:r1] = opaque
+            alpha[r0:r1] = np.where(opaque, 1.0, a)
+            colour[r0:r1] = sampled[..., :3]
+            near = np.where(opaque, sb, near)
+            d[:] = np.where(np.isfinite(near), near, 0.0)
         self.ground &= ~(wall | solid)
-        depth = np.where(np.isfinite(near), near, 0.0)
-        # Horizontal distance for the haze: the ground's, the walls'; the backdrop's haze
-        # is part of its colour.
-        dist = np.where(wall, np.hypot(sw * rx, sw * ry), dist)
-        # Wall texture coordinates (rows along x, columns up) and a level per pixel from
-        # its texel footprint (metres per pixel / texel size).
-        footprint = sw / self.cal.k[0, 0] / sprites.SCENERY_RES_M
-        level = np.where(footprint > 6.0, 2, np.where(footprint > 1.5, 1, 0))
-        fog = np.exp(-dist / HAZE_M)
+        # Wall texture coordinates (rows along x, columns up) at a level per pixel from
+        # its texel footprint; the haze from the horizontal distance.
         for (lv, f), left in itertools.product(enumerate(_MIP_FACTORS), (True, False)):
-            mask = wall & (level == lv) & ((ry >= 0) == left)    # a box per side
+            mask = wall & (level == lv) & ((rays[..., 1] >= 0) == left)    # a box per side
             if not mask.any():
                 continue
             rows_i, cols_i = np.nonzero(mask)
             y0, y1 = int(rows_i.min()), int(rows_i.max()) + 1
             x0, x1 = int(cols_i.min()), int(cols_i.max()) + 1
             m = mask[y0:y1, x0:x1]
-            mx = (zw[y0:y1, x0:x1] / sprites.SCENERY_RES_M / f).astype(np.float32)
-            my = (wx[y0:y1, x0:x1] / sprites.SCENERY_RES_M / f).astype(np.float32)
-            w = np.where(m, fog[y0:y1, x0:x1], 0.0).astype(np.float32)
-            self._walls.append((lv, y0, y1, x0, x1, mx, my, w))
-        colour = sampled[..., :3].astype(np.float64)
-        return depth, dist, (colour, np.where(solid, 1.0, alpha))
+            mx = zw[y0:y1, x0:x1] / np.float32(sprites.SCENERY_RES_M * f)
+            my = wx[y0:y1, x0:x1] / np.float32(sprites.SCENERY_RES_M * f)
+            fog = np.exp(-dist[y0:y1, x0:x1] / HAZE_M)
+            weight = np.where(m, fog, 0.0).astype(np.float32)
+            self._walls.append((lv, y0, y1, x0, x1, mx, my, weight))
+        return depth, dist, (colour, alpha)
 
     def _textures(self) -> None:
         base = sprites.road_texture(self._rng)

@@ -308,8 +308,9 @@ BACKDROP_HEIGHT_M = 24.0    # the far tree line and buildings straight ahead
 def _speckle(rng: np.random.Generator, shape: tuple[int, int], density: float,
              amplitude: float) -> np.ndarray:
     """Sparse single-texel spots of +-amplitude (stones in asphalt, leaves, gravel)."""
-    spots = (rng.random(shape) < density).astype(np.float32)
-    sign = np.where(rng.random(shape) < 0.5, -1.0, 1.0).astype(np.float32)
+    spots = (rng.random(shape, dtype=np.float32) < density).astype(np.float32)
+    sign = np.where(rng.random(shape, dtype=np.float32) < 0.5, np.float32(-1.0),
+                    np.float32(1.0))
     return np.asarray(cv2.GaussianBlur(spots * sign, (0, 0), 0.7) * amplitude * 3.0,
                       np.float32)
 
@@ -317,15 +318,15 @@ def _speckle(rng: np.random.Generator, shape: tuple[int, int], density: float,
 def road_wear(rng: np.random.Generator, img: np.ndarray) -> None:
     """What real asphalt shows a camera, in place on a road texture (rows along x,
     columns along y): aggregate stones, cracks, repair patches and tar seams, with the
-    contrast that gives real road images their edges."""
+    contrast that gives real road images their edges. Applied in bands of rows:
+    whole-tile float temporaries would cost the camera process tens of MB at start."""
     rows, cols = img.shape[:2]
-    f = img.astype(np.float32)
-    f += _speckle(rng, (rows, cols), 0.08, 30.0)[:, :, None]
+    offset = np.zeros((rows, cols), np.int16)
     for _ in range(rows * cols // 30_000):          # repair patches, sharp-edged
         h, w = int(rng.integers(20, 120)), int(rng.integers(20, 120))
         r0, c0 = int(rng.integers(0, rows - h)), int(rng.integers(0, cols - w))
-        f[r0:r0 + h, c0:c0 + w] += float(rng.uniform(-28, 18))
-    crack = np.zeros((rows, cols), np.float32)
+        offset[r0:r0 + h, c0:c0 + w] += int(rng.uniform(-28, 18))
+    crack = np.zeros((rows, cols), np.uint8)
     for _ in range(rows * cols // 6_000):           # cracks and tar seams
         p = np.array([rng.integers(0, cols), rng.integers(0, rows)], np.float64)
         angle = rng.uniform(0, 2 * np.pi)
@@ -334,9 +335,14 @@ def road_wear(rng: np.random.Generator, img: np.ndarray) -> None:
             angle += rng.normal(0, 0.6)
             p = p + rng.uniform(5, 25) * np.array([np.cos(angle), np.sin(angle)])
             pts.append(p.copy())
-        cv2.polylines(crack, [np.array(pts, np.int32)], False, 1.0, int(rng.integers(1, 5)))
-    f -= crack[:, :, None] * 45.0
-    img[:] = np.clip(f, 0, 255).astype(np.uint8)
+        cv2.polylines(crack, [np.array(pts, np.int32)], False, 1, int(rng.integers(1, 5)))
+    offset -= crack.astype(np.int16) * 45
+    del crack
+    for r0 in range(0, rows, 200):
+        r1 = min(r0 + 200, rows)
+        f = img[r0:r1].astype(np.float32)
+        f += (_speckle(rng, (r1 - r0, cols), 0.08, 30.0) + offset[r0:r1])[:, :, None]
+        img[r0:r1] = np.clip(f, 0, 255).astype(np.uint8)
 
 
 def roadside_texture(rng: np.random.Generator) -> np.ndarray:
