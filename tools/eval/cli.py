@@ -33,12 +33,12 @@ from typing import Any
 
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, load_config, parse_config
+from common.depth_error import D435Noise
 from common.log import add_log_level, setup_logging
 from services.fusion.verifiers import VerifierConfigError
 from tools.eval import labels as labelfile
 from tools.eval import plots, tables
 from tools.eval.dataset_rois import DEPTH_MODES, DatasetSettings
-from tools.eval.depth import D435Noise
 from tools.eval.labels import LabelFileError
 from tools.eval.recording import RecordingSettings
 from tools.eval.records import (

@@ -1,0 +1,159 @@
+"""The depth verifier: does a surface stand in the track's column at the radar's range?
+
+A real obstacle fills part of the column 0.3-2.2 m above the ground at the track's range;
+a radar false target - metal on the road (a plate, a manhole cover), a sign overhead, a
+multipath ghost - leaves that part of the column empty at that range: the depth there is
+the road behind, the sky, or nothing.
+
+Each pixel of the window (the ROI's rows; the column box's columns, widened to
+`min_width_px` for the paper's one-pixel column) is a ray of the calibration. A pixel is
+in the band when its ray, at the track's distance from the camera, lies `min_height_m` to
+`max_height_m` above the ground; it is a hit when its measured depth puts its 3-D point
+in that band (height from its own depth, so a clipped column or a tilted camera does not
+move the band) at the track's horizontal distance from the camera within the tolerance
+
+    tol(r) = k_sigma * rms(r) + margin_m,  rms(r) = r^2 * subpixel / (f_px * baseline)
+
+the D435's RMS depth error after Intel's white paper "Tuning depth cameras for best
+performance" (common/depth_error.py, the same model the evaluation applies to lidar
+depth); `margin_m` covers the radar's range error and the obstacle's own depth.
+
+    score = hits / band pixels with a return
+
+(0 when fewer than `min_returns` band pixels have a return: nothing there to confirm),
+verified iff score >= tau. Pixels without a return (0) count neither way, so the score
+means the same on a dense D435 image and on sparse lidar depth. Distortion is removed
+from the window's pixels when the calibration has any.
+
+What depth cannot tell: a structure that is really there at the range - a guard rail, a
+wall, a pole, a tree - fills the band like an obstacle does; the appearance verifiers
+judge those.
+"""
+
+from collections.abc import Mapping
+from typing import Annotated
+
+import cv2
+import msgspec
+import numpy as np
+
+from common.calibration import Calibration
+from common.depth_error import D435Noise
+from services.fusion.verifiers import (
+    GateResult,
+    Observation,
+    ParamValue,
+    Verifier,
+    _parse,
+    register,
+)
+
+Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
+
+
+class DepthParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    tau: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.15
+    min_height_m: Metres = 0.3
+    max_height_m: Metres = 2.2
+    k_sigma: Annotated[float, msgspec.Meta(ge=0, le=10)] = 2.0
+    margin_m: Metres = 0.3
+    # The depth camera's model (the D435 at 848x480).
+    focal_px: Annotated[float, msgspec.Meta(gt=0, le=10000)] = 449.0
+    baseline_m: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.050
+    subpixel: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.08
+    min_width_px: Annotated[int, msgspec.Meta(ge=1, le=1000)] = 24
+    min_returns: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 8
+
+    def __post_init__(self) -> None:
+        if self.min_height_m >= self.max_height_m:
+            raise ValueError("min_height_m must be below max_height_m")
+
+
+def _window_cols(obs: Observation, min_width: int) -> tuple[int, int]:
+    """Columns [c0, c1) of the window: the column box's, widened about its centre to
+    `min_width` within the ROI."""
+    col, roi = obs.column, obs.roi
+    c0, c1 = col.x, col.x + col.w
+    if c1 - c0 < min_width:
+        mid = (c0 + c1) / 2.0
+        c0 = round(mid - min_width / 2.0)
+        c1 = c0 + min_width
+    return max(c0, roi.x), min(c1, roi.x + roi.w)
+
+
+def _rays(cal: Calibration, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised image coordinates (x/z, y/z) of the pixels u (W,) x v (H,), each (H, W)
+    float32 (broadcast rows and columns when there is no distortion)."""
+    k = cal.k
+    if not np.any(cal.dist):
+        yn = ((v - k[1, 2]) / k[1, 1])[:, None]
+        xn = ((u[None, :] - k[0, 2] - k[0, 1] * yn) / k[0, 0])
+        return xn.astype(np.float32), np.broadcast_to(yn, xn.shape).astype(np.float32)
+    grid = np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 1, 2).astype(np.float64)
+    norm = cv2.undistortPoints(grid, k, cal.dist).reshape(len(v), len(u), 2)
+    return norm[..., 0].astype(np.float32), norm[..., 1].astype(np.float32)
+
+
+class DepthConsistency:
+    """The depth verifier (module docstring)."""
+
+    name = "depth"
+    needs_depth = True
+
+    def __init__(self, p: DepthParams) -> None:
+        self.p = p
+        self.model = D435Noise(focal_px=p.focal_px, baseline_m=p.baseline_m,
+                               subpixel=p.subpixel, hole_rate=0.0)
+
+    def params(self) -> dict[str, ParamValue]:
+        return msgspec.structs.asdict(self.p)
+
+    def tolerance_m(self, distance_m: float) -> float:
+        return float(self.p.k_sigma * self.model.rms_m(distance_m) + self.p.margin_m)
+
+    def verify(self, obs: Observation) -> GateResult:
+        """Raises ValueError when the observation lacks depth, calibration or xy_m
+        (fusion and the evaluation give all three to a verifier that needs depth)."""
+        if obs.depth_m is None or obs.calibration is None or obs.xy_m is None:
+            raise ValueError("the depth verifier needs depth_m, calibration and xy_m")
+        p, cal, roi = self.p, obs.calibration, obs.roi
+        c0, c1 = _window_cols(obs, p.min_width_px)
+        r0, r1 = roi.y, roi.y + roi.h
+        # The camera's centre in the ground frame, and the track's distance from it.
+        centre = -cal.r.T @ cal.t
+        expected = float(np.hypot(obs.xy_m[0] - centre[0], obs.xy_m[1] - centre[1]))
+        tol = self.tolerance_m(expected)
+        xn, yn = _rays(cal, np.arange(c0, c1, dtype=np.float64),
+                       np.arange(r0, r1, dtype=np.float64))
+        # Each ray in the ground frame (R^T (xn, yn, 1)), per unit of camera depth: its
+        # horizontal run and its rise.
+        r = cal.r.astype(np.float32)
+        gx = r[0, 0] * xn + r[1, 0] * yn + r[2, 0]
+        gy = r[0, 1] * xn + r[1, 1] * yn + r[2, 1]
+        rise = r[0, 2] * xn + r[1, 2] * yn + r[2, 2]
+        run = np.hypot(gx, gy)
+        cz = np.float32(centre[2])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            band_h = cz + expected * rise / run
+        band = (run > 1e-6) & (band_h >= p.min_height_m) & (band_h <= p.max_height_m)
+        d = obs.depth_m[r0:r1, c0:c1]
+        returns = band & (d > 0)
+        n_returns = int(np.count_nonzero(returns))
+        dist = d * run
+        height = cz + d * rise
+        hit = (returns & (np.abs(dist - expected) <= tol)
+               & (height >= p.min_height_m) & (height <= p.max_height_m))
+        n_hit = int(np.count_nonzero(hit))
+        near = int(np.count_nonzero(returns & (dist < expected - tol)))
+        score = n_hit / n_returns if n_returns >= p.min_returns else 0.0
+        band_px = int(np.count_nonzero(band))
+        return GateResult(score, score >= p.tau,
+                          {"returns": float(n_returns), "band_px": float(band_px),
+                           "hits": float(n_hit),
+                           "nearer": near / n_returns if n_returns else 0.0,
+                           "expected_m": expected, "tol_m": tol})
+
+
+@register("depth")
+def _depth(params: Mapping[str, ParamValue]) -> Verifier:
+    return DepthConsistency(_parse(params, DepthParams, "depth"))
