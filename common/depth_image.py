@@ -52,8 +52,9 @@ def encode_depth(units: np.ndarray, codec: str = DEFAULT_CODEC) -> bytes:
     """A uint16 (H, W) depth image to bytes. Raises ValueError (dtype, shape, codec)."""
     if units.dtype != np.uint16 or units.ndim != 2:
         raise ValueError(f"expected 2-D uint16 depth, got {units.dtype} {units.shape}")
+    units = np.ascontiguousarray(units)      # a decimated view has strides
     if codec == "zstd":
-        return _ZSTD_C.compress(np.ascontiguousarray(units, dtype="<u2").tobytes())
+        return _ZSTD_C.compress(units.astype("<u2", copy=False).tobytes())
     if codec == "png":
         ok, buf = cv2.imencode(".png", units, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
         if not ok:

@@ -35,6 +35,9 @@ def test_every_codec_is_lossless_and_checks_the_size(codec):
         decode_depth(data[: len(data) // 2], codec, 64, 48)
     with pytest.raises(DepthDecodeError):
         decode_depth(b"\x00junk", codec, 64, 48)
+    # A decimated view (strided) codes like a copy.
+    assert np.array_equal(decode_depth(encode_depth(units[::2, ::2], codec), codec, 32, 24),
+                          units[::2, ::2])
 
 
 def test_metres_round_to_millimetres_and_out_of_range_is_no_return():

@@ -11,44 +11,15 @@ from services.fusion.depth_check import DepthConsistency, DepthParams
 from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.verifiers import Observation, VerifierConfigError, create
 from tests.fusion.helpers import CAL
+from tools.eval.depth import Box, box_scene_depth, car_box
 
 PAPER = ColumnProjector(CAL, ColumnGeometry())                 # the one-pixel column
 WIDE = ColumnProjector(CAL, ColumnGeometry(half_width_m=0.54))  # the evaluation's
 
 
-def ground_rays(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
-    """Every pixel's ray in the ground frame per unit of camera depth, and the camera's
-    centre (pinhole: CAL has no distortion)."""
-    assert not np.any(cal.dist)
-    v, u = np.mgrid[0:cal.height, 0:cal.width].astype(np.float64)
-    k = cal.k
-    cam = np.stack([(u - k[0, 2]) / k[0, 0], (v - k[1, 2]) / k[1, 1], np.ones_like(u)], -1)
-    return cam @ cal.r, -cal.r.T @ cal.t
-
-
-def render_depth(cal: Calibration, road: bool = True,
-                 boxes: tuple[tuple[float, float, float, float, float, float], ...] = ()
+def render_depth(cal: Calibration, road: bool = True, boxes: tuple[Box, ...] = ()
                  ) -> np.ndarray:
-    """Camera z of the nearest surface per pixel (0: none): the road plane z = 0 and
-    axis-aligned boxes (x0, x1, y0, y1, z0, z1) of the ground frame."""
-    ray, c = ground_rays(cal)
-    best = np.full(ray.shape[:2], np.inf)
-    if road:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = -c[2] / ray[..., 2]
-        best = np.where((s > 0) & (s < 80), s, best)
-    for x0, x1, y0, y1, z0, z1 in boxes:
-        lo = np.full(best.shape, -np.inf)
-        hi = np.full(best.shape, np.inf)
-        for axis, (a, b) in enumerate(((x0, x1), (y0, y1), (z0, z1))):
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t0 = (a - c[axis]) / ray[..., axis]
-                t1 = (b - c[axis]) / ray[..., axis]
-            lo = np.maximum(lo, np.minimum(t0, t1))
-            hi = np.minimum(hi, np.maximum(t0, t1))
-        inside = (hi >= lo) & (lo > 0)
-        best = np.where(inside & (lo < best), lo, best)
-    return np.where(np.isfinite(best), best, 0.0).astype(np.float32)
+    return box_scene_depth(cal, boxes, road)
 
 
 def observe(depth: np.ndarray | None, x: float, y: float = 0.0,
@@ -60,8 +31,7 @@ def observe(depth: np.ndarray | None, x: float, y: float = 0.0,
     return Observation(gray, roi, column, float(np.hypot(x, y)), depth, CAL, (x, y))
 
 
-def car(x: float, y: float = 0.0) -> tuple[float, float, float, float, float, float]:
-    return (x, x + 4.0, y - 0.9, y + 0.9, 0.2, 1.5)
+car = car_box
 
 
 VERIFIER = create("depth")
