@@ -19,7 +19,8 @@ product separates better than requiring both verdicts (docs/fusion.md): lidar de
 misses part of some objects, and a hard AND loses them. `detail` says which cue decided
 (`decided_depth` or `decided_appearance` is 1: the one with the smaller ratio), both
 ratios, and `depth_available` (0 when the camera has no depth for this frame: appearance
-alone decides, and says so).
+alone decides, and says so). Where depth finds nothing at the range (ratio 0) the score is
+0 and appearance is not computed.
 Edge density is not a cue: on real images it does not separate obstacles from what is
 not one (docs/evaluation.md).
 """
@@ -112,6 +113,11 @@ class Combined:
             d = self.depth.verify(obs)
             detail["depth"] = d.score
             ratios["depth"] = detail["depth_ratio"] = _ratio(d.score, self.p.depth_tau)
+        if have_depth and ratios["depth"] == 0.0:
+            # Nothing stands at the range: the product is 0 whatever the appearance, so
+            # appearance (the dearer cue) is not computed.
+            detail["decided_depth"] = 1.0
+            return GateResult(0.0, False, detail)
         if self.look is not None:
             look, ratio = self._look_ratio(obs)
             detail["appearance"] = look

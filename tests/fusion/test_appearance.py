@@ -210,7 +210,7 @@ def test_combined_needs_both_cues_and_says_which_decided(monkeypatch):
     assert not wall_like.verified and wall_like.detail["decided_appearance"] == 1.0
     empty = look(at_car, bright, road)          # looks fine; nothing stands at the range
     assert not empty.verified and empty.detail["decided_depth"] == 1.0
-    assert empty.score == pytest.approx(0.0)
+    assert empty.score == pytest.approx(0.0) and "appearance" not in empty.detail
     no_depth = look(at_car, bright, None)       # a camera without depth
     assert no_depth.verified and no_depth.detail["depth_available"] == 0.0
     assert no_depth.score == pytest.approx(230 / 255 / 0.5)
