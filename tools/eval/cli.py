@@ -140,6 +140,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     demo.add_argument("--scenarios", default="", help="comma-separated (default: the "
                                                       "demo's)")
     demo.add_argument("--camera-fps", type=float, default=30.0)
+    demo.add_argument("--fusion-config", help="fusion TOML of the closed loop (default: "
+                                             "the demo's, deploy/fusion.toml)")
     return parser.parse_args(argv)
 
 
@@ -343,7 +345,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "record-demo":
             from tools.eval.demo_recording import record_demo
 
-            return record_demo(Path(args.out), args.scenarios, args.camera_fps)
+            return record_demo(Path(args.out), args.scenarios, args.camera_fps,
+                               Path(args.fusion_config) if args.fusion_config else None)
         if args.command in ("rois", "run"):
             records, info, failed = _extract(args)
             out = Path(args.out)

@@ -79,11 +79,13 @@ class BusRecorder:
         self.writer.close()
 
 
-def record_demo(out: Path, scenarios: str, camera_fps: float) -> int:
-    """Run and record the scenarios; 0 when recorded (whatever the verdicts), 2 when the
-    stack could not start."""
+def record_demo(out: Path, scenarios: str, camera_fps: float,
+                fusion_config: Path | None = None) -> int:
+    """Run and record the scenarios, fusion configured by `fusion_config` (default: the
+    demo's); 0 when recorded (whatever the verdicts), 2 when the stack could not start."""
     from tools.demo import DEMO_SCENARIOS, pick_scenarios
     from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
+    from tools.sim.stack import FUSION_CONFIG
 
     chosen = pick_scenarios(scenarios or ",".join(DEMO_SCENARIOS))
     stop = stop_event_on_signals(grace_s=None)
@@ -92,7 +94,7 @@ def record_demo(out: Path, scenarios: str, camera_fps: float) -> int:
     recorder = BusRecorder(out)
     try:
         with closed_loop(out.parent / f"{out.stem}-stack", camera_fps=camera_fps,
-                         log=sys.stderr) as loop:
+                         log=sys.stderr, fusion_config=fusion_config or FUSION_CONFIG) as loop:
             recorder.subscribe(loop.bus)
             for i, sc in enumerate(chosen, 1):
                 if stop.is_set():
