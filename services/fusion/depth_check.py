@@ -25,15 +25,18 @@ and rear window: at 5 m they fill much of the column 1-3 m behind the bumper).
     score = hits / band pixels with a return
 
 (0 when fewer than `min_returns` band pixels have a return: nothing there to confirm),
-verified iff score >= tau. Pixels without a return (0) count neither way, so the score
-means the same on a dense D435 image and on sparse lidar depth. Distortion is removed
-from the window's pixels when the calibration has any.
+verified iff score >= tau. Only the window's pixels with a return are placed in 3-D
+(distortion removed when the calibration has any); of more than `max_pixels` returns a
+fixed low-discrepancy sample of that many is used. Pixels without a return (0) count
+neither way, so the score means the same on a dense D435 image and on sparse lidar
+depth.
 
 What depth cannot tell: a structure that is really there at the range - a guard rail, a
 wall, a pole, a tree - fills the band like an obstacle does; the appearance verifiers
 judge those.
 """
 
+import math
 from collections.abc import Mapping
 from typing import Annotated
 
@@ -53,6 +56,7 @@ from services.fusion.verifiers import (
 )
 
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 class DepthParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -68,6 +72,9 @@ class DepthParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     subpixel: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.08
     min_width_px: Annotated[int, msgspec.Meta(ge=1, le=1000)] = 24
     min_returns: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 8
+    # More returns than this in the window are sampled down to about this many: the score
+    # is a share, and depth decimated by the camera repeats each value anyway.
+    max_pixels: Annotated[int, msgspec.Meta(ge=64, le=1_000_000)] = 2048
 
     def __post_init__(self) -> None:
         if self.min_height_m >= self.max_height_m:
@@ -87,16 +94,15 @@ def _window_cols(obs: Observation, min_width: int) -> tuple[int, int]:
 
 
 def _rays(cal: Calibration, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised image coordinates (x/z, y/z) of the pixels u (W,) x v (H,), each (H, W)
-    float32 (broadcast rows and columns when there is no distortion)."""
+    """Normalised image coordinates (x/z, y/z) of the pixels (u, v) (1-D, float64),
+    distortion removed."""
     k = cal.k
     if not np.any(cal.dist):
-        yn = ((v - k[1, 2]) / k[1, 1])[:, None]
-        xn = ((u[None, :] - k[0, 2] - k[0, 1] * yn) / k[0, 0])
-        return xn.astype(np.float32), np.broadcast_to(yn, xn.shape).astype(np.float32)
-    grid = np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 1, 2).astype(np.float64)
-    norm = cv2.undistortPoints(grid, k, cal.dist).reshape(len(v), len(u), 2)
-    return norm[..., 0].astype(np.float32), norm[..., 1].astype(np.float32)
+        yn = (v - k[1, 2]) / k[1, 1]
+        return (u - k[0, 2] - k[0, 1] * yn) / k[0, 0], yn
+    pts = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
+    norm = cv2.undistortPoints(pts, k, cal.dist).reshape(-1, 2)
+    return norm[:, 0], norm[:, 1]
 
 
 class DepthConsistency:
@@ -128,33 +134,39 @@ class DepthConsistency:
         centre = -cal.r.T @ cal.t
         expected = float(np.hypot(obs.xy_m[0] - centre[0], obs.xy_m[1] - centre[1]))
         tol = self.tolerance_m(expected)
-        xn, yn = _rays(cal, np.arange(c0, c1, dtype=np.float64),
-                       np.arange(r0, r1, dtype=np.float64))
-        # Each ray in the ground frame (R^T (xn, yn, 1)), per unit of camera depth: its
-        # horizontal run and its rise.
-        r = cal.r.astype(np.float32)
-        gx = r[0, 0] * xn + r[1, 0] * yn + r[2, 0]
-        gy = r[0, 1] * xn + r[1, 1] * yn + r[2, 1]
+        window = obs.depth_m[r0:r1, c0:c1]
+        rows, cols = np.nonzero(window > 0)
+        if len(rows) > p.max_pixels:
+            # A low-discrepancy sample (golden-ratio sequence) of the returns: spread over
+            # the window like a random one, the same on every call, and without the
+            # aliasing of every n-th pixel against a window's width or lidar lines.
+            keep = (np.arange(p.max_pixels) * _GOLDEN % 1.0 * len(rows)).astype(np.intp)
+            rows, cols = rows[keep], cols[keep]
+        d = window[rows, cols].astype(np.float64)
+        xn, yn = _rays(cal, cols + float(c0), rows + float(r0))
+        # Each return's ray in the ground frame (R^T (xn, yn, 1)) per unit of camera
+        # depth: its horizontal run and its rise.
+        r = cal.r
+        run = np.hypot(r[0, 0] * xn + r[1, 0] * yn + r[2, 0],
+                       r[0, 1] * xn + r[1, 1] * yn + r[2, 1])
         rise = r[0, 2] * xn + r[1, 2] * yn + r[2, 2]
-        run = np.hypot(gx, gy)
-        cz = np.float32(centre[2])
+        cz = float(centre[2])
+        # In the band: the ray at the track's distance stands min..max height above the
+        # ground, i.e. rise / run within [(min - cz) / r, (max - cz) / r].
         with np.errstate(divide="ignore", invalid="ignore"):
-            band_h = cz + expected * rise / run
-        band = (run > 1e-6) & (band_h >= p.min_height_m) & (band_h <= p.max_height_m)
-        d = obs.depth_m[r0:r1, c0:c1]
-        returns = band & (d > 0)
-        n_returns = int(np.count_nonzero(returns))
+            slope = rise / run
+        band = ((slope >= (p.min_height_m - cz) / expected)
+                & (slope <= (p.max_height_m - cz) / expected))
+        n_returns = int(np.count_nonzero(band))
         dist = d * run
-        height = cz + d * rise
-        hit = (returns & (dist >= expected - tol) & (dist <= expected + tol + p.extent_m)
-               & (height >= p.min_height_m) & (height <= p.max_height_m))
+        lift = d * rise                 # height above the camera's centre
+        hit = (band & (dist >= expected - tol) & (dist <= expected + tol + p.extent_m)
+               & (lift >= p.min_height_m - cz) & (lift <= p.max_height_m - cz))
         n_hit = int(np.count_nonzero(hit))
-        near = int(np.count_nonzero(returns & (dist < expected - tol)))
+        near = int(np.count_nonzero(band & (dist < expected - tol)))
         score = n_hit / n_returns if n_returns >= p.min_returns else 0.0
-        band_px = int(np.count_nonzero(band))
         return GateResult(score, score >= p.tau,
-                          {"returns": float(n_returns), "band_px": float(band_px),
-                           "hits": float(n_hit),
+                          {"returns": float(n_returns), "hits": float(n_hit),
                            "nearer": near / n_returns if n_returns else 0.0,
                            "expected_m": expected, "tol_m": tol})
 
