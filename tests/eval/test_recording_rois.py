@@ -13,7 +13,7 @@ from common.config.loader import parse_config
 from common.imaging import decode_gray
 from common.messages import CompressedFrame, decode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import Observation, available, create
+from services.fusion.verifiers import Observation, create
 from tests.eval.fixtures import BOX_SPEED, GHOST_XY, box_face_x, write_sim_recording
 from tests.fusion.helpers import CAL
 from tools.eval import sim_truth
@@ -80,7 +80,7 @@ def test_scores_are_the_verifiers_on_the_decoded_frame(rec):
         gray = decode_gray(frames[r.frame_ref.seq])
         expected = gate.verify(Observation(gray, Roi(*r.roi), Roi(*r.column), r.range_m))
         assert r.scores["edge_density"].score == expected.score == r.density
-        assert set(r.scores) == set(available())
+        assert set(r.scores) == {s.name for s in default_specs()}
         assert r.scores["edge_density"].us > 0
     # Full-frame timing once per frame used.
     timed = [r for r in records if r.frame_canny_us is not None]

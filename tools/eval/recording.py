@@ -341,9 +341,11 @@ def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
         got = free_rois(Roi(*pos.roi), occupied, cal.width, s.background_per_object, rng)
         if len(got) < s.background_per_object:
             _bump(counters, "background_no_room")
-        dx, dy = pos.column[0] - pos.roi[0], pos.column[1] - pos.roi[1]
+        # The positive's column, moved with its ROI (what a verifier of the column sees).
+        px, py, pw, ph = pos.column
+        dx, dy = px - pos.roi[0], py - pos.roi[1]
         for k, roi in enumerate(got):
-            column = Roi(roi.x + dx, roi.y + dy, pos.column[2], pos.column[3])
+            column = Roi(roi.x + dx, roi.y + dy, pw, ph)
             obs = Observation(gray, roi, column, pos.range_m, depth, cal, xy)
             scores = scorer.score(obs)
             out.append(RoiRecord(
