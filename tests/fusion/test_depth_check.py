@@ -106,3 +106,13 @@ def test_missing_depth_or_geometry_is_an_error_and_bad_params_are_refused():
     with pytest.raises(VerifierConfigError):
         create("depth", {"tau": 2.0})
     assert create("depth", {"tau": 0.3}).params()["tau"] == 0.3
+
+
+def test_known_limit_a_wall_or_rail_at_the_range_passes_like_an_obstacle():
+    # Depth confirms what really stands at the range: a wall along the road's edge and a
+    # guard rail 0.3-0.8 m high (a radar return off either is a real surface).
+    wall = (5.0, 40.0, 3.0, 3.3, 0.0, 2.5)
+    rail = (5.0, 40.0, -3.3, -3.0, 0.3, 0.8)
+    depth = render_depth(CAL, boxes=(wall, rail))
+    assert VERIFIER.verify(observe(depth, 12.0, 3.0)).verified
+    assert VERIFIER.verify(observe(depth, 12.0, -3.0)).verified
