@@ -285,6 +285,8 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
                 depth_cache.clear()       # cycles move forward, like the frame cache
                 depth_cache[key] = cams.depth_at(name, stub.stamp_ns, cal, counters)
             depth = depth_cache[key]
+            if depth is not None:
+                scorer.prepare(cal)
             light, median = lighting(gray)
             world = truth.world_at(stamp) if truth is not None else None
             positives: list[tuple[RoiRecord, tuple[float, float]]] = []
