@@ -135,6 +135,11 @@ class CountingVerifier:
     def params(self) -> dict[str, ParamValue]:
         return self.inner.params()
 
+    def prepare(self, calibration: Calibration) -> None:
+        prepare = getattr(self.inner, "prepare", None)
+        if callable(prepare):
+            prepare(calibration)
+
     def verify(self, obs: Observation) -> GateResult:
         self.runs += 1
         return self.inner.verify(obs)

@@ -30,6 +30,7 @@ from typing import Annotated
 
 import msgspec
 
+from common.calibration import Calibration
 from services.fusion import appearance
 from services.fusion.verifiers import (
     GateResult,
@@ -93,6 +94,13 @@ class Combined:
         if self.look is not None:
             out["appearance_tau"] = self._look_tau
         return out
+
+    def prepare(self, calibration: Calibration) -> None:
+        """The cues' own preparation for a camera (the depth verifier's ray maps)."""
+        for cue in (self.depth, self.look):
+            prepare = getattr(cue, "prepare", None)
+            if callable(prepare):
+                prepare(calibration)
 
     def _look_ratio(self, obs: Observation) -> tuple[float, float]:
         assert self.look is not None

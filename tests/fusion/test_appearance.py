@@ -264,3 +264,14 @@ def test_in_fusion_the_combined_verifier_gets_depth_when_the_camera_has_it(monke
         assert bus.subs["camera_depth"] == dec.submit_depth
     finally:
         shell.stop()
+
+
+def test_combined_prepares_its_depth_cue_for_each_camera(monkeypatch):
+    import services.fusion.depth_check as depth_check
+
+    monkeypatch.setitem(_REGISTRY, "hog_linear", fake_look)
+    seen = []
+    monkeypatch.setattr(depth_check, "ray_maps", lambda cal: seen.append(cal))
+    v = create("combined", {"weights": "fake.json"})
+    v.prepare(CAL)  # type: ignore[attr-defined]
+    assert seen == [CAL]
