@@ -197,3 +197,13 @@ def test_the_evaluation_labels_a_false_target_track_as_a_negative():
     assert label_track(world, 1_000, 30.0, 0.0) == ("YES", "box")
     assert label_track(world, 1_000, 40.0, 0.0) == ("NO", "sign")
     assert label_track(world, 1_000, 50.0, 0.0) == ("NO", "")
+
+
+def test_depth_in_millimetres_is_the_metres_converted(roadside):
+    from common.depth_image import to_units
+
+    bodies = [Body(0, ObjectKind.CAR, 15.0, 0.5, 0.0, 4.4, 1.8, 1.5, 0.0, 0.0),
+              Body(1, ObjectKind.SIGN, 30.1, 0.0, 0.0, 0.2, 9.0, 1.6, 0.0, 0.0, 5.0)]
+    _, metres = roadside.render_rgbd(bodies, 0.0)
+    _, mm = roadside.render_rgbd(bodies, 0.0, millimetres=True)
+    assert mm.dtype == np.uint16 and np.array_equal(mm, to_units(metres))

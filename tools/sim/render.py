@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 
 from common.calibration import Calibration
+from common.depth_image import to_units
 from tools.sim import sprites
 from tools.sim.scenario import CameraLook, ObjectKind
 from tools.sim.world import Body
@@ -108,6 +109,7 @@ class Renderer:
         self.look = look or CameraLook()
         self.roadside = roadside
         self._depth: np.ndarray | None = None     # the depth image being rendered
+        self._static_depth_mm: np.ndarray | None = None
         self.width, self.height = calibration.width, calibration.height
         self.cam_pos = -calibration.r.T @ calibration.t      # camera centre, ground frame
         self._rng = np.random.default_rng(seed)
@@ -348,10 +350,18 @@ class Renderer:
         `ego_x_m`; `headlights`: a night scene lit by the ego's low beams."""
         return self._draw(bodies, ego_x_m, lights, headlights, None)
 
-    def render_rgbd(self, bodies: list[Body], ego_x_m: float) -> tuple[np.ndarray, np.ndarray]:
+    def render_rgbd(self, bodies: list[Body], ego_x_m: float, millimetres: bool = False
+                    ) -> tuple[np.ndarray, np.ndarray]:
         """The BGR frame and its aligned depth: (H, W) float32 camera-frame depth in
-        metres of what each colour pixel shows, 0 where nothing returns (the sky)."""
-        depth = self.static_depth.copy()
+        metres of what each colour pixel shows, 0 where nothing returns (the sky); with
+        `millimetres`, uint16 in DepthFrame's units (common/depth_image.py), converted
+        only where objects are drawn (a whole frame's conversion costs 1-2 ms)."""
+        if millimetres:
+            if self._static_depth_mm is None:
+                self._static_depth_mm = to_units(self.static_depth)
+            depth = self._static_depth_mm.copy()
+        else:
+            depth = self.static_depth.copy()
         return self._draw(bodies, ego_x_m, (), False, depth), depth
 
     def _draw(self, bodies: list[Body], ego_x_m: float, lights: Sequence[Light],
@@ -482,7 +492,7 @@ class Renderer:
             z = d / denom
         ok = opaque & np.isfinite(z) & (z > 0)
         region = self._depth[y0:y1, x0:x1]
-        region[ok] = z[ok]
+        region[ok] = (to_units(np.where(ok, z, 0.0)) if region.dtype == np.uint16 else z)[ok]
 
     def _sprite(self, body: Body, face: str) -> sprites.Sprite:
         key = (body.index, body.kind.value, face)
