@@ -207,3 +207,21 @@ def test_depth_in_millimetres_is_the_metres_converted(roadside):
     _, metres = roadside.render_rgbd(bodies, 0.0)
     _, mm = roadside.render_rgbd(bodies, 0.0, millimetres=True)
     assert mm.dtype == np.uint16 and np.array_equal(mm, to_units(metres))
+
+
+def test_on_the_rendered_depth_the_depth_verifier_sees_the_car_and_not_the_false_targets(
+        roadside):
+    """The simulator's depth carries what the issue's depth check needs: a car fills its
+    column at the radar's range, a manhole cover and an overhead sign leave it empty;
+    the edge-density gate passes all three (the roadside's edges)."""
+    from tools.sim.verifier_probe import probe
+
+    for name, depth_share in (("stationary_car_30kph", (0.95, 1.0)),
+                              ("no_threat_manhole_30kph", (0.0, 0.05)),
+                              ("no_threat_overhead_sign_30kph", (0.0, 0.05))):
+        counts = probe(load_scenario(find_scenario(name)), roadside, ["depth", "edge_density"],
+                       every=3)
+        passed, checked = counts["depth"]
+        assert checked >= 10, name
+        assert depth_share[0] <= passed / checked <= depth_share[1], (name, counts)
+        assert counts["edge_density"][0] >= 0.95 * checked, (name, counts)
