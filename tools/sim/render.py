@@ -374,8 +374,8 @@ class Renderer:
         cam = self.cam_pos[:2]
         rel.sort(key=lambda item: -float(np.hypot(*(item[1] - cam))))
         for body, centre in rel:
-            if centre[0] - cam[0] < 0.3:
-                continue    # behind the camera
+            if centre[0] - cam[0] < 0.3 or body.kind is ObjectKind.GHOST:
+                continue    # behind the camera, or only the radar's (nothing is there)
             lit = self._upright_gain(float(centre[0] - cam[0])) if headlights else 1.0
             if body.kind is ObjectKind.PLATE:
                 self._plate(img, body, centre, lit)
