@@ -338,8 +338,10 @@ class Renderer:
                                          self._weight[r0:r1], self._weight_bg[r0:r1])
         wall_shift = np.float32((ego_x_m % sprites.SCENERY_TILE_M) / sprites.SCENERY_RES_M)
         for lv, y0, y1, x0, x1, mx, my, w in self._walls:
+            # Nearest texel: less than half the time of bilinear on these large boxes,
+            # and at most 1.5 texels a pixel at the nearest level it looks the same.
             texels = cv2.remap(self._wall_tex[lv], mx, my + wall_shift / _MIP_FACTORS[lv],
-                               cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+                               cv2.INTER_NEAREST, borderMode=cv2.BORDER_WRAP)
             region = img[y0:y1, x0:x1]
             region[:] = cv2.blendLinear(texels, region, w, 1.0 - w)
         return img
