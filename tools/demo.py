@@ -57,6 +57,7 @@ DEMO_SCENARIOS = (
     "no_threat_manhole_30kph",
     "no_threat_overhead_sign_30kph",
     "no_threat_guard_rail_bend_20kph",
+    "no_threat_multipath_ghost_20kph",
 )
 
 

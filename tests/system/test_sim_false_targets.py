@@ -28,7 +28,7 @@ from tools.sim.world import Body, World
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
 FALSE_TARGET_SCENARIOS = ("no_threat_manhole_30kph", "no_threat_overhead_sign_30kph",
-                          "no_threat_guard_rail_bend_20kph")
+                          "no_threat_guard_rail_bend_20kph", "no_threat_multipath_ghost_20kph")
 CORRIDOR_M = 1.2          # fusion's default in-path half width (0.9 + 0.3 margin)
 RADAR_PERIOD_S = 0.074
 
@@ -197,3 +197,32 @@ def test_the_evaluation_labels_a_false_target_track_as_a_negative():
     assert label_track(world, 1_000, 30.0, 0.0) == ("YES", "box")
     assert label_track(world, 1_000, 40.0, 0.0) == ("NO", "sign")
     assert label_track(world, 1_000, 50.0, 0.0) == ("NO", "")
+
+
+def test_depth_in_millimetres_is_the_metres_converted(roadside):
+    from common.depth_image import to_units
+
+    bodies = [Body(0, ObjectKind.CAR, 15.0, 0.5, 0.0, 4.4, 1.8, 1.5, 0.0, 0.0),
+              Body(1, ObjectKind.SIGN, 30.1, 0.0, 0.0, 0.2, 9.0, 1.6, 0.0, 0.0, 5.0)]
+    _, metres = roadside.render_rgbd(bodies, 0.0)
+    _, mm = roadside.render_rgbd(bodies, 0.0, millimetres=True)
+    assert mm.dtype == np.uint16 and np.array_equal(mm, to_units(metres))
+
+
+def test_on_the_rendered_depth_the_depth_verifier_sees_the_car_and_not_the_false_targets(
+        roadside):
+    """The simulator's depth carries what the issue's depth check needs: a car fills its
+    column at the radar's range, a manhole cover, an overhead sign and a multipath
+    ghost leave it empty; the edge-density gate passes them all (the roadside's edges)."""
+    from tools.sim.verifier_probe import probe
+
+    for name, depth_share in (("stationary_car_30kph", (0.95, 1.0)),
+                              ("no_threat_manhole_30kph", (0.0, 0.05)),
+                              ("no_threat_overhead_sign_30kph", (0.0, 0.05)),
+                              ("no_threat_multipath_ghost_20kph", (0.0, 0.05))):
+        counts = probe(load_scenario(find_scenario(name)), roadside, ["depth", "edge_density"],
+                       every=3)
+        passed, checked = counts["depth"]
+        assert checked >= 10, name
+        assert depth_share[0] <= passed / checked <= depth_share[1], (name, counts)
+        assert counts["edge_density"][0] >= 0.95 * checked, (name, counts)

@@ -107,14 +107,15 @@ class SimCameraSource(FrameSource):
     def frame_and_depth_at(self, stamp_ns: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The frame and its aligned depth (uint16 mm; None without depth). Raises
         SourceError when the simulator went silent."""
-        image, depth_m = self._scene_at(stamp_ns, with_depth=self.depth)
-        if depth_m is None:
-            return image, None
-        if self.depth_noise is not None:
-            depth_m = self.depth_noise.apply(depth_m, self._noise_rng)
-        return image, to_units(depth_m)
+        if not self.depth:
+            return self._scene_at(stamp_ns, with_depth=False)
+        if self.depth_noise is None:
+            return self._scene_at(stamp_ns, with_depth=True, millimetres=True)
+        image, depth_m = self._scene_at(stamp_ns, with_depth=True)
+        assert depth_m is not None
+        return image, to_units(self.depth_noise.apply(depth_m, self._noise_rng))
 
-    def _scene_at(self, stamp_ns: int, with_depth: bool
+    def _scene_at(self, stamp_ns: int, with_depth: bool, millimetres: bool = False
                   ) -> tuple[np.ndarray, np.ndarray | None]:
         with self._lock:
             world, seen_at = self._world, self._world_at
@@ -132,7 +133,7 @@ class SimCameraSource(FrameSource):
             self.renderer.set_look(CameraLook(brightness=world.brightness, noise=world.noise))
             bodies, ego_x = bodies_at(world, stamp_ns)
         if with_depth:
-            return self.renderer.render_rgbd(bodies, ego_x)
+            return self.renderer.render_rgbd(bodies, ego_x, millimetres)
         return self.renderer.render(bodies, ego_x), None
 
     def read(self) -> Frame:

@@ -37,6 +37,7 @@ class ObjectKind(enum.Enum):
     PLATE = "plate"            # a metal plate or manhole cover, flat on the road
     SIGN = "sign"              # an overhead sign on a gantry, `z_m` above the road
     GUARD_RAIL = "guard_rail"  # one straight segment of a roadside guard rail
+    GHOST = "ghost"            # a multipath ghost: a persistent return where nothing is
 
     @property
     def is_obstacle(self) -> bool:
@@ -44,7 +45,8 @@ class ObjectKind(enum.Enum):
         return self not in FALSE_TARGETS
 
 
-FALSE_TARGETS = frozenset({ObjectKind.PLATE, ObjectKind.SIGN, ObjectKind.GUARD_RAIL})
+FALSE_TARGETS = frozenset({ObjectKind.PLATE, ObjectKind.SIGN, ObjectKind.GUARD_RAIL,
+                           ObjectKind.GHOST})
 
 # length (along the body), width, height in metres
 DEFAULT_SIZE: dict[ObjectKind, tuple[float, float, float]] = {
@@ -55,6 +57,7 @@ DEFAULT_SIZE: dict[ObjectKind, tuple[float, float, float]] = {
     ObjectKind.PLATE: (0.8, 0.8, 0.02),        # a manhole cover's 0.8 m
     ObjectKind.SIGN: (0.2, 9.0, 1.6),          # the board: across the road, 1.6 m tall
     ObjectKind.GUARD_RAIL: (4.0, 0.1, 0.75),   # a W-beam segment, its top 0.75 m high
+    ObjectKind.GHOST: (0.2, 0.2, 0.2),         # where the radar puts it; nothing is there
 }
 # Height of the bottom above the road (a sign's clearance); 0 for everything else.
 DEFAULT_Z_M: dict[ObjectKind, float] = {ObjectKind.SIGN: 5.0}
