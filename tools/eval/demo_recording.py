@@ -2,8 +2,8 @@
 `aeb demo`: the real services on a SIMULATED vehicle, radar, camera and actuator),
 recorded in the project's MCAP layout for `aeb eval`.
 
-Recorded: radar tracks, camera frames and CameraInfo, fusion's targets and brake
-commands, the brake's status and the simulator's ground truth (`sim/world`), each on its
+Recorded: radar tracks, camera frames, their depth and CameraInfo, fusion's targets and
+brake commands, the brake's status and the simulator's ground truth (`sim/world`), each on its
 own channel as the recording layout says. This is a narrow recorder of the evaluation's
 inputs, for machines without a general recorder.
 """
@@ -17,6 +17,7 @@ from typing import Any
 from common.clock import wall_ns
 from common.keys import (
     BRAKE_STATUS,
+    CAMERA_DEPTH,
     CAMERA_INFO,
     CAMERA_JPEG,
     FUSION_BRAKE_CMD,
@@ -29,8 +30,8 @@ from common.service import stop_event_on_signals
 from tools.eval.mcap_io import RecordingWriter
 from tools.sim.messages import SIM_WORLD
 
-SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_INFO, FUSION_TARGETS,
-                                   FUSION_BRAKE_CMD, BRAKE_STATUS, SIM_WORLD)
+SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,
+                                   FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, SIM_WORLD)
 
 
 class BusRecorder:
