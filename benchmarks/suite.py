@@ -3,6 +3,8 @@ table, one JSON file and one PNG chart. `python -m benchmarks` or `aeb bench`.
 
 Sections (each a module with `run(quick, out_dir) -> list[Figure]`):
 - gate: the edge-density gate per ROI vs the paper's naive code, and the full frame;
+- depth: depth frames on the wire (bytes, encode, decode per codec and size) beside the
+  colour JPEG, and the depth verifier per ROI beside the paper's gate;
 - radar: decode + tracking per cycle (object and cluster mode), clusters 50/250/500;
 - fusion: tracks received -> BrakeCommand with 1..128 tracks and 1/2/4 cameras;
 - brake: command receipt -> serial write;
@@ -28,6 +30,8 @@ from common.log import add_log_level, setup_logging
 
 SECTIONS: dict[str, str] = {
     "gate": "benchmarks.bench_gate",
+    "verifiers": "benchmarks.bench_verifiers",
+    "depth": "benchmarks.bench_depth",
     "radar": "benchmarks.bench_radar",
     "fusion": "benchmarks.bench_fusion",
     "brake": "benchmarks.bench_brake",

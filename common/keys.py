@@ -16,6 +16,7 @@ from common.messages import (
     BrakeStatus,
     CameraInfo,
     CompressedFrame,
+    DepthFrame,
     EgoMotion,
     RadarStatus,
     RadarTracks,
@@ -124,6 +125,12 @@ CAMERA_JPEG: KeySpec[CompressedFrame] = KeySpec(
     "camera_jpeg", "camera/{camera}/jpeg", CompressedFrame,
     rate_hz=30.0, max_age_s=0.1, qos=QoS(Priority.DATA, Congestion.DROP),
 )
+# Depth aligned to the JPEG frames, at the rate the camera publishes it (at most the
+# frames'; docs/camera.md). Dropped rather than queued, like the frames.
+CAMERA_DEPTH: KeySpec[DepthFrame] = KeySpec(
+    "camera_depth", "camera/{camera}/depth", DepthFrame,
+    rate_hz=30.0, max_age_s=0.1, qos=QoS(Priority.DATA, Congestion.DROP),
+)
 CAMERA_INFO: KeySpec[CameraInfo] = KeySpec(
     "camera_info", "camera/{camera}/info", CameraInfo,
     rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.BLOCK),
@@ -162,7 +169,7 @@ HEALTH: KeySpec[Any] = KeySpec(
 REGISTRY: dict[str, KeySpec[Any]] = {
     spec.name: spec
     for spec in (
-        RADAR_TRACKS, RADAR_STATUS, CAMERA_JPEG, CAMERA_INFO,
+        RADAR_TRACKS, RADAR_STATUS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,
         FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, HEALTH,
         RADAR_CAN,
     )

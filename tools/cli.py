@@ -35,6 +35,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "can-export": ("tools.can_export", "a CAN log decoded to CSV with the shipped DBC"),
     "eval": ("tools.eval.cli", "evaluate verifiers on labelled ROIs (the paper's tables)"),
     "label": ("tools.eval.labelweb", "label ROIs YES / NO in a local web page"),
+    "train-verifier": ("tools.train_verifier", "train the hog_linear verifier on labelled ROIs"),
 }
 
 

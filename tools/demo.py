@@ -39,6 +39,7 @@ from tools.sim.radar_feed import RadarFeed
 from tools.sim.runner import RunResult
 from tools.sim.scenario import Scenario, all_scenarios, find_scenario, load_scenario
 from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
+from tools.sim.stack import FUSION_CONFIG
 from tools.sim.verdict import SUMMARY_HEADER, Sample, summary_line
 
 DEMO_SCENARIOS = (
@@ -53,6 +54,10 @@ DEMO_SCENARIOS = (
     "no_threat_parked_cars_30kph",
     "no_threat_pedestrian_walking_beside_20kph",
     "no_threat_pedestrian_crossed_20kph",
+    "no_threat_manhole_30kph",
+    "no_threat_overhead_sign_30kph",
+    "no_threat_guard_rail_bend_20kph",
+    "no_threat_multipath_ghost_20kph",
 )
 
 
@@ -70,6 +75,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--candidate", action="store_true",
                         help="also run the candidate fusion instance (deploy/fusion-candidate"
                              ".toml) in shadow mode and print the A/B report at the end")
+    parser.add_argument("--fusion-config", type=Path, default=FUSION_CONFIG,
+                        help="the followed fusion instance's config (default: the shipped "
+                             "deploy/fusion.toml; e.g. deploy/fusion-paper.toml); the brake "
+                             "follows its instance")
     parser.add_argument("--raw-can", action="store_true",
                         help="the radar also publishes its raw CAN frames (to record them "
                              "with `aeb record` for `aeb rerun radar`)")
@@ -130,7 +139,8 @@ def run_demo(args: argparse.Namespace, scenarios: list[Scenario], out: Path) -> 
     actuator: Any = None
     try:
         with closed_loop(out, args.port, args.camera_fps, args.candidate,
-                         log=sys.stdout, raw_can=args.raw_can) as loop:
+                         log=sys.stdout, fusion_config=args.fusion_config,
+                         raw_can=args.raw_can) as loop:
             ab = start_ab(loop.bus) if args.candidate else None
             sim = loop.sim
             for i, sc in enumerate(scenarios, 1):

@@ -13,6 +13,7 @@ import msgspec
 
 from common.config.base import ServiceConfig
 from common.config.paths import ConfigPath
+from common.messages.camera import DEPTH_CODECS
 
 Fps = Annotated[float, msgspec.Meta(ge=0, le=1000)]
 _CAMERA_NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -33,6 +34,7 @@ class RealSenseSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, t
     height: Annotated[int, msgspec.Meta(gt=0)] = 480
     fps: Annotated[int, msgspec.Meta(ge=0, le=90)] = 30   # 0: the camera's fps
     timeout_ms: Annotated[int, msgspec.Meta(ge=10)] = 1000  # no frame for this long: error
+    depth: bool = True          # aligned depth with each frame (a bag without it: colour)
 
 
 class OpenCVSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, tag_field="kind",
@@ -90,6 +92,26 @@ class SyntheticSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, t
 Source = RealSenseSource | OpenCVSource | FolderSource | SyntheticSource
 
 
+class DepthSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The `[camera.depth]` table: how depth from a source that has it is published
+    (CAMERA_DEPTH, beside each JPEG frame with the same capture stamp).
+
+    `decimation` k publishes every k-th pixel of every k-th row (2: 424x240 from the
+    D435's 848x480, a quarter of the bytes; benchmarks/bench_depth.py); `fps` at most this
+    rate (0: with every published frame).
+    """
+
+    publish: bool = True
+    decimation: Annotated[int, msgspec.Meta(ge=1, le=8)] = 2
+    fps: Fps = 0.0
+    codec: str = "zstd"
+
+    def __post_init__(self) -> None:
+        if self.codec not in DEPTH_CODECS:
+            raise ValueError(f"depth codec {self.codec!r}: expected one of "
+                             f"{', '.join(DEPTH_CODECS)}")
+
+
 class CameraSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """The `[camera]` table.
 
@@ -103,6 +125,7 @@ class CameraSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     fps: Annotated[float, msgspec.Meta(gt=0, le=1000)] = 30.0
     jpeg_quality: Annotated[int, msgspec.Meta(ge=1, le=100)] = 80
     source: Source = msgspec.field(default_factory=lambda: RealSenseSource())
+    depth: DepthSettings = msgspec.field(default_factory=DepthSettings)
     stall_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 1.0
     info_period_s: Annotated[float, msgspec.Meta(gt=0)] = 1.0
     reopen_initial_s: Annotated[float, msgspec.Meta(gt=0)] = 0.5

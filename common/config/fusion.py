@@ -11,7 +11,7 @@ from typing import Annotated
 import msgspec
 
 from common.config.base import ServiceConfig
-from common.config.paths import ConfigPath
+from common.config.paths import ConfigPath, path_keys
 from common.config.realtime import RealtimeSettings
 from common.keys import RADAR_TRACKS
 from common.resources import EXAMPLE_CALIBRATION
@@ -86,7 +86,9 @@ class VerifierSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     parameters not given take the verifier's defaults."""
 
     name: str = "edge_density"
-    params: dict[str, ParamValue] = msgspec.field(default_factory=dict)
+    # `weights` (hog_linear, combined) is a file, relative to the config file's folder.
+    params: Annotated[dict[str, ParamValue], path_keys("weights")] = msgspec.field(
+        default_factory=dict)
 
 
 class PathPredictionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -1,10 +1,12 @@
 """Paths inside a configuration file are relative to the file's own folder, so that a
 config works from any current directory and a copied deploy/ folder stays whole.
 
-A config type marks a field as a path with `ConfigPath`; `load_config` resolves every
-marked field of a file it reads (`resolve_paths`). Left as written: empty values, absolute
-paths, URLs (``rtsp://...``) and device indexes (``"0"``). ``~`` is expanded. Paths given
-on a command line stay relative to the current directory, as any command's do.
+A config type marks a field as a path with `ConfigPath`, or the entries of a parameter
+table that are paths with `path_keys(...)` (a verifier's `weights`); `load_config`
+resolves every marked field of a file it reads (`resolve_paths`). Left as written: empty
+values, absolute paths, URLs (``rtsp://...``) and device indexes (``"0"``). ``~`` is
+expanded. Paths given on a command line stay relative to the current directory, as any
+command's do.
 """
 
 import os
@@ -15,6 +17,14 @@ import msgspec
 
 _MARK = "aeb_config_path"
 ConfigPath = Annotated[str, msgspec.Meta(extra={_MARK: True})]
+# A table of free parameters (a verifier's) whose entries under these keys are paths.
+_KEYS_MARK = "aeb_config_path_keys"
+
+
+def path_keys(*keys: str) -> msgspec.Meta:
+    """Mark a dict field: its string values under `keys` are paths (resolved as
+    `ConfigPath` fields are)."""
+    return msgspec.Meta(extra={_KEYS_MARK: keys})
 
 S = TypeVar("S", bound=msgspec.Struct)
 
@@ -32,6 +42,11 @@ def _is_path_tuple(annotation: Any) -> bool:
     args: tuple[Any, ...] = getattr(annotation, "__args__", ())
     return getattr(annotation, "__origin__", None) is tuple and len(args) > 0 \
         and _is_path(args[0])
+def _keys(annotation: Any) -> tuple[str, ...]:
+    for m in getattr(annotation, "__metadata__", ()):
+        if isinstance(m, msgspec.Meta) and (m.extra or {}).get(_KEYS_MARK):
+            return tuple((m.extra or {})[_KEYS_MARK])
+    return ()
 
 
 def resolve_path(value: str, base: Path) -> str:
@@ -54,6 +69,12 @@ def resolve_paths(cfg: S, base: Path, resolved: list[tuple[str, str]] | None = N
             new: Any = resolve_path(value, base)
             if resolved is not None and new != value:
                 resolved.append((value, new))
+        elif isinstance(value, dict) and (keys := _keys(field.type)):
+            new = {k: resolve_path(v, base) if k in keys and isinstance(v, str) else v
+                   for k, v in value.items()}
+            if resolved is not None:
+                resolved += [(value[k], new[k]) for k in keys
+                             if k in value and new[k] != value[k]]
         elif isinstance(value, msgspec.Struct):
             new = resolve_paths(value, base, resolved)
         elif isinstance(value, tuple) and _is_path_tuple(field.type):

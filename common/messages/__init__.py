@@ -1,7 +1,7 @@
 """Every message type on the bus. Defined here and nowhere else."""
 
 from common.messages.brake import BrakeState, BrakeStatus, FailsafePolicy
-from common.messages.camera import CameraInfo, CompressedFrame
+from common.messages.camera import CameraInfo, CompressedFrame, DepthFrame
 from common.messages.codec import DecodeError, decode, encode
 from common.messages.fusion import (
     BrakeCommand,
@@ -37,6 +37,7 @@ __all__ = [
     "CompressedFrame",
     "Decision",
     "DecodeError",
+    "DepthFrame",
     "EgoMotion",
     "FailsafePolicy",
     "Header",

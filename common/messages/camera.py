@@ -4,6 +4,9 @@ import msgspec
 
 from common.messages.header import Header
 
+# DepthFrame.codec values (common/depth_image.py implements them).
+DEPTH_CODECS = ("zstd", "png")
+
 
 class CompressedFrame(msgspec.Struct, frozen=True):
     """One JPEG frame. `header.stamp_ns` is the capture time (wall clock).
@@ -18,6 +21,25 @@ class CompressedFrame(msgspec.Struct, frozen=True):
     height: int
     jpeg: bytes
     crc32: int | None = None
+
+
+class DepthFrame(msgspec.Struct, frozen=True):
+    """One depth image aligned to a colour frame (common/depth_image.py encodes it).
+
+    `header.stamp_ns` is the capture time of the colour frame it is aligned to (the same
+    stamp as that `CompressedFrame`: fusion pairs them by it). Pixel (u, v) of the depth
+    image covers pixels (u, v) * (colour size / depth size) of the colour frame (the
+    depth may be published at a lower resolution). `data` is uint16 depth in `units_m`
+    (0: no return) coded with `codec` ("zstd" or "png", both lossless).
+    """
+
+    header: Header
+    camera: str
+    width: int
+    height: int
+    codec: str
+    data: bytes
+    units_m: float = 0.001
 
 
 class CameraInfo(msgspec.Struct, frozen=True):
@@ -52,3 +74,4 @@ class CameraInfo(msgspec.Struct, frozen=True):
     frames_decimated: int = 0  # skipped because the source is faster than `fps`
     reopens: int = 0           # times the source failed while streaming and was reopened
     errors: dict[str, int] = msgspec.field(default_factory=dict)  # read_errors by reason
+    depth_published: int = 0   # DepthFrames published (0: the source has no depth)

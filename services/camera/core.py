@@ -17,7 +17,7 @@ import numpy as np
 from common.calibration import Calibration
 from common.counters import ReasonCounter
 from common.imaging import jpeg_crc32
-from common.messages import CameraInfo, CompressedFrame, Header
+from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
 from services.camera.source import Frame
 
 NS_PER_S = 1_000_000_000
@@ -58,13 +58,15 @@ class FrameStats:
     decimated: int = 0      # skipped to keep the publish rate
     dropped: int = 0        # replaced in the slot before the encoder took them
     published: int = 0
+    depth_published: int = 0
     errors: ReasonCounter = field(default_factory=ReasonCounter)
 
 
 class CameraCore:
     """Rate gate, single pending slot, sequence numbers and message building."""
 
-    def __init__(self, camera: str, width: int, height: int, fps: float) -> None:
+    def __init__(self, camera: str, width: int, height: int, fps: float,
+                 depth_fps: float = 0.0) -> None:
         self.camera = camera
         self.source_name = f"camera/{camera}"
         self.width = width
@@ -74,6 +76,9 @@ class CameraCore:
         self._gate = RateGate(fps)
         self._pending: Frame | None = None
         self._seq = 0
+        # Depth goes out with the published frames, thinned to depth_fps (0: with each).
+        self._depth_gate = RateGate(depth_fps) if depth_fps > 0 else None
+        self._depth_seq = 0
 
     def offer(self, frame: Frame, now_mono_ns: int) -> Offer:
         """A frame from the source, at `now_mono_ns` (monotonic)."""
@@ -109,6 +114,20 @@ class CameraCore:
         self.stats.published += 1
         return CompressedFrame(header=header, camera=self.camera, width=self.width,
                                height=self.height, jpeg=jpeg, crc32=jpeg_crc32(jpeg))
+
+    def depth_due(self, now_mono_ns: int) -> bool:
+        """Whether the frame being published now also gets its depth published."""
+        return self._depth_gate is None or self._depth_gate.admit(now_mono_ns)
+
+    def depth_message(self, frame: Frame, data: bytes, codec: str, width: int, height: int,
+                      pub_mono_ns: int) -> DepthFrame:
+        """The DepthFrame for a frame's encoded depth: its capture stamp, its own seq."""
+        header = Header(seq=self._depth_seq, source=self.source_name, stamp_ns=frame.stamp_ns,
+                        pub_mono_ns=pub_mono_ns)
+        self._depth_seq += 1
+        self.stats.depth_published += 1
+        return DepthFrame(header=header, camera=self.camera, width=width, height=height,
+                          codec=codec, data=data)
 
     def _check(self, image: np.ndarray) -> tuple[str, str] | None:
         if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 \
@@ -216,5 +235,5 @@ def camera_info(cal: Calibration, camera: str, fps: float, source_kind: str, sta
         frames_published=stats.published, frames_dropped=stats.dropped,
         read_errors=sum(errors.values()), healthy=healthy, status=status,
         frames_captured=stats.captured, frames_decimated=stats.decimated,
-        reopens=reopens, errors=errors,
+        reopens=reopens, errors=errors, depth_published=stats.depth_published,
     )

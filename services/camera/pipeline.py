@@ -3,8 +3,11 @@
 - capture: opens the source (reopening with backoff after a failure), reads frames and
   offers them to the core's one-frame slot. It never waits for the encoder or the bus.
 - publish: takes the newest frame from the slot, encodes it to JPEG and hands the
-  message to `publish`. While it is busy, newer frames replace the pending one (counted
-  as dropped): a slow encoder or bus never builds a backlog.
+  message to `publish`; then, when the frame has depth and depth is published, its
+  depth (decimated, coded losslessly: common/depth_image.py) to `publish_depth` with the
+  same capture stamp. While it is busy, newer frames replace the pending one (counted
+  as dropped): a slow encoder or bus never builds a backlog. A depth image that is not
+  uint16 of the frame's size is counted (`depth_error`) and not published; the frame is.
 
 `publish` must not block for long (the Zenoh publisher uses congestion control DROP);
 it may raise zenoh.ZError, which is counted and logged.
@@ -19,9 +22,11 @@ import numpy as np
 import zenoh
 
 from common.clock import NS_PER_MS, mono_ns
+from common.config.camera import DepthSettings
+from common.depth_image import encode_depth
 from common.imaging import encode_jpeg
 from common.log import RateLimitedLog, kv
-from common.messages import CompressedFrame
+from common.messages import CompressedFrame, DepthFrame
 from services.camera.core import Backoff, CameraCore, Health, Offer
 from services.camera.source import EndOfStream, Frame, FrameSource, SourceConfigError
 
@@ -56,7 +61,9 @@ class FramePipeline:
     def __init__(self, source: FrameSource, core: CameraCore, health: Health,
                  backoff: Backoff, publish: Callable[[CompressedFrame], None],
                  jpeg_quality: int = 80, encode: Encoder = encode_jpeg,
-                 clock: Callable[[], int] = mono_ns) -> None:
+                 clock: Callable[[], int] = mono_ns,
+                 publish_depth: Callable[[DepthFrame], None] | None = None,
+                 depth: DepthSettings | None = None) -> None:
         self.source = source
         self.core = core
         self.health = health
@@ -66,6 +73,8 @@ class FramePipeline:
         self.ended = threading.Event()
         self.fatal: SourceConfigError | None = None
         self._publish = publish
+        self._publish_depth = publish_depth
+        self._depth = depth or DepthSettings()
         self._quality = jpeg_quality
         self._encode = encode
         self._clock = clock
@@ -207,3 +216,32 @@ class FramePipeline:
         with self.lock:
             self.timing.encode_ns.append(t1 - t0)
             self.timing.publish_mono_ns.append(msg.header.pub_mono_ns)
+        if frame.depth is not None and self._publish_depth is not None:
+            self._encode_and_publish_depth(frame, frame.depth)
+
+    def _encode_and_publish_depth(self, frame: Frame, depth: np.ndarray) -> None:
+        with self.lock:
+            due = self.core.depth_due(self._clock())
+        if not due:
+            return
+        k = self._depth.decimation
+        try:
+            if depth.shape != frame.image.shape[:2]:
+                raise ValueError(f"depth is {depth.shape}, frame {frame.image.shape[:2]}")
+            units = depth[::k, ::k] if k > 1 else depth
+            data = encode_depth(units, self._depth.codec)
+        except ValueError as exc:
+            with self.lock:
+                self.core.stats.errors.add("depth_error")
+            self._rl.error("depth", "depth_encode_failed", error=repr(exc))
+            return
+        with self.lock:
+            msg = self.core.depth_message(frame, data, self._depth.codec, units.shape[1],
+                                          units.shape[0], self._clock())
+        try:
+            assert self._publish_depth is not None
+            self._publish_depth(msg)
+        except zenoh.ZError as exc:
+            with self.lock:
+                self.core.stats.errors.add("publish_error")
+            self._rl.error("publish", "publish_failed", error=repr(exc))

@@ -1,6 +1,12 @@
 """Intel RealSense colour stream (D435: 848x480 at 30 fps) or a RealSense `.bag` recording,
 through pyrealsense2 (the optional extra `realsense`, imported only when this source opens).
 
+Depth (`depth = true`, the default): the depth stream at the colour's size and rate,
+aligned to the colour frame by librealsense's `align` (each depth pixel re-projected into
+the colour camera), delivered with the frame as uint16 millimetres (0: no return); a
+device whose depth unit is not 1 mm is converted. A recording without a depth stream
+plays colour only.
+
 Stamps: a device frame whose timestamp domain is global or system time (the D400 default
 is global time: the device clock mapped onto the host clock) is stamped with that
 capture time; a hardware-clock stamp, a stamp more than a second away from the host
@@ -26,6 +32,7 @@ from services.camera.source import (
 )
 
 _MAX_CLOCK_GAP_NS = 1_000_000_000
+_MM = 0.001
 INSTALL_HINT = "pip install -e '.[realsense]' (or pip install pyrealsense2)"
 
 
@@ -43,7 +50,7 @@ class RealSenseSource(FrameSource):
     kind = "realsense"
 
     def __init__(self, serial: str = "", bag: str = "", loop: bool = False, width: int = 848,
-                 height: int = 480, fps: int = 30, timeout_ms: int = 1000,
+                 height: int = 480, fps: int = 30, timeout_ms: int = 1000, depth: bool = True,
                  loader: Callable[[], ModuleType] = import_pyrealsense2,
                  wall_clock: Callable[[], int] = wall_ns) -> None:
         super().__init__()
@@ -54,36 +61,60 @@ class RealSenseSource(FrameSource):
         self.height = height
         self.fps = fps
         self.timeout_ms = timeout_ms
+        self.depth = depth
         self._loader = loader
         self._wall = wall_clock
         self._rs: Any = None
         self._pipeline: Any = None
         self._playback: Any = None
+        self._align: Any = None
+        self._depth_scale = _MM
 
     def describe(self) -> str:
         what = f"recording {self.bag}" if self.bag else f"device {self.serial or '(first found)'}"
-        return f"realsense {what} colour {self.width}x{self.height} at {self.fps} fps"
+        depth = " with aligned depth" if self.depth else ""
+        return f"realsense {what} colour {self.width}x{self.height} at {self.fps} fps{depth}"
 
-    def open(self) -> None:
-        rs = self._rs = self._loader()
-        pipeline = rs.pipeline()
+    def _config(self, rs: Any, depth: bool) -> Any:
         config = rs.config()
         if self.bag:
             # A recording's own format is used (converted to BGR below); a size or rate the
             # recording does not hold would make start() fail.
             config.enable_device_from_file(self.bag, repeat_playback=self.loop)
             config.enable_stream(rs.stream.color)
+            if depth:
+                config.enable_stream(rs.stream.depth)
         else:
-            self._require_device(rs)
             if self.serial:
                 config.enable_device(self.serial)
             config.enable_stream(rs.stream.color, self.width, self.height, rs.format.bgr8,
                                  self.fps)
+            if depth:
+                config.enable_stream(rs.stream.depth, self.width, self.height, rs.format.z16,
+                                     self.fps)
+        return config
+
+    def open(self) -> None:
+        rs = self._rs = self._loader()
+        pipeline = rs.pipeline()
+        if not self.bag:
+            self._require_device(rs)
+        depth = self.depth
         try:
-            profile = pipeline.start(config)
+            try:
+                profile = pipeline.start(self._config(rs, depth))
+            except RuntimeError:
+                if not (self.bag and depth):
+                    raise
+                depth = False            # a colour-only recording
+                profile = pipeline.start(self._config(rs, depth))
         except RuntimeError as exc:
             raise SourceError(f"cannot start RealSense {self.describe()}: {exc}") from exc
         self._pipeline = pipeline
+        self._align = rs.align(rs.stream.color) if depth else None
+        if depth:
+            self._depth_scale = float(profile.get_device().first_depth_sensor()
+                                      .get_depth_scale())
         if self.bag:
             self._playback = profile.get_device().as_playback()
             self._playback.set_real_time(True)
@@ -116,11 +147,17 @@ class RealSenseSource(FrameSource):
                 raise EndOfStream(f"end of recording {self.bag}") from exc
             raise SourceError(f"no frame within {self.timeout_ms} ms: {exc}") from exc
         arrival_ns = self._wall()
+        if self._align is not None:
+            frames = self._align.process(frames)
         color = frames.get_color_frame()
         if not color:
             raise SourceError("frameset without a colour frame")
         image = to_bgr(rs, color)
-        return Frame(image=image, stamp_ns=self._stamp(rs, color, arrival_ns))
+        depth = None
+        if self._align is not None:
+            got = frames.get_depth_frame()
+            depth = to_millimetres(got, self._depth_scale) if got else None
+        return Frame(image=image, stamp_ns=self._stamp(rs, color, arrival_ns), depth=depth)
 
     def _stamp(self, rs: Any, color: Any, arrival_ns: int) -> int:
         if self._playback is not None:
@@ -134,6 +171,7 @@ class RealSenseSource(FrameSource):
 
     def close(self) -> None:
         pipeline, self._pipeline, self._playback = self._pipeline, None, None
+        self._align = None
         if pipeline is not None:
             # Already stopped (device unplugged): nothing left to release.
             with contextlib.suppress(RuntimeError):
@@ -158,3 +196,13 @@ def to_bgr(rs: Any, color: Any) -> np.ndarray:
     if fmt == rs.format.yuyv:
         return cv2.cvtColor(data, cv2.COLOR_YUV2BGR_YUY2)
     raise SourceError(f"unsupported RealSense colour format {fmt}")
+
+
+def to_millimetres(depth: Any, scale_m: float) -> np.ndarray:
+    """A copy of an aligned depth frame as uint16 millimetres (0: no return)."""
+    data = np.asanyarray(depth.get_data())
+    if abs(scale_m - _MM) < 1e-9:
+        return np.array(data, dtype=np.uint16, copy=True)
+    mm = np.rint(data.astype(np.float64) * (scale_m / _MM))
+    mm[mm > 65535] = 0
+    return mm.astype(np.uint16)

@@ -48,7 +48,7 @@ def build_source(settings: cfg.CameraSettings, cal: Calibration,
             return RealSenseSource(serial=src.serial, bag=src.bag, loop=src.loop,
                                    width=src.width, height=src.height,
                                    fps=src.fps or round(settings.fps),
-                                   timeout_ms=src.timeout_ms)
+                                   timeout_ms=src.timeout_ms, depth=src.depth)
         from services.camera.plugin import PluginContext, make_plugin_source
 
         context = PluginContext(width=cal.width, height=cal.height,

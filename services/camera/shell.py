@@ -1,4 +1,5 @@
-"""The camera on the bus: frames on CAMERA_JPEG, CameraInfo at a fixed period on
+"""The camera on the bus: frames on CAMERA_JPEG, their depth (when the source has it
+and `[camera.depth] publish`) on CAMERA_DEPTH, CameraInfo at a fixed period on
 CAMERA_INFO and as a queryable on the same key, and the health token."""
 
 import logging
@@ -11,7 +12,7 @@ from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
 from common.config.camera import CameraSettings
-from common.keys import CAMERA_INFO, CAMERA_JPEG
+from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG
 from common.log import kv
 from common.messages import CameraInfo, Header
 from common.systemd import Watchdog
@@ -34,13 +35,17 @@ class CameraShell:
         self.watchdog = watchdog or Watchdog(env={})   # fed by the info loop of `run`
         self.cal = cal
         self.bus = bus
-        self.core = CameraCore(settings.name, cal.width, cal.height, settings.fps)
+        self.core = CameraCore(settings.name, cal.width, cal.height, settings.fps,
+                               settings.depth.fps)
         self.health = Health(settings.stall_timeout_s)
         frames = bus.publisher(CAMERA_JPEG, camera=settings.name)
+        depth = (bus.publisher(CAMERA_DEPTH, camera=settings.name)
+                 if settings.depth.publish else None)
         self.pipeline = FramePipeline(
             source, self.core, self.health,
             Backoff(settings.reopen_initial_s, settings.reopen_max_s),
             publish=frames.put, jpeg_quality=settings.jpeg_quality,
+            publish_depth=depth.put if depth is not None else None, depth=settings.depth,
         )
         self._info_pub = bus.publisher(CAMERA_INFO, camera=settings.name)
         self._info_seq = 0

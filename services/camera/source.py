@@ -10,7 +10,9 @@ Contract of a FrameSource (also in docs/camera.md):
   shape (H, W, 3) (any strides; the camera copies nothing and may keep it until encoded,
   so a source must not reuse the array's memory afterwards), and `stamp_ns` is the
   wall-clock time (`time.time_ns()` domain) when the frame was captured. A paced source
-  sleeps inside `read()` to keep its rate.
+  sleeps inside `read()` to keep its rate. A source with depth (RGB-D cameras, the
+  simulator) also sets `depth`: uint16 millimetres (0: no return) aligned to `image`,
+  of its height and width (the camera publishes it as DepthFrame beside the JPEG).
 - `read()` must return or raise within about a second (or its own configured timeout):
   a device that delivers nothing raises `SourceError` rather than blocking forever.
 - Errors: `SourceError` means "this source failed, close and reopen it later" (the camera
@@ -43,10 +45,12 @@ class SourceConfigError(ValueError):
 
 @dataclass(frozen=True)
 class Frame:
-    """One captured image: BGR uint8 (H, W, 3), and its wall-clock capture time in ns."""
+    """One captured image: BGR uint8 (H, W, 3), its wall-clock capture time in ns, and
+    the depth aligned to it (uint16 mm (H, W), 0 = no return) when the source has depth."""
 
     image: np.ndarray
     stamp_ns: int
+    depth: np.ndarray | None = None
 
 
 class FrameSource(ABC):

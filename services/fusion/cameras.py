@@ -12,17 +12,19 @@ see it, in configured order:
   rejects it; the deciding camera is the one with the highest density (the closest call);
 - **not checked** when a camera with a usable frame sees it but the track is not gated
   (the gate scope, core.py);
-- **unavailable** only if some camera would see it but none of those has a usable frame;
+- **unavailable** only if some camera would see it but none of those has a usable frame
+  (for a verifier that needs depth, a frame is usable only with its depth);
 - **not visible** only if no camera sees it (all project it behind themselves or outside
   their image).
 """
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from common.calibration import Calibration
 from common.messages import RadarTrack, Verification
 from common.messages.fusion import CameraCheck
 from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
@@ -50,29 +52,52 @@ class CameraView:
     xy: list[list[float]]
     rois: list[Roi | None]
     columns: list[Roi | None]
+    calibration: Calibration | None = None
+
+
+def _depth_reason(feed: FrameFeed, radar_stamp_ns: int, max_skew_ns: int) -> str:
+    """Why no frame with depth could be used (the verifier needs depth)."""
+    if not feed.frames:
+        return unavailable_reason(feed, radar_stamp_ns, max_skew_ns)
+    with_depth = tuple(f for f in feed.frames if f.depth_m is not None)
+    if not with_depth:
+        return ("no depth with the camera's frames (the verifier needs depth: "
+                f"{feed.depth_received} depth images received, "
+                f"{feed.depth_undecodable} unusable)")
+    return "frames with depth: " + unavailable_reason(replace(feed, frames=with_depth),
+                                                      radar_stamp_ns, max_skew_ns)
 
 
 def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
                  tracks: Sequence[RadarTrack], radar_stamp_ns: int, max_skew_ns: int,
-                 align: bool) -> list[CameraView]:
+                 align: bool, needs_depth: bool = False) -> list[CameraView]:
     """Every camera's frame and projections for one cycle. Tracks are predicted to the
     frame's time only with `align`; a camera without a usable frame projects them as
-    they are (to tell "would see it" from "not visible")."""
+    they are (to tell "would see it" from "not visible"). `needs_depth`: only frames
+    with their depth are usable."""
     pos = np.array([(t.x_m, t.y_m) for t in tracks], dtype=np.float64).reshape(-1, 2)
     vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks], dtype=np.float64).reshape(-1, 2)
     views = []
     for cam, feed in zip(cameras, feeds, strict=True):
+        frames = (tuple(f for f in feed.frames if f.depth_m is not None) if needs_depth
+                  else feed.frames)
         frame = (None if feed.unusable_reason
-                 else select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align))
-        reason = ("" if frame is not None
-                  else feed.unusable_reason or unavailable_reason(feed, radar_stamp_ns,
-                                                                  max_skew_ns))
+                 else select_frame(frames, radar_stamp_ns, max_skew_ns, align))
+        if frame is not None:
+            reason = ""
+        elif feed.unusable_reason:
+            reason = feed.unusable_reason
+        elif needs_depth:
+            reason = _depth_reason(feed, radar_stamp_ns, max_skew_ns)
+        else:
+            reason = unavailable_reason(feed, radar_stamp_ns, max_skew_ns)
         dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
         xy = pos + vel * dt_s
         boxes = cam.projector.boxes(xy) if len(xy) else []
         views.append(CameraView(cam.name, frame, reason, xy.tolist(),
                                 [b[0] if b is not None else None for b in boxes],
-                                [b[1] if b is not None else None for b in boxes]))
+                                [b[1] if b is not None else None for b in boxes],
+                                cam.projector.cal))
     return views
 
 
@@ -117,7 +142,8 @@ def check_track(i: int, views: Sequence[CameraView], gate: bool, verify: Gate) -
             column = v.columns[i]
             assert column is not None           # a ROI always has its column
             x, y = v.xy[i]
-            result = verify(Observation(v.frame.gray, roi, column, math.hypot(x, y)))
+            result = verify(Observation(v.frame.gray, roi, column, math.hypot(x, y),
+                                        v.frame.depth_m, v.calibration, (x, y)))
             density = result.score
             if result.verified:
                 state = Verification.VERIFIED

@@ -96,6 +96,12 @@ class FusionCore:
         self.camera_names = ",".join(names)
         self.verifier = verifier
         self.verifier_params = verifier.params()
+        # A verifier may precompute per calibration (the depth verifier's ray maps): now,
+        # not inside the first radar cycle that gates a track.
+        prepare = getattr(verifier, "prepare", None)
+        if callable(prepare):
+            for cam in self.cameras:
+                prepare(cam.projector.cal)
         self.source = f"fusion/{settings.instance}"
         self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
         self.rule = DecisionRule(settings.decision)
@@ -152,7 +158,8 @@ class FusionCore:
         order = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
                        key=ranks.__getitem__, reverse=True)
         views = camera_views(self.cameras, feeds, [confirmed[i] for i in order],
-                             tracks.header.stamp_ns, self._max_skew_ns, self.s.frames.align)
+                             tracks.header.stamp_ns, self._max_skew_ns, self.s.frames.align,
+                             self.verifier.needs_depth)
         reason_unavailable = ""
         if any(v.frame is not None for v in views):
             status = VerifierStatus.OK
@@ -191,7 +198,8 @@ class FusionCore:
             others = [i for i in range(len(cycle.confirmed)) if i not in targets]
             views = camera_views(self.cameras, cycle.feeds,
                                  [cycle.confirmed[i] for i in others], stamp_ns,
-                                 self._max_skew_ns, self.s.frames.align)
+                                 self._max_skew_ns, self.s.frames.align,
+                                 self.verifier.needs_depth)
             gate_all = self.s.gate_scope is GateScope.ALL
             for j, i in enumerate(others):
                 targets[i] = self._target(cycle.confirmed[i], cycle.kins[i], cycle.threats[i],

@@ -5,20 +5,28 @@ The radar callback never waits for a JPEG decode: it takes a snapshot of the rin
 works on frames already decoded. Decoding goes through common.imaging.decode_gray, the
 project's one path. With `decode = "before_radar"` the worker decodes only the frames a
 radar cycle can use (services/fusion/rhythm.py); the others are counted as skipped.
+
+Depth (when the verifier needs it): each DepthFrame is decoded in the same worker
+(common/depth_image.py, the one depth path), brought to the frame's size (nearest
+neighbour: every depth pixel covers its block of colour pixels) and paired with the
+colour frame of the same capture stamp, whichever of the two arrives first. A frame
+without its depth stays in the ring without depth (a depth verifier does not use it).
 """
 
 import logging
 import threading
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from common.clock import mono_ns
 from common.config.fusion import DecodePolicy, FrameSettings
+from common.depth_image import DepthDecodeError, decode_depth, to_metres
 from common.imaging import ImageCorruptError, ImageDecodeError, decode_gray
 from common.log import RateLimitedLog
-from common.messages import CompressedFrame, DecodeError, decode
+from common.messages import CompressedFrame, DecodeError, DepthFrame, decode
 from services.fusion.rhythm import RadarRhythm
 
 # Decoded frames kept per camera: a cycle uses the one nearest its stamp, which within the
@@ -54,6 +62,7 @@ class DecodedFrame:
     stamp_ns: int          # capture time (wall clock)
     rx_mono_ns: int        # when fusion received it
     gray: np.ndarray       # 2-D uint8, never modified after decoding
+    depth_m: np.ndarray | None = None   # float32 metres at gray's size, 0 = no return
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +82,9 @@ class FrameFeed:
     unchanged_since_ns: int | None = None
     # set by fusion's core: this camera is not to be used this cycle, and why
     unusable_reason: str = ""
+    depth_received: int = 0
+    depth_undecodable: int = 0
+    depth_dropped: int = 0
 
 
 class FrameError(ValueError):
@@ -118,6 +130,28 @@ def frozen(feed: FrameFeed, scene_moving: bool, frozen_after_ns: int) -> bool:
         return False
     newest = max(f.stamp_ns for f in feed.frames)
     return newest - feed.unchanged_since_ns >= frozen_after_ns
+def decode_depth_frame(payload: bytes, width: int, height: int) -> tuple[int, np.ndarray]:
+    """A DepthFrame payload to (capture stamp, float32 metres at width x height).
+
+    The depth may be smaller than the frame by a whole factor (the camera's decimation).
+    Raises FrameError (reasons: "depth_message", "depth_size", "depth_codec").
+    """
+    try:
+        msg = decode(payload, DepthFrame)
+    except DecodeError as exc:
+        raise FrameError("depth_message", str(exc)) from exc
+    fx, fy = (width // msg.width, height // msg.height) if msg.width and msg.height else (0, 0)
+    if fx < 1 or fx != fy or (msg.width * fx, msg.height * fy) != (width, height):
+        raise FrameError("depth_size", f"depth is {msg.width}x{msg.height}, not the frame's "
+                                       f"{width}x{height} divided by a whole factor")
+    try:
+        units = decode_depth(msg.data, msg.codec, msg.width, msg.height)
+    except DepthDecodeError as exc:
+        raise FrameError("depth_codec", f"depth seq {msg.header.seq}: {exc}") from exc
+    depth = to_metres(units, msg.units_m)
+    if fx > 1:
+        depth = cv2.resize(depth, (width, height), interpolation=cv2.INTER_NEAREST)
+    return msg.header.stamp_ns, depth
 
 
 def select_frame(frames: tuple[DecodedFrame, ...], radar_stamp_ns: int, max_skew_ns: int,
@@ -161,6 +195,9 @@ class FrameDecoder:
         self.height = height
         self.camera = camera
         self._pending: deque[tuple[bytes, int]] = deque()
+        self._depth_pending: deque[bytes] = deque()
+        # Decoded depth still waiting for its frame, by capture stamp.
+        self._depth_waiting: deque[tuple[int, np.ndarray]] = deque(maxlen=RING_SIZE)
         # Waiting for the radar, only the newest frame is worth keeping.
         self._queue_size = 1 if rhythm is not None else QUEUE_SIZE
         self._rhythm = rhythm
@@ -171,6 +208,9 @@ class FrameDecoder:
         self._undecodable = 0
         self._dropped = 0
         self._skipped = 0
+        self._depth_received = 0
+        self._depth_undecodable = 0
+        self._depth_dropped = 0
         self._last_error = ""
         self._last_error_rx: int | None = None
         self._unchanged_since: int | None = None
@@ -220,6 +260,17 @@ class FrameDecoder:
             self._pending.append((payload, rx_mono_ns))
             self._cond.notify()
 
+    def submit_depth(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        """Queue a raw DepthFrame (never blocks); when the queue is full the oldest waiting
+        one is dropped and counted."""
+        with self._cond:
+            self._depth_received += 1
+            if len(self._depth_pending) >= QUEUE_SIZE:
+                self._depth_pending.popleft()
+                self._depth_dropped += 1
+            self._depth_pending.append(payload)
+            self._cond.notify()
+
     def decode_now(self, payload: bytes, rx_mono_ns: int) -> None:
         """Decode one payload in the caller's thread (the worker's body; also for tests)."""
         try:
@@ -236,7 +287,31 @@ class FrameDecoder:
                     self._unchanged_since = previous.stamp_ns
             else:
                 self._unchanged_since = None
+            for i, (stamp, depth) in enumerate(self._depth_waiting):
+                if stamp == frame.stamp_ns:
+                    del self._depth_waiting[i]
+                    frame = replace(frame, depth_m=depth)
+                    break
             self._ring.append(frame)
+
+    def decode_depth_now(self, payload: bytes) -> None:
+        """Decode one DepthFrame and pair it with its frame (the worker's body)."""
+        try:
+            stamp, depth = decode_depth_frame(payload, self.width, self.height)
+        except FrameError as exc:
+            with self._cond:
+                self._depth_undecodable += 1
+                self.errors_by_reason[exc.reason] = self.errors_by_reason.get(exc.reason,
+                                                                              0) + 1
+            self._rl.warning(f"depth:{exc.reason}", "depth_unusable", reason=exc.reason,
+                             camera=self.camera, error=str(exc))
+            return
+        with self._cond:
+            for i, frame in enumerate(self._ring):
+                if frame.stamp_ns == stamp:
+                    self._ring[i] = replace(frame, depth_m=depth)
+                    return
+            self._depth_waiting.append((stamp, depth))
 
     def _unusable(self, reason: str, error: str, rx_mono_ns: int) -> None:
         with self._cond:
@@ -245,12 +320,15 @@ class FrameDecoder:
             self._last_error = error
             self._last_error_rx = rx_mono_ns
 
-    def _next(self) -> tuple[bytes, int] | None:
-        """The next frame to decode, once it is time (None: stopping)."""
+    def _next(self) -> tuple[bytes, int] | bytes | None:
+        """The next frame to decode, once it is time, or a depth payload (None:
+        stopping). Depth is decoded at once: its frame may be waiting for the radar."""
         with self._cond:
             while True:
                 if self._stop:
                     return None
+                if self._depth_pending:
+                    return self._depth_pending.popleft()
                 if not self._pending:
                     self._cond.wait()
                     continue
@@ -267,9 +345,13 @@ class FrameDecoder:
             if item is None:
                 return
             try:
-                self.decode_now(*item)
+                if isinstance(item, bytes):
+                    self.decode_depth_now(item)
+                else:
+                    self.decode_now(*item)
             except Exception as exc:  # a bug must not end this camera's frames: count, go on
-                self._unusable("decoder_error", f"decoder error: {exc!r}", item[1])
+                self._unusable("decoder_error", f"decoder error: {exc!r}",
+                               mono_ns() if isinstance(item, bytes) else item[1])
                 self._rl.error("frame:bug", "frame_decoder_failed", camera=self.camera,
                                error=repr(exc))
 
@@ -277,5 +359,8 @@ class FrameDecoder:
         with self._cond:
             return FrameFeed(tuple(self._ring), self._received, self._undecodable,
                              self._dropped, self._last_error, self._last_error_rx,
-                             self._skipped, self.errors_by_reason.get("corrupt", 0),
-                             self._unchanged_since)
+                             self._skipped, corrupt=self.errors_by_reason.get("corrupt", 0),
+                             unchanged_since_ns=self._unchanged_since,
+                             depth_received=self._depth_received,
+                             depth_undecodable=self._depth_undecodable,
+                             depth_dropped=self._depth_dropped)

@@ -1,6 +1,6 @@
-"""The fusion I/O shell: each camera's frames to its decoder, radar cycles through the
-core, messages out. Exactly one BrakeCommand per RadarTracks, published before its
-VerifiedTargets."""
+"""The fusion I/O shell: each camera's frames (and, for a verifier that needs depth, its
+depth) to its decoder, radar cycles through the core, messages out. Exactly one
+BrakeCommand per RadarTracks, published before its VerifiedTargets."""
 
 import logging
 import threading
@@ -18,7 +18,14 @@ from common.clock import mono_ns, wall_ns
 from common.command_auth import CommandSigner
 from common.config.fusion import FusionSettings
 from common.counters import ReasonCounter
-from common.keys import CAMERA_INFO, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from common.keys import (
+    CAMERA_DEPTH,
+    CAMERA_INFO,
+    CAMERA_JPEG,
+    FUSION_BRAKE_CMD,
+    FUSION_TARGETS,
+    RADAR_TRACKS,
+)
 from common.log import RateLimitedLog, kv
 from common.messages import (
     CameraInfo,
@@ -34,6 +41,7 @@ from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FROZEN_REASON, FrameDecoder
 from services.fusion.rhythm import RadarRhythm
+from services.fusion.verifiers import wants_depth
 
 
 class FusionShell:
@@ -79,6 +87,9 @@ class FusionShell:
         for name, decoder in zip(self.camera_names, self.decoders, strict=True):
             decoder.start()
             self._subs.append(self.bus.subscribe_raw(CAMERA_JPEG, decoder.submit, camera=name))
+            if wants_depth(self.core.verifier):
+                self._subs.append(self.bus.subscribe_raw(CAMERA_DEPTH, decoder.submit_depth,
+                                                         camera=name))
         self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
                                                  sensor=self.s.radar_sensor))
         for name in self.camera_names:
@@ -208,6 +219,8 @@ class FusionShell:
                    frames_dropped=sum(f.dropped for f in feeds),
                    frames_skipped=sum(f.skipped for f in feeds),
                    frames_corrupt=sum(f.corrupt for f in feeds),
+                   depth_received=sum(f.depth_received for f in feeds),
+                   depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
                    invalid_tracks=self.core.invalid_tracks)
         if len(feeds) > 1:
             for name, f in zip(self.camera_names, feeds, strict=True):

@@ -15,9 +15,14 @@ records the verifier's name and parameters.
   saturated blobs (lamps, headlights, reflections) are not counted and the density is
   compared with its own threshold. On a lit ROI with little noise it equals
   `edge_density` exactly.
+- `depth`: depth consistency (depth_check.py): the share of the column's pixels, 0.3 to
+  2.2 m above the ground, whose aligned depth puts a surface at the track's range within
+  the D435's error; needs depth.
 
 To add one: write a class with `name`, `needs_depth`, `params()` and `verify()`, a msgspec
 Struct for its parameters, and register a factory with `@register("name")` (see docs/fusion.md).
+A verifier may also define `prepare(calibration)`: fusion calls it for each camera when it
+starts (the depth verifier computes its ray maps there).
 """
 
 import math
@@ -29,6 +34,7 @@ import cv2
 import msgspec
 import numpy as np
 
+from common.calibration import Calibration
 from services.fusion.roi import Roi
 
 ParamValue = float | int | str | bool
@@ -51,13 +57,17 @@ class Observation:
     column's own box (z from 0 to the column height at the track), clipped to the frame.
     `range_m`: the track's radar range at the frame's time. `depth_m`: depth aligned to
     `gray` in metres (float32, 0 where there is no return), None when the camera has no
-    depth."""
+    depth. `calibration`: the calibration the column was projected with, and `xy_m` the
+    track's (x, y) in its ground frame (the column's foot) at the frame's time; verifiers
+    that place depth in 3-D need both (None when unknown)."""
 
     gray: np.ndarray
     roi: Roi
     column: Roi
     range_m: float
     depth_m: np.ndarray | None = None
+    calibration: Calibration | None = None
+    xy_m: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +92,13 @@ class Verifier(Protocol):
     def verify(self, obs: Observation) -> GateResult:
         """Check one track's observation."""
         ...
+
+
+def wants_depth(v: Verifier) -> bool:
+    """Whether fusion should bring this verifier the camera's depth: it needs depth, or it
+    uses depth when a frame has some (`uses_depth = True`: the combined verifier, which
+    falls back to appearance without it)."""
+    return bool(v.needs_depth or getattr(v, "uses_depth", False))
 
 
 VerifierFactory = Callable[[Mapping[str, ParamValue]], Verifier]
@@ -262,3 +279,7 @@ class AdaptiveEdgeDensity:
 def _adaptive(params: Mapping[str, ParamValue]) -> Verifier:
     return AdaptiveEdgeDensity(
         _parse(params, AdaptiveEdgeDensityParams, "adaptive_edge_density"))
+
+
+# Registers the verifiers defined in their own modules (they import this one).
+from services.fusion import appearance, combined, depth_check  # noqa: E402,F401

@@ -213,3 +213,46 @@ def test_a_bug_in_a_source_is_reported_as_the_source_down_and_the_capture_goes_o
             assert "read: 'plugin bug'" in pipe.health.error
         src.push(1)
         wait_for(lambda: len(published) == 1, 30, what="frame after the reopen")
+
+
+def depth_of(i: int, h: int = H, w: int = W) -> np.ndarray:
+    return (np.arange(h * w, dtype=np.uint16).reshape(h, w) + 100 * i).astype(np.uint16)
+
+
+def test_depth_goes_out_beside_its_frame_decimated_lossless_and_a_bad_one_is_counted():
+    from common.config.camera import DepthSettings
+    from common.depth_image import decode_depth
+
+    src = ScriptedSource()
+    frames: list[CompressedFrame] = []
+    depths: list = []
+    pipe = FramePipeline(src, CameraCore("front", W, H, 1e9), Health(stall_timeout_s=5.0),
+                         Backoff(0.01, 0.02), publish=frames.append,
+                         publish_depth=depths.append, depth=DepthSettings(decimation=2))
+    with running(pipe, src):
+        img = np.zeros((H, W, 3), np.uint8)
+        script = [depth_of(0), None, depth_of(2, H // 2, W),     # none; wrong size
+                  depth_of(3).astype(np.float32)]                   # not uint16
+        for i, depth in enumerate(script):
+            src.script.put(Frame(img, 1000 + i, depth))
+            # One at a time: a frame waiting in the slot would be replaced by the next.
+            n = i + 1
+            wait_for(lambda: len(frames) == n and pipe.core.pending is None, 30,  # noqa: B023
+                     what=f"frame {i} published")
+        wait_for(lambda: pipe.core.stats.errors.snapshot().get("depth_error") == 2, 30)
+    assert len(depths) == 1 and pipe.core.stats.depth_published == 1
+    d = depths[0]
+    assert d.header.stamp_ns == frames[0].header.stamp_ns == 1000
+    assert (d.camera, d.width, d.height, d.codec, d.units_m) == ("front", W // 2, H // 2,
+                                                                  "zstd", 0.001)
+    assert np.array_equal(decode_depth(d.data, d.codec, d.width, d.height),
+                          depth_of(0)[::2, ::2])
+    assert [f.header.stamp_ns for f in frames] == [1000, 1001, 1002, 1003]
+
+
+def test_depth_is_thinned_to_its_own_rate():
+    core = CameraCore("front", W, H, 30.0, depth_fps=10.0)
+    period = 1_000_000_000 // 30
+    due = [core.depth_due(i * period) for i in range(9)]
+    assert due == [True, False, False] * 3
+    assert all(CameraCore("front", W, H, 30.0).depth_due(i * period) for i in range(9))

@@ -51,3 +51,53 @@ def test_an_unusable_source_exits_2(router):
     code, node = run_node(router, settings, Unusable())
     assert code == 2
     assert str(node.pipeline.fatal) == "needs a licence dongle"
+
+
+class DepthFrames(FrameSource):
+    """`n` frames with depth (frame i: grey 20 i, depth 1000 + i mm), then the end."""
+
+    kind = "depth-test"
+
+    def __init__(self, width: int, height: int, n: int) -> None:
+        super().__init__()
+        self.size, self.n, self.i = (width, height), n, 0
+
+    def read(self) -> Frame:
+        import numpy as np
+
+        from services.camera.source import EndOfStream
+
+        if self.i >= self.n:
+            raise EndOfStream("done")
+        w, h = self.size
+        self.i += 1
+        return Frame(np.full((h, w, 3), 20 * self.i, np.uint8), 5_000 + self.i,
+                     np.full((h, w), 1000 + self.i, np.uint16))
+
+
+def test_a_source_with_depth_gets_it_published_beside_each_frame(router):
+    import numpy as np
+
+    from common.depth_image import decode_depth
+    from common.keys import CAMERA_DEPTH, CAMERA_JPEG
+    from tests.support import Collector, wait_for
+
+    cal = Calibration.load(CALIBRATION)
+    settings = CameraSettings(calibration=CALIBRATION, fps=1000.0, exit_at_end=True,
+                              info_period_s=0.05, stats_period_s=0)
+    jpegs, depths = Collector(), Collector()
+    with open_bus(router, source="test") as watcher:
+        watcher.subscribe(CAMERA_JPEG, jpegs, camera="front")
+        watcher.subscribe(CAMERA_DEPTH, depths, camera="front")
+        code, node = run_node(router, settings, DepthFrames(cal.width, cal.height, 6))
+        assert code == 0
+        info = node.info()
+        assert info.frames_published >= 1 and info.depth_published == info.frames_published
+        wait_for(lambda: len(depths.messages) == info.depth_published
+                 and len(jpegs.messages) == info.frames_published, 30, what="all received")
+    frame_stamps = {m.header.stamp_ns for m in jpegs.messages}
+    for d in depths.messages:
+        assert d.header.stamp_ns in frame_stamps
+        assert (d.width, d.height) == (cal.width // 2, cal.height // 2)   # decimation 2
+        units = decode_depth(d.data, d.codec, d.width, d.height)
+        assert np.all(units == 1000 + d.header.stamp_ns - 5_000)

@@ -294,9 +294,24 @@ class FakeColorFrame:
         return self._domain
 
 
-def fake_rs(frames: list, stopped_after: bool = False, serials: tuple[str, ...] = ("123",)):
-    """A stand-in for the parts of pyrealsense2 the source uses: records the calls."""
+class FakeDepthFrame:
+    def __init__(self, data: np.ndarray) -> None:
+        self._data = data
+
+    def __bool__(self) -> bool:
+        return True
+
+    def get_data(self) -> np.ndarray:
+        return self._data
+
+
+def fake_rs(frames: list, stopped_after: bool = False, serials: tuple[str, ...] = ("123",),
+            depths: list | None = None, depth_scale: float = 0.001,
+            start_fails_with_depth: bool = False):
+    """A stand-in for the parts of pyrealsense2 the source uses: records the calls.
+    `depths`: the depth frame of each frameset (None: none); `align` records that it ran."""
     calls: list = []
+    depths = list(depths or [])
 
     def device(serial: str):
         return types.SimpleNamespace(get_info=lambda what: serial)
@@ -304,20 +319,36 @@ def fake_rs(frames: list, stopped_after: bool = False, serials: tuple[str, ...] 
     def context():
         return types.SimpleNamespace(query_devices=lambda: [device(s) for s in serials])
 
+    sensor = types.SimpleNamespace(get_depth_scale=lambda: depth_scale)
+
     class Pipeline:
         def start(self, config):
             calls.append(("start", config.calls))
-            device = types.SimpleNamespace(as_playback=lambda: playback)
+            if start_fails_with_depth and any(c[1][:1] == ("depth",) for c in config.calls):
+                raise RuntimeError("no depth stream in this recording")
+            device = types.SimpleNamespace(as_playback=lambda: playback,
+                                           first_depth_sensor=lambda: sensor)
             return types.SimpleNamespace(get_device=lambda: device)
 
         def wait_for_frames(self, timeout_ms):
             if not frames:
                 raise RuntimeError(f"Frame didn't arrive within {timeout_ms}")
             color = frames.pop(0)
-            return types.SimpleNamespace(get_color_frame=lambda: color)
+            depth = depths.pop(0) if depths else None
+            return types.SimpleNamespace(get_color_frame=lambda: color,
+                                         get_depth_frame=lambda: depth, aligned=False)
 
         def stop(self):
             calls.append(("stop",))
+
+    class Align:
+        def __init__(self, to):
+            calls.append(("align", to))
+
+        def process(self, frameset):
+            frameset.aligned = True
+            calls.append(("aligned",))
+            return frameset
 
     class Config:
         def __init__(self):
@@ -330,11 +361,11 @@ def fake_rs(frames: list, stopped_after: bool = False, serials: tuple[str, ...] 
         set_real_time=lambda v: calls.append(("real_time", v)),
         current_status=lambda: "stopped" if stopped_after else "playing")
     rs = types.SimpleNamespace(
-        pipeline=Pipeline, config=Config, context=context,
+        pipeline=Pipeline, config=Config, context=context, align=Align,
         camera_info=types.SimpleNamespace(serial_number="serial_number"),
-        stream=types.SimpleNamespace(color="color"),
+        stream=types.SimpleNamespace(color="color", depth="depth"),
         format=types.SimpleNamespace(bgr8="bgr8", rgb8="rgb8", bgra8="bgra8", rgba8="rgba8",
-                                     yuyv="yuyv"),
+                                     yuyv="yuyv", z16="z16"),
         timestamp_domain=types.SimpleNamespace(global_time="global", system_time="system",
                                                hardware_clock="hw"),
         playback_status=types.SimpleNamespace(stopped="stopped"))
@@ -393,3 +424,45 @@ def test_realsense_bag_plays_in_real_time_and_ends():
     with pytest.raises(EndOfStream):
         src.read()
     src.close()
+
+
+def test_realsense_depth_is_aligned_to_colour_and_delivered_in_millimetres():
+    img = np.zeros((480, 848, 3), np.uint8)
+    raw = np.full((480, 848), 4000, np.uint16)
+    raw[0, 0] = 0
+    rs, calls = fake_rs([FakeColorFrame(img, "bgr8", 1.0, "hw")] * 2,
+                        depths=[FakeDepthFrame(raw), None])
+    src = RealSenseSource(loader=lambda: rs, wall_clock=lambda: 7)
+    src.open()
+    start = calls[0][1]
+    assert ("enable_stream", ("depth", 848, 480, "z16", 30), {}) in start
+    assert ("align", "color") in calls
+    got = src.read()
+    assert ("aligned",) in calls
+    assert got.depth is not None and got.depth.dtype == np.uint16
+    assert np.array_equal(got.depth, raw) and got.depth is not raw   # copied out
+    assert src.read().depth is None                # a frameset without depth
+    src.close()
+    # A device whose depth unit is 0.1 mm: converted to mm; colour only when asked.
+    rs, calls = fake_rs([FakeColorFrame(img, "bgr8", 1.0, "hw")],
+                        depths=[FakeDepthFrame(raw)], depth_scale=0.0001)
+    src = RealSenseSource(loader=lambda: rs)
+    src.open()
+    depth = src.read().depth
+    assert depth is not None and depth[1, 1] == 400 and depth[0, 0] == 0
+    rs, calls = fake_rs([FakeColorFrame(img, "bgr8", 1.0, "hw")])
+    src = RealSenseSource(loader=lambda: rs, depth=False)
+    src.open()
+    assert src.read().depth is None and not [c for c in calls if c[0] == "align"]
+    assert not [c for c in calls[0][1] if c[1][:1] == ("depth",)]
+
+
+def test_a_recording_without_depth_plays_colour_only():
+    img = np.zeros((480, 848, 3), np.uint8)
+    rs, calls = fake_rs([FakeColorFrame(img, "bgr8", 1.0, "hw")],
+                        start_fails_with_depth=True)
+    src = RealSenseSource(bag="colour.bag", loader=lambda: rs)
+    src.open()
+    assert len([c for c in calls if c[0] == "start"]) == 2
+    frame = src.read()
+    assert frame.depth is None and frame.image.shape == (480, 848, 3)

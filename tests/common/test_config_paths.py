@@ -94,3 +94,16 @@ def test_a_relocated_copy_of_a_config_keeps_pointing_at_the_same_files(tmp_path)
     (tmp_path / "naive.toml").write_text((DEPLOY / "fusion.toml").read_text())
     assert load_config(tmp_path / "naive.toml", FusionConfig).fusion.calibration == \
         str(tmp_path / "calibration/d435_848x480.toml")
+
+
+def test_a_verifiers_weights_file_resolves_against_the_files_folder(tmp_path, elsewhere):
+    vehicle = tmp_path / "vehicle"
+    vehicle.mkdir()
+    (vehicle / "fusion.toml").write_text(
+        '[fusion.verifier]\nname = "combined"\n'
+        'params = { weights = "verifiers/w.json", tau = 1.5, appearance = "hog_linear" }\n')
+    params = load_config(vehicle / "fusion.toml", FusionConfig).fusion.verifier.params
+    assert params == {"weights": str(vehicle / "verifiers" / "w.json"), "tau": 1.5,
+                      "appearance": "hog_linear"}
+    # Other parameters that happen to be strings stay as written.
+    assert params["appearance"] == "hog_linear"

@@ -33,7 +33,7 @@ def test_wildcard_and_match_are_inverse():
 
 def test_registry_has_every_key_of_the_design_with_rates_and_ages():
     assert set(REGISTRY) == {
-        "radar_tracks", "radar_status", "camera_jpeg", "camera_info",
+        "radar_tracks", "radar_status", "camera_jpeg", "camera_depth", "camera_info",
         "fusion_targets", "fusion_brake_cmd", "brake_status", "ego_motion", "health",
         "radar_can",
     }

@@ -99,6 +99,11 @@ def test_kitti_negatives_background_rows_and_lidar_structure(kitti_split):
     for r in background:
         x, y, w, h = r.roi
         assert any((p.roi[1], p.roi[2], p.roi[3]) == (y, w, h) for p in positives.values())
+        # Its column is the positive's column moved with the ROI, not the padded ROI:
+        # a verifier of the column sees a background column of the object's size.
+        pos = next(p for p in positives.values() if (p.roi[1], p.roi[2], p.roi[3]) == (y, w, h))
+        assert r.column[1:] == pos.column[1:] and r.column != r.roi
+        assert r.column[0] - x == pos.column[0] - pos.roi[0]
         for bx0, by0, bx1, by1 in occupied:
             assert x + w - 1 < bx0 or x > bx1 or y + h - 1 < by0 or y > by1
     # The wall is the only lidar structure: ground, the boxes' own points are not.
@@ -172,3 +177,27 @@ def test_vod_radar_returns_on_nothing_are_the_papers_negatives(vod_root):
     assert not [r for r in recs if r.kind == "lidar"]
     # 1936 px wide at f 1495.5 resampled to f 449.
     assert recs[0].image_w == round(1936 * FOCAL / 1495.5)
+
+
+def test_the_depth_verifier_passes_the_objects_and_rejects_their_background(kitti_split):
+    specs = [VerifierSpec("depth", "depth")]
+    recs, _, _ = kitti_records(kitti_split, DatasetSettings(depth="d435"), specs)
+    objects = [r for r in recs if r.kind == "object"]
+    walls = [r for r in recs if r.kind == "lidar"]
+    # Background ROIs avoid labelled boxes, not the (unlabelled) wall: depth sees the wall.
+    background = [r for r in recs if r.kind == "background"
+                  and not any(w.frame == r.frame and abs(w.roi[0] - r.roi[0]) < r.roi[2]
+                              for w in walls)]
+    assert objects and background and walls
+    # The fixture's cloud is sparse and does not occlude: ground points behind the car
+    # fall between its own, so the car scores far below 1 - but above its background.
+    assert all(r.scores["depth"].score > 0.05 for r in objects)
+    assert any(r.scores["depth"].verified for r in objects)
+    assert all(r.scores["depth"].score == 0.0 for r in background)
+    assert all(r.scores["depth"].verified for r in walls)
+    # A background ROI keeps its positive's column (not the padded box), moved with it.
+    sizes = {tuple(r.column[1:]) for r in objects}
+    for r in background:
+        x, y, w, h = r.column
+        assert (y, w, h) in sizes and tuple(r.column) != tuple(r.roi)
+        assert r.roi[0] <= x and x + w <= r.roi[0] + r.roi[2]

@@ -29,7 +29,7 @@ def test_bad_configuration_exits_2_naming_the_problem(tmp_path, toml, named):
 
 
 @pytest.mark.parametrize("path", ["deploy/fusion.toml", "deploy/fusion-candidate.toml",
-                                  "deploy/fusion-paper.toml"])
+                                  "deploy/fusion-paper.toml", "deploy/fusion-combined.toml"])
 def test_shipped_configs_build(path):
     core, _ = build_core(load_config(path, FusionConfig))
     assert core.source == f"fusion/{core.s.instance}"
@@ -90,3 +90,17 @@ def test_the_gate_benchmark_reports_its_figures(tmp_path):
     same = next(f for f in figures if f.name.startswith("ROIs with densities identical"))
     assert same.target_met is True and same.value == same.baseline_value
     assert all(f.group == "gate" and f.baseline_value is not None for f in figures)
+
+
+def test_the_verifier_benchmark_times_every_verifier_beside_the_papers_gate(tmp_path, capsys):
+    from benchmarks import bench_verifiers
+
+    figures = bench_verifiers.run(True, tmp_path)
+    result = json.loads((tmp_path / "bench_verifiers.json").read_text())
+    timing = result["timing"]
+    assert {"edge_density", "depth", "hog_people", "hog_linear",
+            "combined (depth + hog_linear)"} <= set(timing)
+    assert all(t["n"] > 0 and t["p50_us"] > 0 for t in timing.values())
+    assert result["rois"] > 0 and (tmp_path / "bench_verifiers.png").stat().st_size > 0
+    assert {f.baseline_value for f in figures} == {timing["edge_density"]["mean_us"]}
+    assert "x edge_density" in capsys.readouterr().out

@@ -63,3 +63,29 @@ def test_factory_needs_the_camera_bus_and_knows_its_options():
     with pytest.raises(SourceConfigError, match="colour"):
         make_plugin_source("tools.sim.camera_source:make_source", ctx)
     assert issubclass(SimCameraSource, FrameSource)
+
+
+def test_frames_carry_aligned_depth_in_millimetres_unless_turned_off():
+    cal = Calibration.load(CALIBRATION)
+    source = SimCameraSource(cal, 30.0, None, clock=lambda: 100.0, sleep=lambda s: None,
+                             wall_clock=lambda: 10 * S)
+    source.on_world(world(10 * S, speed=0.0))
+    frame = source.read()
+    assert frame.depth is not None and frame.depth.dtype == np.uint16
+    assert frame.depth.shape == frame.image.shape[:2]
+    # the pedestrian's torso, 15 m ahead of the radar (20 m world, ego at 5 m), 0.8 m
+    # behind it the camera: 15.8 m at the pixel where the colour shows them
+    uv, _ = cal.project(np.array([[15.0, -2.0, 1.2]]))
+    u, v = (int(np.rint(c)) for c in uv[0])
+    assert abs(int(frame.depth[v, u]) - 15_800) <= 30
+    assert frame.depth[5, 424] == 0                                   # the sky
+    assert "exact depth" in source.describe()
+    colour_only = SimCameraSource(cal, 30.0, None, clock=lambda: 100.0,
+                                  sleep=lambda s: None, wall_clock=lambda: 10 * S, depth=False)
+    assert colour_only.read().depth is None
+    noisy = SimCameraSource(cal, 30.0, None, clock=lambda: 100.0, sleep=lambda s: None,
+                            wall_clock=lambda: 10 * S, depth_noise=True)
+    noisy.on_world(world(10 * S, speed=0.0))
+    d = noisy.read().depth
+    assert d is not None and 15_000 < int(np.median(d[v - 3:v + 4, u - 2:u + 3])) < 16_600
+    assert not np.array_equal(d, frame.depth)

@@ -116,7 +116,8 @@ def test_object_ids_swap_sometimes():
 
 @pytest.fixture(scope="module")
 def renderer() -> Renderer:
-    return Renderer(Calibration.load(CALIBRATION), seed=3)
+    """The plain rendering (smooth road, open sky) of the still test scenes."""
+    return Renderer(Calibration.load(CALIBRATION), seed=3, roadside=False)
 
 
 def roi(cal: Calibration, x: float, y: float) -> tuple[int, int, int, int]:
@@ -142,10 +143,10 @@ def test_frames_have_the_calibration_size_and_change_as_the_ego_moves(renderer):
     b = renderer.render([], 1.5)
     # The road moves under the car; the sky does not.
     assert np.abs(a[400:].astype(int) - b[400:]).mean() > 2.0
-    assert np.abs(a[:100].astype(int) - b[:100]).mean() < 4.0
+    assert np.abs(a[:100, 340:508].astype(int) - b[:100, 340:508]).mean() < 4.0
 
 
-@pytest.mark.parametrize("kind", list(ObjectKind))
+@pytest.mark.parametrize("kind", [k for k in ObjectKind if k.is_obstacle])
 def test_obstacle_rois_are_dense_in_edges_and_empty_road_is_not(renderer, kind):
     """The paper's gate (Canny 40/120, tau 0.025) on the frames fusion would receive
     (JPEG q80, decoded to grey on the project's one path)."""
@@ -161,8 +162,8 @@ def test_obstacle_rois_are_dense_in_edges_and_empty_road_is_not(renderer, kind):
 
 def test_sky_is_sparse_and_dusk_lowers_contrast():
     cal = Calibration.load(CALIBRATION)
-    day = Renderer(cal, seed=1)
-    dusk = Renderer(cal, seed=1, look=CameraLook(brightness=0.3, noise=3.0))
+    day = Renderer(cal, seed=1, roadside=False)
+    dusk = Renderer(cal, seed=1, look=CameraLook(brightness=0.3, noise=3.0), roadside=False)
     ped = [body(ObjectKind.PEDESTRIAN, 10.0)]
     sky_box = (300, 10, 420, 120)
     assert density(gray_frame(day, ped), sky_box) < 0.002

@@ -33,12 +33,12 @@ from typing import Any
 
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, load_config, parse_config
+from common.depth_error import D435Noise
 from common.log import add_log_level, setup_logging
 from services.fusion.verifiers import VerifierConfigError
 from tools.eval import labels as labelfile
 from tools.eval import plots, tables
 from tools.eval.dataset_rois import DEPTH_MODES, DatasetSettings
-from tools.eval.depth import D435Noise
 from tools.eval.labels import LabelFileError
 from tools.eval.recording import RecordingSettings
 from tools.eval.records import (
@@ -117,6 +117,9 @@ def _add_report(p: argparse.ArgumentParser, sources: bool = True) -> None:
                    help="bootstrap resamples whole frames, sessions or single ROIs")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap samples")
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--held-out", metavar="WEIGHTS",
+                   help="only the ROIs of frames these hog_linear weights were not trained "
+                        "on (the weights file's trained_on.frames)")
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -137,6 +140,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     demo.add_argument("--scenarios", default="", help="comma-separated (default: the "
                                                       "demo's)")
     demo.add_argument("--camera-fps", type=float, default=30.0)
+    demo.add_argument("--fusion-config", help="fusion TOML of the closed loop (default: "
+                                             "the demo's, deploy/fusion.toml)")
     return parser.parse_args(argv)
 
 
@@ -153,8 +158,9 @@ def _calibrations(items: list[str], cameras: list[str]) -> dict[str, str]:
 
 def _extract(args: argparse.Namespace) -> tuple[list[RoiRecord], RunInfo, int]:
     """Raises ConfigError, VerifierConfigError, SourceError for bad arguments."""
+    left_out: dict[str, str] = {}
     specs: list[VerifierSpec] = ([parse_spec(v) for v in args.verifier] if args.verifier
-                                 else default_specs())
+                                 else default_specs(left_out))
     cfg = (load_config(args.fusion_config, FusionConfig) if args.fusion_config
            else parse_config({}, FusionConfig))
     fusion = cfg.fusion
@@ -174,6 +180,9 @@ def _extract(args: argparse.Namespace) -> tuple[list[RoiRecord], RunInfo, int]:
     where = args.scheduler or f"{min(args.jobs, len(tasks))} local processes"
     print(f"{len(tasks)} tasks on {where}; verifiers: "
           f"{', '.join(s.label for s in specs)}", file=sys.stderr, flush=True)
+    for name, why in left_out.items():
+        print(f"verifier {name} left out ({why}): name it with --verifier",
+              file=sys.stderr, flush=True)
     t0 = time.monotonic()
     progress = Progress(len(tasks))
     results = execute(tasks, args.jobs, args.scheduler, progress.update)
@@ -257,9 +266,23 @@ def _load(args: argparse.Namespace) -> tuple[list[RoiRecord], dict[str, dict[str
     return records, params, Path(args.out) if args.out else folder
 
 
+def held_out(records: list[RoiRecord], weights: str) -> list[RoiRecord]:
+    """The records of frames that `weights` was not trained on. Raises
+    VerifierConfigError for a weights file that cannot be read."""
+    from services.fusion.appearance import HogLinearModel
+
+    trained = set(HogLinearModel.load(weights).trained_on.get("frames", []))
+    kept = [r for r in records if r.frame_key not in trained]
+    print(f"held out of {weights}: {len(kept)} of {len(records)} ROIs "
+          f"({len({r.frame_key for r in kept})} frames)", file=sys.stderr)
+    return kept
+
+
 def _report(args: argparse.Namespace, records: list[RoiRecord],
             params: dict[str, dict[str, Any]], out: Path, compare: bool) -> int:
     settings = _report_settings(args)
+    if args.held_out:
+        records = held_out(records, args.held_out)
     given = labelfile.read_labels(args.labels) if args.labels else None
     labels = labelfile.resolve(records, given)
     chosen = {k: v for k, v in params.items() if not args.only or k in args.only}
@@ -322,7 +345,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "record-demo":
             from tools.eval.demo_recording import record_demo
 
-            return record_demo(Path(args.out), args.scenarios, args.camera_fps)
+            return record_demo(Path(args.out), args.scenarios, args.camera_fps,
+                               Path(args.fusion_config) if args.fusion_config else None)
         if args.command in ("rois", "run"):
             records, info, failed = _extract(args)
             out = Path(args.out)

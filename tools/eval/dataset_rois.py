@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.depth_error import D435Noise
 from services.fusion.verifiers import Observation
 from tools.eval.adapters import read_frame
 from tools.eval.adapters.kitti import KittiFormatError
@@ -23,7 +24,7 @@ from tools.eval.adapters.paper_rois import (
     point_candidates,
     scaled,
 )
-from tools.eval.depth import D435Noise, project_depth
+from tools.eval.depth import project_depth
 from tools.eval.frames import FrameLoadError, load_image
 from tools.eval.records import KIND_LIDAR, KIND_RADAR, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
@@ -106,7 +107,9 @@ def dataset_records(kind: str, root: Path, frame_ids: list[str], s: DatasetSetti
         ref = FrameRef("image", str(frame.image_path), scale=sc.scale,
                        jpeg_quality=s.jpeg_quality)
         for n, c in enumerate(candidates):
-            obs = Observation(gray, c.roi, c.column, c.range_m, depth)
+            if depth is not None and c.calibration is not None:
+                scorer.prepare(c.calibration)
+            obs = Observation(gray, c.roi, c.column, c.range_m, depth, c.calibration, c.xy_m)
             scores = scorer.score(obs)
             frame_us = scorer.full_frame_us(gray) if s.timing and n == 0 else None
             out.append(RoiRecord(

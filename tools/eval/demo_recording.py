@@ -2,9 +2,9 @@
 `aeb demo`: the real services on a SIMULATED vehicle, radar, camera and actuator),
 recorded in the project's MCAP layout for `aeb eval`.
 
-Recorded: radar tracks, camera frames and CameraInfo, fusion's targets and brake
-commands, the brake's status and the simulator's ground truth (`sim/world`), each on its
-own channel as the recording layout says, by `aeb record`'s recorder.
+Recorded: radar tracks, camera frames, their depth and CameraInfo, fusion's targets and
+brake commands, the brake's status and the simulator's ground truth (`sim/world`), each on
+its own channel as the recording layout says, by `aeb record`'s recorder.
 """
 
 import sys
@@ -13,6 +13,7 @@ from typing import Any
 
 from common.keys import (
     BRAKE_STATUS,
+    CAMERA_DEPTH,
     CAMERA_INFO,
     CAMERA_JPEG,
     FUSION_BRAKE_CMD,
@@ -25,15 +26,17 @@ from tools.recording.record import Recorder
 from tools.recording.writer import RecordingWriter
 from tools.sim.messages import SIM_WORLD
 
-SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_INFO, FUSION_TARGETS,
-                                   FUSION_BRAKE_CMD, BRAKE_STATUS, SIM_WORLD)
+SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,
+                                   FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, SIM_WORLD)
 
 
-def record_demo(out: Path, scenarios: str, camera_fps: float) -> int:
-    """Run and record the scenarios; 0 when recorded (whatever the verdicts), 2 when the
-    stack could not start."""
+def record_demo(out: Path, scenarios: str, camera_fps: float,
+                fusion_config: Path | None = None) -> int:
+    """Run and record the scenarios, fusion configured by `fusion_config` (default: the
+    demo's); 0 when recorded (whatever the verdicts), 2 when the stack could not start."""
     from tools.demo import DEMO_SCENARIOS, pick_scenarios
     from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
+    from tools.sim.stack import FUSION_CONFIG
 
     chosen = pick_scenarios(scenarios or ",".join(DEMO_SCENARIOS))
     stop = stop_event_on_signals(grace_s=None)
@@ -42,7 +45,7 @@ def record_demo(out: Path, scenarios: str, camera_fps: float) -> int:
     recorder: Recorder | None = None
     try:
         with closed_loop(out.parent / f"{out.stem}-stack", camera_fps=camera_fps,
-                         log=sys.stderr) as loop:
+                         log=sys.stderr, fusion_config=fusion_config or FUSION_CONFIG) as loop:
             recorder = Recorder(loop.bus, RecordingWriter(out, flush_s=None),
                                 [spec.wildcard(loop.bus.vehicle) for spec in SPECS],
                                 converter=None)

@@ -1,31 +1,22 @@
-"""Depth images aligned to the camera from lidar points, and a model of the RealSense
-D435's depth error to apply to them.
+"""Depth images aligned to the camera from lidar points or from a box scene, and a
+model of the RealSense D435's depth error to apply to them.
 
 `project_depth` gives the depth (camera z, metres) of the nearest point in each pixel,
 0 where no point falls: a lidar's depth image is sparse (64 lines), a D435's is dense;
-verifiers that read depth get 0 as "no return" in both.
+verifiers that read depth get 0 as "no return" in both. `box_scene_depth` ray-casts a
+dense depth image of a flat road and axis-aligned boxes (a SIMULATION, for tests and
+benchmarks of the depth path).
 
-The D435 model (`D435Noise`), from Intel's white paper "Tuning depth cameras for best
-performance" (RealSense D400 series): the RMS depth error of a stereo camera grows with
-the square of the distance,
-
-    rms(z) = z^2 * subpixel / (f_px * baseline)
-
-with the D435's 50 mm baseline, a subpixel accuracy of about 0.08 (Intel quotes 0.05-0.1
-for textured scenes) and f_px the depth stream's focal length in pixels (about 420-450 at
-848x480: its 87 x 58 deg field of view); 0.36 m at 10 m, 2.2 m at 25 m with f 449 px.
-Depth is reported in 1 mm units up to 65.535 m. No depth closer than the minimum
-distance, where the disparity exceeds the search range of 126 px: min_z = f_px *
-baseline / 126 (0.18 m at 449 px). Holes (no depth: low texture, occlusion edges) are
-drawn at random at `hole_rate`.
+The D435 model (`D435Noise`) lives in common/depth_error.py: fusion's depth verifier
+takes its tolerance from the same model.
 """
-
-from dataclasses import dataclass
 
 import numpy as np
 
-DISPARITY_SEARCH_PX = 126
-MAX_DEPTH_M = 65.535        # uint16 depth in 1 mm units
+from common.calibration import Calibration
+from common.depth_error import D435Noise
+
+__all__ = ["D435Noise", "box_scene_depth", "car_box", "project_depth"]
 
 
 def project_depth(points_cam: np.ndarray, k: np.ndarray, width: int, height: int,
@@ -48,39 +39,39 @@ def project_depth(points_cam: np.ndarray, k: np.ndarray, width: int, height: int
     return depth
 
 
-@dataclass(frozen=True)
-class D435Noise:
-    """The D435's depth error and gaps (module docstring)."""
+Box = tuple[float, float, float, float, float, float]   # x0, x1, y0, y1, z0, z1 (ground)
 
-    focal_px: float = 449.0
-    baseline_m: float = 0.050
-    subpixel: float = 0.08
-    hole_rate: float = 0.02
-    max_depth_m: float = MAX_DEPTH_M
 
-    def __post_init__(self) -> None:
-        if self.focal_px <= 0 or self.baseline_m <= 0 or self.subpixel < 0:
-            raise ValueError("focal_px and baseline_m must be positive, subpixel >= 0")
-        if not 0 <= self.hole_rate < 1:
-            raise ValueError("hole_rate must be in [0, 1)")
+def box_scene_depth(cal: Calibration, boxes: tuple[Box, ...] = (), road: bool = True,
+                    max_range_m: float = 80.0) -> np.ndarray:
+    """Camera z of the nearest surface per pixel (float32, 0 where none within
+    `max_range_m`): the road plane z = 0 of the calibration's ground frame and
+    axis-aligned boxes of it. Pinhole: raises ValueError for a distorted calibration."""
+    if np.any(cal.dist):
+        raise ValueError("box_scene_depth needs an undistorted calibration")
+    v, u = np.mgrid[0:cal.height, 0:cal.width].astype(np.float64)
+    k = cal.k
+    cam = np.stack([(u - k[0, 2]) / k[0, 0], (v - k[1, 2]) / k[1, 1], np.ones_like(u)], -1)
+    ray = cam @ cal.r                 # R^T per pixel: the ray in the ground frame per unit z
+    c = -cal.r.T @ cal.t
+    best = np.full(ray.shape[:2], np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if road:
+            s = -c[2] / ray[..., 2]
+            best = np.where((s > 0) & (s < max_range_m), s, best)
+        for box in boxes:
+            lo = np.full(best.shape, -np.inf)
+            hi = np.full(best.shape, np.inf)
+            for axis in range(3):
+                t0 = (box[2 * axis] - c[axis]) / ray[..., axis]
+                t1 = (box[2 * axis + 1] - c[axis]) / ray[..., axis]
+                lo = np.maximum(lo, np.minimum(t0, t1))
+                hi = np.minimum(hi, np.maximum(t0, t1))
+            hit = (hi >= lo) & (lo > 0) & (lo < best)
+            best = np.where(hit, lo, best)
+    return np.where(np.isfinite(best), best, 0.0).astype(np.float32)
 
-    @property
-    def min_depth_m(self) -> float:
-        return self.focal_px * self.baseline_m / DISPARITY_SEARCH_PX
 
-    def rms_m(self, z: np.ndarray | float) -> np.ndarray:
-        return np.asarray(z, dtype=np.float64) ** 2 * self.subpixel / (
-            self.focal_px * self.baseline_m)
-
-    def apply(self, depth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """A copy of `depth` (0 = none) as a D435 would report it."""
-        out = depth.astype(np.float64)
-        valid = out > 0
-        z = out[valid]
-        z = z + rng.standard_normal(len(z)) * self.rms_m(z)
-        z = np.round(z * 1000.0) / 1000.0
-        z[(z < self.min_depth_m) | (z > self.max_depth_m)] = 0.0
-        if self.hole_rate > 0:
-            z[rng.random(len(z)) < self.hole_rate] = 0.0
-        out[valid] = z
-        return out.astype(np.float32)
+def car_box(x: float, y: float = 0.0) -> Box:
+    """A car-sized box whose rear is at x (1.8 m wide, 0.2-1.5 m above the road)."""
+    return (x, x + 4.0, y - 0.9, y + 0.9, 0.2, 1.5)

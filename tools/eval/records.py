@@ -75,6 +75,11 @@ class RoiRecord(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     frame_canny_us: float | None = None  # full-frame Canny, on one record per frame
 
     @property
+    def frame_key(self) -> str:
+        """The frame's name across sessions: `session:frame`."""
+        return f"{self.session}:{self.frame}"
+
+    @property
     def roi_area_pct(self) -> float:
         return 100.0 * self.roi[2] * self.roi[3] / (self.image_w * self.image_h)
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from common.calibration import Calibration
 from services.fusion.roi import Roi
 from services.fusion.verifiers import (
     Observation,
@@ -64,9 +65,20 @@ def parse_spec(text: str) -> VerifierSpec:
     return VerifierSpec(text.strip(), name.strip(), params)
 
 
-def default_specs() -> list[VerifierSpec]:
-    """Every registered verifier with its default parameters."""
-    return [VerifierSpec(name, name) for name in available()]
+def default_specs(left_out: dict[str, str] | None = None) -> list[VerifierSpec]:
+    """Every registered verifier that works with its default parameters (`hog_linear`
+    and `combined` need a weights file: name them with --verifier); the others go into
+    `left_out` (name -> why) when given."""
+    out = []
+    for name in available():
+        try:
+            create(name)
+        except VerifierConfigError as exc:
+            if left_out is not None:
+                left_out[name] = str(exc)
+            continue
+        out.append(VerifierSpec(name, name))
+    return out
 
 
 class Scorer:
@@ -77,6 +89,13 @@ class Scorer:
         self.verifiers: list[tuple[str, Verifier]] = [(s.label, create(s.name, s.params))
                                                       for s in specs]
         self._gate = create(PAPER_GATE)
+
+    def prepare(self, calibration: Calibration) -> None:
+        """Let verifiers precompute for this calibration (outside the timed verify)."""
+        for _, v in self.verifiers:
+            prepare = getattr(v, "prepare", None)
+            if callable(prepare):
+                prepare(calibration)
 
     def params(self) -> dict[str, dict[str, ParamValue]]:
         return {label: v.params() for label, v in self.verifiers}

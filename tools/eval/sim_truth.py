@@ -1,7 +1,9 @@
 """Ground truth of a simulator recording (SIMULATION): its `sim/world` messages say where
-every object was, so each radar track is labelled YES when it lies on an object's
-footprint (within the radar's noise) and NO otherwise (a ghost: the radar model's false
-returns), and background negatives avoid every object's image box.
+every object was, so each radar track is labelled YES when it lies on an obstacle's
+footprint (within the radar's noise) and NO otherwise: a ghost (the radar model's
+short-lived false returns) or a persistent false target (a plate on the road, an
+overhead sign, a guard rail: NO with its kind). Background negatives avoid every
+object's image box.
 """
 
 import bisect
@@ -14,6 +16,7 @@ from common.messages import DecodeError, decode
 from tools.eval.adapters.paper_rois import Box2D, footprint_distance
 from tools.sim.camera_source import bodies_at
 from tools.sim.messages import SimWorld
+from tools.sim.scenario import ObjectKind
 
 # A track this close to an object's footprint is that object: the simulated radar's
 # position noise (0.1-0.15 m) and its split returns on large objects stay well inside.
@@ -48,17 +51,22 @@ def _footprints(world: SimWorld, stamp_ns: int) -> list[tuple[str, np.ndarray, f
     objects the camera renders, also in the moments after a run ended (the radar's
     tracks of them coast on; between runs the world has none)."""
     bodies, ego_x = bodies_at(world, stamp_ns)
-    return [(b.kind.value, b.corners() - np.array([ego_x, 0.0]), b.height_m) for b in bodies]
+    return [(b.kind.value, b.corners() - np.array([ego_x, 0.0]), b.z_m + b.height_m)
+            for b in bodies]
 
 
 def label_track(world: SimWorld, stamp_ns: int, x_m: float, y_m: float) -> tuple[str, str]:
-    """(YES | NO, the object's kind or "") for a track at (x, y) in the radar frame."""
+    """(YES | NO, the object's kind or "") for a track at (x, y) in the radar frame: NO
+    with the kind on a false target (plate, sign, guard rail), NO and "" off every
+    object."""
     best, kind = math.inf, ""
     for k, corners, _ in _footprints(world, stamp_ns):
         d = float(footprint_distance(np.array([[x_m, y_m]]), corners)[0])
         if d < best:
             best, kind = d, k
-    return ("YES", kind) if best <= TRACK_TOLERANCE_M else ("NO", "")
+    if best > TRACK_TOLERANCE_M:
+        return ("NO", "")
+    return ("YES" if ObjectKind(kind).is_obstacle else "NO", kind)
 
 
 def object_boxes(world: SimWorld, stamp_ns: int, cal: Calibration,

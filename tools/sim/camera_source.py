@@ -10,20 +10,27 @@ Camera config::
 The source follows `sim/world` (published by the simulator) on the camera's own bus,
 extrapolates the latest world state to each frame's capture time (objects at their
 velocities, the ego with its acceleration) and renders it with the camera's calibration,
-so the frame matches what fusion projects radar tracks into. Before the first world
-state arrives it renders the empty road (so the camera is up before the simulator);
+so the frame matches what fusion projects radar tracks into. Each frame carries its
+aligned depth (uint16 mm, 0 = no return), rendered from the same geometry: the camera
+service publishes it as DepthFrame beside the JPEG (`[camera.depth]`). The depth is the
+exact geometry unless the option `depth_noise` applies the D435's error model
+(common/depth_error.py: about 21 ms a full frame, too slow for 30 fps beside the
+rendering). Option `depth = false`: colour only, as a camera without depth. Before the
+first world state arrives it renders the empty road (so the camera is up before the simulator);
 once the simulator has been seen, a world older than `stale_after_s` is a camera failure
 (`SourceError`): fusion then sees no fresh frames, as with a real camera that stopped.
 """
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 from common.calibration import Calibration
 from common.clock import wall_ns
+from common.depth_error import D435Noise
+from common.depth_image import to_units
 from services.camera.plugin import PluginContext
 from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError, SourceError
 from tools.sim.messages import SIM_WORLD, SimWorld
@@ -44,7 +51,7 @@ def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
     else:
         ego_x = world.ego_x_m + v * dt + 0.5 * a * dt * dt
     bodies = [Body(o.index, ObjectKind(o.kind), o.x_m, o.y_m, o.yaw_deg, o.length_m,
-                   o.width_m, o.height_m, o.vx_mps, o.vy_mps).shifted(dt)
+                   o.width_m, o.height_m, o.vx_mps, o.vy_mps, o.z_m).shifted(dt)
               for o in world.objects]
     return bodies, ego_x
 
@@ -59,9 +66,13 @@ class SimCameraSource(FrameSource):
                  stale_after_s: float = 1.0,
                  clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep,
-                 wall_clock: Callable[[], int] = wall_ns) -> None:
+                 wall_clock: Callable[[], int] = wall_ns,
+                 depth: bool = True, depth_noise: bool = False) -> None:
         super().__init__()
         self.renderer = Renderer(calibration)
+        self.depth = depth
+        self.depth_noise = D435Noise() if depth_noise else None
+        self._noise_rng = np.random.default_rng(0)
         self.fps = fps
         self.stale_after_s = stale_after_s
         self._pacer = Pacer(fps, clock, sleep)
@@ -74,8 +85,10 @@ class SimCameraSource(FrameSource):
         self._subscription = subscribe(self.on_world) if subscribe is not None else None
 
     def describe(self) -> str:
+        depth = ("" if not self.depth else
+                 ", with depth (D435 noise)" if self.depth_noise else ", with exact depth")
         return (f"simulated camera {self.renderer.width}x{self.renderer.height} at "
-                f"{self.fps:g} fps, rendering sim/world (simulation)")
+                f"{self.fps:g} fps{depth}, rendering sim/world (simulation)")
 
     def on_world(self, world: SimWorld, key: str = "") -> None:
         with self._lock:
@@ -89,33 +102,56 @@ class SimCameraSource(FrameSource):
     def frame_at(self, stamp_ns: int) -> np.ndarray:
         """The rendered frame for the latest world at `stamp_ns`. Raises SourceError when
         the simulator went silent."""
+        return self._scene_at(stamp_ns, with_depth=False)[0]
+
+    def frame_and_depth_at(self, stamp_ns: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The frame and its aligned depth (uint16 mm; None without depth). Raises
+        SourceError when the simulator went silent."""
+        if not self.depth:
+            return self._scene_at(stamp_ns, with_depth=False)
+        if self.depth_noise is None:
+            return self._scene_at(stamp_ns, with_depth=True, millimetres=True)
+        image, depth_m = self._scene_at(stamp_ns, with_depth=True)
+        assert depth_m is not None
+        return image, to_units(self.depth_noise.apply(depth_m, self._noise_rng))
+
+    def _scene_at(self, stamp_ns: int, with_depth: bool, millimetres: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
         with self._lock:
             world, seen_at = self._world, self._world_at
-        if world is None:
-            return self.renderer.render([], 0.0)
-        age = self._clock() - seen_at
-        if age > self.stale_after_s:
-            raise SourceError(f"no simulator world for {age:.1f} s (is the simulator running?)")
-        if (world.run, world.seed) != self._scene:
-            self._scene = (world.run, world.seed)
-            self.renderer.new_scene(world.seed)
-        self.renderer.set_look(CameraLook(brightness=world.brightness, noise=world.noise))
-        bodies, ego_x = bodies_at(world, stamp_ns)
-        return self.renderer.render(bodies, ego_x)
+        bodies: list[Body] = []
+        ego_x = 0.0
+        if world is not None:
+            age = self._clock() - seen_at
+            if age > self.stale_after_s:
+                raise SourceError(f"no simulator world for {age:.1f} s (is the simulator "
+                                  "running?)")
+            if (world.run, world.seed) != self._scene:
+                self._scene = (world.run, world.seed)
+                self.renderer.new_scene(world.seed)
+                self._noise_rng = np.random.default_rng((world.seed, 2))
+            self.renderer.set_look(CameraLook(brightness=world.brightness, noise=world.noise))
+            bodies, ego_x = bodies_at(world, stamp_ns)
+        if with_depth:
+            return self.renderer.render_rgbd(bodies, ego_x, millimetres)
+        return self.renderer.render(bodies, ego_x), None
 
     def read(self) -> Frame:
         self._pacer.wait()
         stamp = self._wall()
-        return Frame(image=self.frame_at(stamp), stamp_ns=stamp)
+        image, depth = self.frame_and_depth_at(stamp)
+        return Frame(image=image, stamp_ns=stamp, depth=depth)
 
 
 def make_source(context: PluginContext) -> SimCameraSource:
-    """The camera plugin factory. Options: `stale_after_s` (default 1.0).
+    """The camera plugin factory. Options: `stale_after_s` (default 1.0), `depth`
+    (default true: aligned depth with every frame), `depth_noise` (default false: the
+    exact geometry; true: the D435's error model).
 
     Raises SourceConfigError without a calibration or a bus (it must run inside the
     camera service), or for unknown options.
     """
-    unknown = set(context.options) - {"stale_after_s"}
+    unknown = set(context.options) - {"stale_after_s", "depth", "depth_noise"}
     if unknown:
         raise SourceConfigError(f"tools.sim.camera_source: unknown options {sorted(unknown)}")
     if context.calibration is None:
@@ -130,4 +166,15 @@ def make_source(context: PluginContext) -> SimCameraSource:
     return SimCameraSource(
         context.calibration, context.fps,
         lambda cb: bus.subscribe(SIM_WORLD, cb),
-        stale_after_s=float(context.options.get("stale_after_s", 1.0)))
+        stale_after_s=float(context.options.get("stale_after_s", 1.0)),
+        depth=_flag(context.options, "depth", True),
+        depth_noise=_flag(context.options, "depth_noise", False))
+
+
+def _flag(options: Mapping[str, object], name: str, default: bool) -> bool:
+    """A boolean option. Raises SourceConfigError for anything but true or false."""
+    value = options.get(name, default)
+    if not isinstance(value, bool):
+        raise SourceConfigError(f"tools.sim.camera_source: option {name} must be true or "
+                                f"false, got {value!r}")
+    return value

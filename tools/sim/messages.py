@@ -18,7 +18,7 @@ class SimObject(msgspec.Struct, frozen=True):
     ground below the ego's radar at the start of the run)."""
 
     index: int
-    kind: str                  # car | box | pedestrian | bicycle
+    kind: str                  # car | box | pedestrian | bicycle | plate | sign | guard_rail
     x_m: float                 # centre of the footprint
     y_m: float
     yaw_deg: float
@@ -27,6 +27,7 @@ class SimObject(msgspec.Struct, frozen=True):
     height_m: float
     vx_mps: float
     vy_mps: float
+    z_m: float = 0.0           # bottom above the road (an overhead sign)
 
 
 class SimWorld(msgspec.Struct, frozen=True):

@@ -50,7 +50,7 @@ class MovingBoxSource(FrameSource):
         self.frames = frames
         self.distance_m = distance_m
         self.speed_mps = speed_mps
-        self.renderer = Renderer(calibration, look=CameraLook(noise=0.0))
+        self.renderer = Renderer(calibration, look=CameraLook(noise=0.0), roadside=False)
         self._pacer = Pacer(fps, clock, sleep)
         self._wall = wall_clock
         self._n = 0

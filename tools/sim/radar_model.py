@@ -6,6 +6,13 @@ forward, y left, origin at the radar on the ego's front; velocities relative to 
 Imperfections, from `RadarLook`: measurement noise, occasional ghost returns, dropouts,
 several returns per large object (split objects, several clusters), occlusion by nearer
 objects, object IDs that are stable but sometimes swap.
+
+Persistent false targets are returns like any other: the ARS408 measures no elevation,
+so a metal plate on the road, an overhead sign and a guard rail segment ahead are
+reported as stationary objects at their nearest point, every cycle, and its tracker (and
+ours) confirms them; so is a persistent multipath ghost (a `ghost` object: the path of a
+reflection off a bridge, a truck or a rail, reported where nothing is). They hide nothing
+behind them: the radar sees past a plate, under a sign and beside a rail.
 """
 
 import math
@@ -24,14 +31,20 @@ FAR_RANGE_M = 250.0
 FAR_HALF_FOV_DEG = 9.0
 MIN_RANGE_M = 0.2
 
-# Typical radar cross sections (dBsm) seen from behind or the side.
+# Typical radar cross sections (dBsm) seen from behind or the side. The false targets
+# are strong reflectors: a metal plate or manhole cover at a grazing angle, a sign
+# gantry's steel, a guard rail's W-beam and posts.
 RCS_DBSM = {ObjectKind.CAR: 10.0, ObjectKind.BOX: -8.0, ObjectKind.PEDESTRIAN: -5.0,
-            ObjectKind.BICYCLE: -2.0}
-# 0x60D Class codes
+            ObjectKind.BICYCLE: -2.0, ObjectKind.PLATE: 2.0, ObjectKind.SIGN: 12.0,
+            ObjectKind.GUARD_RAIL: 5.0, ObjectKind.GHOST: -2.0}
+# 0x60D Class codes (0 point, 1 car, 3 pedestrian, 5 bicycle, 6 wide)
 OBJ_CLASS = {ObjectKind.CAR: 1, ObjectKind.BOX: 0, ObjectKind.PEDESTRIAN: 3,
-             ObjectKind.BICYCLE: 5}
+             ObjectKind.BICYCLE: 5, ObjectKind.PLATE: 0, ObjectKind.SIGN: 6,
+             ObjectKind.GUARD_RAIL: 6, ObjectKind.GHOST: 0}
 CLUSTERS_PER_OBJECT = {ObjectKind.CAR: (3, 5), ObjectKind.BOX: (1, 1),
-                       ObjectKind.PEDESTRIAN: (1, 2), ObjectKind.BICYCLE: (1, 2)}
+                       ObjectKind.PEDESTRIAN: (1, 2), ObjectKind.BICYCLE: (1, 2),
+                       ObjectKind.PLATE: (1, 1), ObjectKind.SIGN: (1, 3),
+                       ObjectKind.GUARD_RAIL: (1, 2), ObjectKind.GHOST: (1, 1)}
 OCCLUDED_FRACTION = 0.7     # an object mostly hidden behind nearer ones is not seen
 LARGE_OBJECT_M = 1.5        # objects wider or longer than this may split
 
@@ -112,7 +125,8 @@ def _visible(bodies: list[Body], ego_x: float) -> list[_Seen]:
         covered = 0.0
         # Union of the nearer visible objects' angular intervals over this one.
         spans = sorted((max(o.az_lo, s.az_lo), min(o.az_hi, s.az_hi)) for o in out
-                       if o.range_m < s.range_m and o.az_hi > s.az_lo and o.az_lo < s.az_hi)
+                       if o.range_m < s.range_m and o.az_hi > s.az_lo and o.az_lo < s.az_hi
+                       and o.body.kind.is_obstacle)
         end = s.az_lo
         for lo, hi in spans:
             lo = max(lo, end)

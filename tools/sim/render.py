@@ -8,9 +8,21 @@ source and the test and benchmark scenes (tools/sim/scenes.py) all draw through 
 The road is a textured ground plane (asphalt, lane markings, shoulders, grass) mapped per
 pixel by intersecting each pixel's ray with the ground, with coarser texture levels far
 away so that distant texels do not alias into false edges, and a haze that blends the
-ground into the sky at the horizon. Cars and boxes are textured 3-D boxes; pedestrians
-and bicycles are camera-facing cut-outs. Objects are drawn far to near, so nearer ones
-hide farther ones as a camera would see them.
+ground into the sky at the horizon. With `roadside` (the closed loop's default) the
+asphalt is worn (stones, cracks, patches), hedges, trees and house fronts line the road
+at +-ROADSIDE_Y_M and a tree line with buildings stands BACKDROP_M ahead: what real
+images put around an obstacle, so that background ROIs have the edge density of real
+ones (docs/simulator.md). Without it (the still test scenes of tools/sim/scenes.py): the
+smooth road under an open sky. Cars and boxes are textured 3-D boxes; pedestrians
+and bicycles are camera-facing cut-outs; the radar's false targets are what they are: a
+manhole cover flat on the road, a sign board on its gantry above the road, a low guard
+rail on posts. Objects are drawn far to near, so nearer ones hide farther ones as a
+camera would see them.
+
+`render_rgbd` also returns the aligned depth image, from the same geometry: per pixel
+the camera-frame depth Z in metres (float32, as the RealSense's aligned depth stream
+reports it after scaling) of the surface the colour pixel shows, 0 where nothing
+returns (the sky). A SIMULATION of a depth camera, without its noise.
 
 At night (`headlights`), `CameraLook.brightness` is the ambient light and the ego's low
 beams light the road ahead and, falling with the square of distance, the objects facing
@@ -21,6 +33,7 @@ precision.
 
 import ctypes
 import ctypes.util
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,12 +42,19 @@ import cv2
 import numpy as np
 
 from common.calibration import Calibration
+from common.depth_image import to_units
 from tools.sim import sprites
 from tools.sim.scenario import CameraLook, ObjectKind
 from tools.sim.world import Body
 
 MAX_GROUND_M = 250.0
 HAZE_M = 120.0
+ROADSIDE_Y_M = 9.5              # hedges and house fronts this far left and right
+BACKDROP_M = 150.0              # the far tree line, this far ahead of the camera
+BACKDROP_WIDTH_M = 400.0
+BACKDROP_RES_M = 0.1
+_GEOMETRY_ROWS = 40             # rows per band when building the roadside geometry
+BACKDROP_CLARITY = 0.8          # its contrast through the haze (a clear day)
 _MIP_FACTORS = (1, 4, 16)        # texture levels: 2 cm, 8 cm, 32 cm per texel
 _SHADE_REAR, _SHADE_SIDE, _SHADE_TOP = 1.0, 0.78, 1.12
 _NOISE_BANK = 4
@@ -66,14 +86,32 @@ def release_freed_memory() -> None:
             trim(0)
 
 
+def _mip_levels(base: np.ndarray) -> list[np.ndarray]:
+    """The texture at every level of _MIP_FACTORS (blurred, then shrunk)."""
+    levels = []
+    for f in _MIP_FACTORS:
+        tex = base
+        if f > 1:
+            tex = cv2.resize(cv2.GaussianBlur(base, (0, 0), f * 0.6),
+                             (base.shape[1] // f, base.shape[0] // f),
+                             interpolation=cv2.INTER_AREA)
+        levels.append(tex)
+    return levels
+
+
 class Renderer:
     """Renders frames for one calibration. Building it precomputes the per-pixel ground
-    geometry and the textures (about a second); `render` then costs a few ms."""
+    (and roadside) geometry and the textures (one to two seconds); `render` then costs
+    about 5 ms for the plain road, 8-10 ms with the roadside, 2 ms more with depth (CPU
+    on a quiet core)."""
 
     def __init__(self, calibration: Calibration, seed: int = 0,
-                 look: CameraLook | None = None) -> None:
+                 look: CameraLook | None = None, roadside: bool = True) -> None:
         self.cal = calibration
         self.look = look or CameraLook()
+        self.roadside = roadside
+        self._depth: np.ndarray | None = None     # the depth image being rendered
+        self._static_depth_mm: np.ndarray | None = None
         self.width, self.height = calibration.width, calibration.height
         self.cam_pos = -calibration.r.T @ calibration.t      # camera centre, ground frame
         self._rng = np.random.default_rng(seed)
@@ -141,6 +179,9 @@ class Renderer:
         gy = self.cam_pos[1] + s * rays[..., 1]
         dist = np.hypot(gx - self.cam_pos[0], gy - self.cam_pos[1])
         ground = hits & (dist < MAX_GROUND_M)
+        # The rays are R^T (x_n, y_n, 1): the scale s along one is the camera-frame depth.
+        self._norm = norm.astype(np.float32)
+        self._ground_z = np.where(ground, s, 0.0).astype(np.float32)
         return ground, np.where(ground, gx, 0.0), np.where(ground, gy, 0.0), dist, rays
 
     def _ground_xy(self) -> tuple[np.ndarray, np.ndarray]:
@@ -155,6 +196,13 @@ class Renderer:
 
     def _ground_geometry(self) -> None:
         self.ground, gx, gy, dist, rays = self._ground_hits()
+        self._walls: list[tuple[int, int, int, int, int, np.ndarray, np.ndarray, np.ndarray]] = []
+        depth = self._ground_z.astype(np.float64)
+        backdrop_px: tuple[np.ndarray, np.ndarray] | None = None
+        if self.roadside:
+            depth, dist, backdrop_px = self._roadside_geometry(rays, depth, dist)
+        self.static_depth = depth.astype(np.float32)
+        del self._ground_z, depth
         dz = rays[..., 2]
         # Texture coordinates (texels of level 0): column from +y (left) to -y.
         col0 = ((sprites.ROAD_HALF_WIDTH_M - gy) / sprites.ROAD_RES_M).astype(np.float32)
@@ -187,18 +235,97 @@ class Renderer:
         t = np.clip(elev / 35.0, 0.0, 1.0)[..., None]
         top = np.array([215, 170, 120], np.float64)
         sky = sprites.HAZE_BGR * (1 - t) + top * t
-        self._background = np.where(ground, sprites.HAZE_BGR, sky).round().astype(np.uint8)
+        background = np.where(ground, sprites.HAZE_BGR, sky).astype(np.float32)
+        del sky
+        if backdrop_px is not None:
+            colour, alpha = backdrop_px
+            a = (alpha * np.float32(BACKDROP_CLARITY))[..., None]
+            background *= 1 - a
+            background += colour * a
+            del colour, alpha, a
+        self._background = background.round().astype(np.uint8)
+
+    def _roadside_geometry(self, rays: np.ndarray, depth: np.ndarray, dist: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """Hedges and house fronts at +-ROADSIDE_Y_M and the backdrop BACKDROP_M ahead:
+        where each pixel's ray meets them before the ground. Sets the wall bands (texture
+        level, box, texture coordinates, weights), hides the ground behind them; returns
+        the depth and horizontal distance with them (`depth` and `dist` updated in
+        place), and the backdrop's colour and alpha per pixel (it stands still relative
+        to the ego, like a far skyline). Computed a band of rows at a time: whole-image
+        float64 temporaries would raise the camera process's peak memory by tens of MB."""
+        cam = self.cam_pos
+        h, w = self.height, self.width
+        tex = sprites.backdrop_texture(np.random.default_rng((self._seed, 7)),
+                                       BACKDROP_WIDTH_M, BACKDROP_RES_M)
+        th, tw = tex.shape[:2]
+        wall = np.zeros((h, w), bool)
+        solid = np.zeros((h, w), bool)
+        zw = np.zeros((h, w), np.float32)
+        wx = np.zeros((h, w), np.float32)
+        level = np.zeros((h, w), np.uint8)
+        colour = np.zeros((h, w, 3), np.uint8)
+        alpha = np.zeros((h, w), np.float32)
+        for r0 in range(0, h, _GEOMETRY_ROWS):
+            r1 = min(r0 + _GEOMETRY_ROWS, h)
+            rx, ry, rz = rays[r0:r1, :, 0], rays[r0:r1, :, 1], rays[r0:r1, :, 2]
+            d = depth[r0:r1]
+            near = np.where(d > 0, d, np.inf)
+            # Walls: y = +-ROADSIDE_Y_M, z in [0, SCENERY_HEIGHT_M].
+            side = np.where(ry >= 0, ROADSIDE_Y_M, -ROADSIDE_Y_M)
+            steep = np.abs(ry) > 1e-9
+            sw = np.where(steep, (side - cam[1]) / np.where(steep, ry, 1.0), 1e9)
+            z = cam[2] + sw * rz
+            hit = (sw > 0) & (z >= 0) & (z <= sprites.SCENERY_HEIGHT_M) & (sw < near) & (
+                sw * rx < MAX_GROUND_M)
+            near = np.where(hit, sw, near)
+            wall[r0:r1], zw[r0:r1], wx[r0:r1] = hit, z, cam[0] + sw * rx
+            footprint = sw / self.cal.k[0, 0] / sprites.SCENERY_RES_M   # texels per pixel
+            level[r0:r1] = np.where(footprint > 6.0, 2, np.where(footprint > 1.5, 1, 0))
+            dist[r0:r1] = np.where(hit, np.hypot(sw * rx, sw * ry), dist[r0:r1])
+            # The backdrop: x = cam x + BACKDROP_M, where nothing nearer is hit.
+            ahead = rx > 1e-9
+            sb = np.where(ahead, BACKDROP_M / np.where(ahead, rx, 1.0), np.inf)
+            zb = cam[2] + sb * rz
+            col = ((BACKDROP_WIDTH_M / 2 - (cam[1] + sb * ry)) / BACKDROP_RES_M)
+            row = ((sprites.BACKDROP_HEIGHT_M - zb) / BACKDROP_RES_M)
+            inside = (sb < near) & (col >= 0) & (col < tw) & (row >= 0) & (row < th)
+            sampled = cv2.remap(tex, np.where(inside, col, -1).astype(np.float32),
+                                np.where(inside, row, -1).astype(np.float32),
+                                cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                                borderValue=(0, 0, 0, 0))
+            a = np.where(inside, sampled[..., 3] / np.float32(255.0), 0.0)
+            opaque = a > 0.5
+            solid[r0:r1] = opaque
+            alpha[r0:r1] = np.where(opaque, 1.0, a)
+            colour[r0:r1] = sampled[..., :3]
+            near = np.where(opaque, sb, near)
+            d[:] = np.where(np.isfinite(near), near, 0.0)
+        self.ground &= ~(wall | solid)
+        # Wall texture coordinates (rows along x, columns up) at a level per pixel from
+        # its texel footprint; the haze from the horizontal distance.
+        for (lv, f), left in itertools.product(enumerate(_MIP_FACTORS), (True, False)):
+            mask = wall & (level == lv) & ((rays[..., 1] >= 0) == left)    # a box per side
+            if not mask.any():
+                continue
+            rows_i, cols_i = np.nonzero(mask)
+            y0, y1 = int(rows_i.min()), int(rows_i.max()) + 1
+            x0, x1 = int(cols_i.min()), int(cols_i.max()) + 1
+            m = mask[y0:y1, x0:x1]
+            mx = zw[y0:y1, x0:x1] / np.float32(sprites.SCENERY_RES_M * f)
+            my = wx[y0:y1, x0:x1] / np.float32(sprites.SCENERY_RES_M * f)
+            fog = np.exp(-dist[y0:y1, x0:x1] / HAZE_M)
+            weight = np.where(m, fog, 0.0).astype(np.float32)
+            self._walls.append((lv, y0, y1, x0, x1, mx, my, weight))
+        return depth, dist, (colour, alpha)
 
     def _textures(self) -> None:
         base = sprites.road_texture(self._rng)
-        self._tex = []
-        for f in _MIP_FACTORS:
-            tex = base
-            if f > 1:
-                tex = cv2.resize(cv2.GaussianBlur(base, (0, 0), f * 0.6),
-                                 (base.shape[1] // f, base.shape[0] // f),
-                                 interpolation=cv2.INTER_AREA)
-            self._tex.append(tex)
+        if self.roadside:
+            sprites.road_wear(self._rng, base)
+        self._tex = _mip_levels(base)
+        self._wall_tex = (_mip_levels(sprites.roadside_texture(self._rng)) if self.roadside
+                          else [])
 
     # -- per frame ------------------------------------------------------------------------
 
@@ -212,12 +339,39 @@ class Renderer:
                                cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
             img[r0:r1] = cv2.blendLinear(texels, self._background[r0:r1],
                                          self._weight[r0:r1], self._weight_bg[r0:r1])
+        wall_shift = np.float32((ego_x_m % sprites.SCENERY_TILE_M) / sprites.SCENERY_RES_M)
+        for lv, y0, y1, x0, x1, mx, my, w in self._walls:
+            # Nearest texel: less than half the time of bilinear on these large boxes,
+            # and at most 1.5 texels a pixel at the nearest level it looks the same.
+            texels = cv2.remap(self._wall_tex[lv], mx, my + wall_shift / _MIP_FACTORS[lv],
+                               cv2.INTER_NEAREST, borderMode=cv2.BORDER_WRAP)
+            region = img[y0:y1, x0:x1]
+            region[:] = cv2.blendLinear(texels, region, w, 1.0 - w)
         return img
 
     def render(self, bodies: list[Body], ego_x_m: float, lights: Sequence[Light] = (),
                headlights: bool = False) -> np.ndarray:
         """One BGR uint8 frame of `bodies` and `lights` (world frame) seen from the ego at
         `ego_x_m`; `headlights`: a night scene lit by the ego's low beams."""
+        return self._draw(bodies, ego_x_m, lights, headlights, None)
+
+    def render_rgbd(self, bodies: list[Body], ego_x_m: float, millimetres: bool = False
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """The BGR frame and its aligned depth: (H, W) float32 camera-frame depth in
+        metres of what each colour pixel shows, 0 where nothing returns (the sky); with
+        `millimetres`, uint16 in DepthFrame's units (common/depth_image.py), converted
+        only where objects are drawn (a whole frame's conversion costs 1-2 ms)."""
+        if millimetres:
+            if self._static_depth_mm is None:
+                self._static_depth_mm = to_units(self.static_depth)
+            depth = self._static_depth_mm.copy()
+        else:
+            depth = self.static_depth.copy()
+        return self._draw(bodies, ego_x_m, (), False, depth), depth
+
+    def _draw(self, bodies: list[Body], ego_x_m: float, lights: Sequence[Light],
+              headlights: bool, depth: np.ndarray | None) -> np.ndarray:
+        self._depth = depth
         img = self._road(ego_x_m)
         if headlights:
             img = np.clip(img * self._beam_gain(), 0, 255).astype(np.uint8)
@@ -225,14 +379,21 @@ class Renderer:
         cam = self.cam_pos[:2]
         rel.sort(key=lambda item: -float(np.hypot(*(item[1] - cam))))
         for body, centre in rel:
-            if centre[0] - cam[0] < 0.3:
-                continue    # behind the camera
+            if centre[0] - cam[0] < 0.3 or body.kind is ObjectKind.GHOST:
+                continue    # behind the camera, or only the radar's (nothing is there)
             lit = self._upright_gain(float(centre[0] - cam[0])) if headlights else 1.0
+            if body.kind is ObjectKind.PLATE:
+                self._plate(img, body, centre, lit)
+                continue
+            if body.kind is ObjectKind.SIGN:
+                self._sign(img, body, centre, lit)
+                continue
             self._shadow(img, body, centre)
-            if body.kind in (ObjectKind.CAR, ObjectKind.BOX):
+            if body.kind in (ObjectKind.CAR, ObjectKind.BOX, ObjectKind.GUARD_RAIL):
                 self._box(img, body, centre, lit)
             else:
                 self._cutout(img, body, centre, lit)
+        self._depth = None
         brightness = self.look.brightness
         if brightness != 1.0 and not headlights:
             img = cv2.convertScaleAbs(img, alpha=brightness)
@@ -296,8 +457,11 @@ class Renderer:
             return None
         return uv.astype(np.float32)
 
-    def _paste(self, img: np.ndarray, sprite: np.ndarray, quad: np.ndarray, shade: float) -> None:
-        """Warp a BGRA sprite onto an image quad (TL, TR, BR, BL) and blend by alpha."""
+    def _paste(self, img: np.ndarray, sprite: np.ndarray, quad: np.ndarray, shade: float,
+               quad3: np.ndarray | None = None) -> None:
+        """Warp a BGRA sprite onto an image quad (TL, TR, BR, BL) and blend by alpha;
+        when a depth image is being rendered, write the depth of the quad's plane (its
+        3-D corners `quad3`, radar ground frame) where the sprite is opaque."""
         x0 = max(math.floor(quad[:, 0].min()), 0)
         y0 = max(math.floor(quad[:, 1].min()), 0)
         x1 = min(math.ceil(quad[:, 0].max()) + 1, self.width)
@@ -315,6 +479,25 @@ class Renderer:
             colour = cv2.convertScaleAbs(colour, alpha=shade)
         region = img[y0:y1, x0:x1]
         region[:] = cv2.blendLinear(colour, region, alpha, 255.0 - alpha)
+        if self._depth is not None and quad3 is not None:
+            self._plane_depth(quad3, (y0, y1, x0, x1), alpha > 127.0)
+
+    def _plane_depth(self, quad3: np.ndarray, box: tuple[int, int, int, int],
+                     opaque: np.ndarray) -> None:
+        """Depth Z of the plane through `quad3` along each pixel's ray, written where
+        `opaque` (the box's pixels the sprite covers)."""
+        assert self._depth is not None
+        p = quad3 @ self.cal.r.T + self.cal.t             # camera frame
+        n = np.cross(p[1] - p[0], p[3] - p[0])
+        d = float(n @ p[0])
+        y0, y1, x0, x1 = box
+        rays = self._norm[y0:y1, x0:x1]
+        denom = rays[..., 0] * n[0] + rays[..., 1] * n[1] + n[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = d / denom
+        ok = opaque & np.isfinite(z) & (z > 0)
+        region = self._depth[y0:y1, x0:x1]
+        region[ok] = (to_units(np.where(ok, z, 0.0)) if region.dtype == np.uint16 else z)[ok]
 
     def _sprite(self, body: Body, face: str) -> sprites.Sprite:
         key = (body.index, body.kind.value, face)
@@ -325,6 +508,14 @@ class Renderer:
             if body.kind is ObjectKind.BOX:
                 size = body.width_m if face in ("rear", "front") else body.length_m
                 sprite = sprites.cardboard(rng, size, h if face != "top" else body.width_m)
+            elif body.kind is ObjectKind.GUARD_RAIL:
+                sprite = (sprites.plain((150, 152, 155), body.width_m, body.length_m)
+                          if face == "top" else sprites.guard_rail(
+                              rng, body.length_m if face == "side" else body.width_m, h))
+            elif body.kind is ObjectKind.PLATE:
+                sprite = sprites.manhole(rng, max(body.length_m, body.width_m))
+            elif body.kind is ObjectKind.SIGN:
+                sprite = sprites.sign_board(rng, body.width_m, h)
             elif face == "top":
                 sprite = sprites.plain(colour, body.width_m, body.length_m)
             elif face == "side":
@@ -337,25 +528,52 @@ class Renderer:
     def _box(self, img: np.ndarray, body: Body, centre: np.ndarray, lit: float) -> None:
         c = body.corners() - np.array([body.x_m, body.y_m]) + centre
         cam = self.cam_pos
-        h = body.height_m
+        z0, h = body.z_m, body.z_m + body.height_m
         faces = {0: "side", 1: "rear", 2: "side", 3: "front"}
         for i, face in faces.items():
             a, b = c[i], c[(i + 1) % 4]
             normal = np.array([b[1] - a[1], a[0] - b[0]])
             if np.dot(normal, cam[:2] - (a + b) / 2) <= 0:
                 continue
-            quad3 = np.array([[a[0], a[1], h], [b[0], b[1], h], [b[0], b[1], 0.0],
-                              [a[0], a[1], 0.0]])
+            quad3 = np.array([[a[0], a[1], h], [b[0], b[1], h], [b[0], b[1], z0],
+                              [a[0], a[1], z0]])
             quad = self._project(quad3)
             if quad is None:
                 continue
             shade = _SHADE_REAR if face != "side" else _SHADE_SIDE
-            self._paste(img, self._sprite(body, face).image, quad, shade * lit)
+            self._paste(img, self._sprite(body, face).image, quad, shade * lit, quad3)
         if cam[2] > h:
             top = np.array([[c[k][0], c[k][1], h] for k in (3, 0, 1, 2)])
             quad = self._project(top)
             if quad is not None:
-                self._paste(img, self._sprite(body, "top").image, quad, _SHADE_TOP * lit)
+                self._paste(img, self._sprite(body, "top").image, quad, _SHADE_TOP * lit, top)
+
+    def _plate(self, img: np.ndarray, body: Body, centre: np.ndarray, lit: float) -> None:
+        """A manhole cover or metal plate: flat on the road (a few mm above it)."""
+        c = body.corners() - np.array([body.x_m, body.y_m]) + centre
+        top = np.array([[c[k][0], c[k][1], min(body.height_m, 0.01)] for k in (3, 0, 1, 2)])
+        quad = self._project(top)
+        if quad is not None:
+            self._paste(img, self._sprite(body, "top").image, quad, lit, top)
+
+    def _sign(self, img: np.ndarray, body: Body, centre: np.ndarray, lit: float) -> None:
+        """An overhead sign: its board facing the ego from `z_m` up, on a post at each end
+        (the gantry's legs) standing on the ground beside the road."""
+        near_x = float(centre[0] - body.length_m / 2)
+        half = body.width_m / 2
+        z0, z1 = body.z_m, body.z_m + body.height_m
+        post = sprites.plain((120, 122, 125), 0.3, z1)
+        for y in (centre[1] + half + 0.15, centre[1] - half - 0.15):
+            quad3 = np.array([[near_x, y + 0.15, z1], [near_x, y - 0.15, z1],
+                              [near_x, y - 0.15, 0.0], [near_x, y + 0.15, 0.0]])
+            quad = self._project(quad3)
+            if quad is not None:
+                self._paste(img, post.image, quad, lit, quad3)
+        board = np.array([[near_x, centre[1] + half, z1], [near_x, centre[1] - half, z1],
+                          [near_x, centre[1] - half, z0], [near_x, centre[1] + half, z0]])
+        quad = self._project(board)
+        if quad is not None:
+            self._paste(img, self._sprite(body, "rear").image, quad, lit, board)
 
     def _cutout(self, img: np.ndarray, body: Body, centre: np.ndarray, lit: float) -> None:
         cam = self.cam_pos[:2]
@@ -393,7 +611,7 @@ class Renderer:
                           [*(centre + right * half), 0.0], [*(centre - right * half), 0.0]])
         quad = self._project(quad3)
         if quad is not None:
-            self._paste(img, image, quad, lit)
+            self._paste(img, image, quad, lit, quad3)
 
     def _shadow(self, img: np.ndarray, body: Body, centre: np.ndarray) -> None:
         c = (body.corners() - np.array([body.x_m, body.y_m])) * 1.08 + centre

@@ -31,7 +31,22 @@ class ObjectKind(enum.Enum):
     BOX = "box"                # e.g. the paper's cardboard box
     PEDESTRIAN = "pedestrian"
     BICYCLE = "bicycle"        # with its rider
+    # Radar false targets: the radar reports them, but nothing stands in the camera's
+    # view and nothing is hit (the ego drives over a plate, under a sign, and follows
+    # the road past a rail).
+    PLATE = "plate"            # a metal plate or manhole cover, flat on the road
+    SIGN = "sign"              # an overhead sign on a gantry, `z_m` above the road
+    GUARD_RAIL = "guard_rail"  # one straight segment of a roadside guard rail
+    GHOST = "ghost"            # a multipath ghost: a persistent return where nothing is
 
+    @property
+    def is_obstacle(self) -> bool:
+        """Whether the ego can hit it (false targets are driven over, under or past)."""
+        return self not in FALSE_TARGETS
+
+
+FALSE_TARGETS = frozenset({ObjectKind.PLATE, ObjectKind.SIGN, ObjectKind.GUARD_RAIL,
+                           ObjectKind.GHOST})
 
 # length (along the body), width, height in metres
 DEFAULT_SIZE: dict[ObjectKind, tuple[float, float, float]] = {
@@ -39,7 +54,13 @@ DEFAULT_SIZE: dict[ObjectKind, tuple[float, float, float]] = {
     ObjectKind.BOX: (0.6, 0.6, 0.6),
     ObjectKind.PEDESTRIAN: (0.35, 0.55, 1.75),
     ObjectKind.BICYCLE: (1.75, 0.6, 1.75),
+    ObjectKind.PLATE: (0.8, 0.8, 0.02),        # a manhole cover's 0.8 m
+    ObjectKind.SIGN: (0.2, 9.0, 1.6),          # the board: across the road, 1.6 m tall
+    ObjectKind.GUARD_RAIL: (4.0, 0.1, 0.75),   # a W-beam segment, its top 0.75 m high
+    ObjectKind.GHOST: (0.2, 0.2, 0.2),         # where the radar puts it; nothing is there
 }
+# Height of the bottom above the road (a sign's clearance); 0 for everything else.
+DEFAULT_Z_M: dict[ObjectKind, float] = {ObjectKind.SIGN: 5.0}
 
 
 class Motion(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -60,9 +81,13 @@ class SceneObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     size_m: tuple[Positive, Positive, Positive] | None = None   # length, width, height
     motion: Motion | None = None
     name: str = ""
+    z_m: NonNeg | None = None            # bottom above the road; None: the kind's default
 
     def size(self) -> tuple[float, float, float]:
         return self.size_m or DEFAULT_SIZE[self.kind]
+
+    def elevation(self) -> float:
+        return self.z_m if self.z_m is not None else DEFAULT_Z_M.get(self.kind, 0.0)
 
 
 class EgoSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -3,7 +3,9 @@ simulator's renderer (tools/sim/render.py) with obstacles at radar-frame positio
 
 These images are not camera data; they give tests and benchmarks real-looking pixels
 with known ground truth: an obstacle or an empty road at a track's position, by day or
-at night (headlights, street lamps, oncoming headlights, sensor noise).
+at night (headlights, street lamps, oncoming headlights, sensor noise). They use the
+plain rendering (smooth road, open sky: few edges where nothing stands), not the
+closed loop's roadside scenery whose background has the edge density of real images.
 """
 
 from dataclasses import dataclass
@@ -65,7 +67,7 @@ def _renderer(cal: Calibration) -> Renderer:
     key = b"".join(np.ascontiguousarray(a, np.float64).tobytes()
                    for a in (cal.k, cal.dist, cal.r, cal.t, [cal.width, cal.height]))
     if key not in _RENDERERS:
-        _RENDERERS[key] = Renderer(cal)
+        _RENDERERS[key] = Renderer(cal, roadside=False)
     return _RENDERERS[key]
 
 

@@ -22,7 +22,14 @@ from tools.launch.table import load_table, resolve_launches
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.runner import SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook
-from tools.sim.stack import FUSION_CONFIG, SERVICES, TOKENS, StackConfigs, write_configs
+from tools.sim.stack import (
+    FUSION_CONFIG,
+    SERVICES,
+    TOKENS,
+    StackConfigs,
+    fusion_instance,
+    write_configs,
+)
 
 CANDIDATE_CONFIG = DEPLOY / "fusion-candidate.toml"
 START_TIMEOUT_S = 120.0
@@ -54,8 +61,11 @@ def write_table(folder: Path, endpoint: str, configs: StackConfigs,
     return path
 
 
-def wait_for_stack(bus: Bus, supervisor: Supervisor, timeout_s: float) -> str:
-    """Empty once every service's liveliness token is up, else why not."""
+def wait_for_stack(bus: Bus, supervisor: Supervisor, timeout_s: float,
+                   instance: str = "primary") -> str:
+    """Empty once every service's liveliness token is up (fusion's of `instance`), else
+    why not."""
+    tokens = TOKENS | {"fusion": ("fusion", instance)}
     alive: dict[tuple[str, str], bool] = {}
     lock = threading.Lock()
 
@@ -67,7 +77,7 @@ def wait_for_stack(bus: Bus, supervisor: Supervisor, timeout_s: float) -> str:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         with lock:
-            missing = [s for s in SERVICES if not alive.get(TOKENS[s], False)]
+            missing = [s for s in SERVICES if not alive.get(tokens[s], False)]
         if not missing:
             return ""
         dead = [c.name for c in supervisor.children if c.finished]
@@ -132,9 +142,11 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     supervisor: Supervisor | None = None
     poller_stop = threading.Event()
     try:
+        instance = fusion_instance(fusion_config)
         configs = write_configs(run_dir, endpoint, str(run_dir / "actuator"), link.path,
                                 camera_fps=camera_fps, fusion_config=fusion_config,
-                                realtime_priority=realtime_priority, raw_can=raw_can)
+                                realtime_priority=realtime_priority, raw_can=raw_can,
+                                fusion_instance=instance)
         table, workdir = load_table(write_table(run_dir, endpoint, configs, candidate,
                                                 realtime_priority))
         launches = resolve_launches(table, workdir, "demo")
@@ -154,14 +166,14 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
         t0 = time.monotonic()
         settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))
         with Bus.open(settings, "ego", "sim") as bus:
-            problem = wait_for_stack(bus, supervisor, START_TIMEOUT_S)
+            problem = wait_for_stack(bus, supervisor, START_TIMEOUT_S, instance)
             if problem:
                 raise StackStartError(f"the stack did not start: {problem}\n{tail(log_path)}")
             if log is not None:
                 print(f"all services up in {time.monotonic() - t0:.1f} s", file=log,
                       flush=True)
             feed = RadarFeed(link, RadarLook())
-            sim = Simulator(bus, feed, SimActuatorView(actuator)).start()
+            sim = Simulator(bus, feed, SimActuatorView(actuator), instance=instance).start()
             try:
                 if not sim.wait_settled(SETTLE_TIMEOUT_S):
                     raise StackStartError(

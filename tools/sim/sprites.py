@@ -295,3 +295,158 @@ def bicycle(rng: np.random.Generator, side: bool) -> Sprite:
         cv2.circle(img, (cx, ground - _px(1.62)), _px(0.11), (30, 40, 60, 255), -1)
     _shade(img, rng, 4.0)
     return Sprite(img, width_m, height_m)
+
+
+# -- the roadside and the false targets ------------------------------------------------------
+
+SCENERY_RES_M = 0.04        # roadside texture: metres per texel
+SCENERY_TILE_M = 48.0       # the roadside repeats every SCENERY_TILE_M along x
+SCENERY_HEIGHT_M = 7.0      # hedges, trees and house fronts up to this height
+BACKDROP_HEIGHT_M = 24.0    # the far tree line and buildings straight ahead
+
+
+def _speckle(rng: np.random.Generator, shape: tuple[int, int], density: float,
+             amplitude: float) -> np.ndarray:
+    """Sparse single-texel spots of +-amplitude (stones in asphalt, leaves, gravel)."""
+    spots = (rng.random(shape, dtype=np.float32) < density).astype(np.float32)
+    sign = np.where(rng.random(shape, dtype=np.float32) < 0.5, np.float32(-1.0),
+                    np.float32(1.0))
+    return np.asarray(cv2.GaussianBlur(spots * sign, (0, 0), 0.7) * amplitude * 3.0,
+                      np.float32)
+
+
+def road_wear(rng: np.random.Generator, img: np.ndarray) -> None:
+    """What real asphalt shows a camera, in place on a road texture (rows along x,
+    columns along y): aggregate stones, cracks, repair patches and tar seams, with the
+    contrast that gives real road images their edges. Applied in bands of rows:
+    whole-tile float temporaries would cost the camera process tens of MB at start."""
+    rows, cols = img.shape[:2]
+    offset = np.zeros((rows, cols), np.int16)
+    for _ in range(rows * cols // 30_000):          # repair patches, sharp-edged
+        h, w = int(rng.integers(20, 120)), int(rng.integers(20, 120))
+        r0, c0 = int(rng.integers(0, rows - h)), int(rng.integers(0, cols - w))
+        offset[r0:r0 + h, c0:c0 + w] += int(rng.uniform(-28, 18))
+    crack = np.zeros((rows, cols), np.uint8)
+    for _ in range(rows * cols // 6_000):           # cracks and tar seams
+        p = np.array([rng.integers(0, cols), rng.integers(0, rows)], np.float64)
+        angle = rng.uniform(0, 2 * np.pi)
+        pts = [p.copy()]
+        for _ in range(int(rng.integers(3, 10))):
+            angle += rng.normal(0, 0.6)
+            p = p + rng.uniform(5, 25) * np.array([np.cos(angle), np.sin(angle)])
+            pts.append(p.copy())
+        cv2.polylines(crack, [np.array(pts, np.int32)], False, 1, int(rng.integers(1, 5)))
+    offset -= crack.astype(np.int16) * 45
+    del crack
+    for r0 in range(0, rows, 200):
+        r1 = min(r0 + 200, rows)
+        f = img[r0:r1].astype(np.float32)
+        f += (_speckle(rng, (r1 - r0, cols), 0.08, 30.0) + offset[r0:r1])[:, :, None]
+        img[r0:r1] = np.clip(f, 0, 255).astype(np.uint8)
+
+
+def roadside_texture(rng: np.random.Generator) -> np.ndarray:
+    """BGR, rows along x (SCENERY_TILE_M), columns up from the ground (column 0) to
+    SCENERY_HEIGHT_M: a roadside of hedges, trees, fences and house fronts."""
+    rows = round(SCENERY_TILE_M / SCENERY_RES_M)
+    cols = round(SCENERY_HEIGHT_M / SCENERY_RES_M)
+    img = np.empty((rows, cols, 3), np.float32)
+    img[:] = (55, 105, 70)
+    x = 0
+    while x < rows:
+        n = int(rng.integers(100, 300))             # 4-12 m of one kind
+        kind = int(rng.integers(0, 3))
+        seg = img[x:x + n]
+        if kind == 0:                                # hedge and trees: foliage
+            seg[:] = (40 + rng.integers(0, 20), 95 + rng.integers(0, 30), 60)
+        elif kind == 1:                              # a house front with windows
+            wall = rng.integers(120, 210, 3).astype(np.float32)
+            seg[:] = wall
+            for r in range(int(rng.integers(3, 10)), seg.shape[0] - 20, 30):
+                for c in (25, 80, 135):
+                    if c + 25 < cols:
+                        seg[r:r + 18, c:c + 25] = (70, 60, 55)
+                        seg[r:r + 18, c + 12] = (180, 180, 180)
+            seg[:, 160:] = (60, 60, 130)             # the roof
+        else:                                        # a fence in front of bushes
+            seg[:] = (45, 110, 75)
+            seg[::6, :40] = (90, 110, 130)
+            seg[:, 20:22] = (90, 110, 130)
+            seg[:, 38:40] = (90, 110, 130)
+        x += n
+    img += _blur_noise(rng, (rows, cols), 1.5, 14.0)[:, :, None]
+    img += _speckle(rng, (rows, cols), 0.12, 40.0)[:, :, None]
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def backdrop_texture(rng: np.random.Generator, width_m: float, res_m: float) -> np.ndarray:
+    """BGRA, columns across the view from left (+y) to right, rows from the top
+    (BACKDROP_HEIGHT_M) down to the ground: a distant tree line and buildings whose tops
+    stand against the sky (alpha 0 above them)."""
+    cols = round(width_m / res_m)
+    rows = round(BACKDROP_HEIGHT_M / res_m)
+    img = np.zeros((rows, cols, 4), np.float32)
+    top = np.empty(cols)
+    c = 0
+    while c < cols:
+        n = int(rng.integers(8, 60))
+        top[c:c + n] = rng.uniform(4.0, 20.0)
+        c += n
+    top_m = np.asarray(cv2.GaussianBlur(top.reshape(1, -1).astype(np.float32), (0, 0), 1.0),
+                       np.float64).ravel()
+    height_of_row = BACKDROP_HEIGHT_M - (np.arange(rows) + 0.5) * res_m
+    solid = height_of_row[:, None] <= top_m[None, :]
+    img[..., 0] = 70
+    img[..., 1] = 100
+    img[..., 2] = 90
+    img[..., :3] += _blur_noise(rng, (rows, cols), 1.0, 22.0)[:, :, None]
+    img[..., :3] += _speckle(rng, (rows, cols), 0.15, 45.0)[:, :, None]
+    img[..., 3] = np.where(solid, 255, 0)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def manhole(rng: np.random.Generator, size_m: float) -> Sprite:
+    """A cast-iron manhole cover (or a steel plate) seen from above: a dark disc with its
+    raised grid, flat on the road."""
+    img = _canvas(size_m, size_m)
+    h, w = img.shape[:2]
+    centre, r = (w // 2, h // 2), min(w, h) // 2 - 1
+    cv2.circle(img, centre, r, (52, 54, 58, 255), -1)
+    grid = np.zeros((h, w), np.uint8)
+    for k in range(-r, r, _px(0.05)):
+        cv2.line(grid, (centre[0] + k, 0), (centre[0] + k, h), 255, 2)
+        cv2.line(grid, (0, centre[1] + k), (w, centre[1] + k), 255, 2)
+    inside = np.zeros((h, w), np.uint8)
+    cv2.circle(inside, centre, r - _px(0.04), 255, -1)
+    img[(grid > 0) & (inside > 0), :3] = (80, 82, 86)
+    cv2.circle(img, centre, r, (30, 30, 32, 255), _px(0.03))
+    _shade(img, rng, 5.0)
+    return Sprite(img, size_m, size_m)
+
+
+def sign_board(rng: np.random.Generator, width_m: float, height_m: float) -> Sprite:
+    """An overhead direction sign: green board, white border, white lettering."""
+    img = _canvas(width_m, height_m)
+    h, w = img.shape[:2]
+    img[:] = (60, 110, 20, 255)
+    cv2.rectangle(img, (6, 6), (w - 7, h - 7), (235, 235, 235, 255), 6)
+    for k, text in enumerate(("CITY CENTRE 4", "AIRPORT  12")):
+        cv2.putText(img, text, (round(0.06 * w), round((0.42 + 0.38 * k) * h)),
+                    cv2.FONT_HERSHEY_SIMPLEX, h / 170.0, (235, 235, 235, 255), max(h // 40, 2))
+    _shade(img, rng, 4.0)
+    return Sprite(img, width_m, height_m)
+
+
+def guard_rail(rng: np.random.Generator, length_m: float, height_m: float) -> Sprite:
+    """A W-beam guard rail's face on its posts (transparent between the posts)."""
+    img = _canvas(length_m, height_m)
+    w = img.shape[1]
+    beam = _px(0.3)
+    img[:beam] = (165, 168, 170, 255)
+    for k in range(3):                               # the W profile's folds
+        y = round((k + 0.5) * beam / 3)
+        img[y:y + 4, :, :3] = (110, 112, 115)
+    for x in range(_px(0.3), w, _px(2.0)):           # a post every 2 m
+        img[beam:, x:x + _px(0.12)] = (70, 72, 75, 255)
+    _shade(img, rng, 5.0)
+    return Sprite(img, length_m, height_m)

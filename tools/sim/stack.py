@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.config.fusion import FusionConfig
-from common.config.loader import relocated_text
+from common.config.loader import load_config, relocated_text
 from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
 
 CALIBRATION = EXAMPLE_CALIBRATION
@@ -46,7 +46,8 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
                   can_interface: str = "slcan", camera_fps: float = 30.0,
                   fusion_config: Path = FUSION_CONFIG,
                   heartbeat_ms: float | None = None,
-                  realtime_priority: int = 0, raw_can: bool = False) -> StackConfigs:
+                  realtime_priority: int = 0, raw_can: bool = False,
+                  fusion_instance: str = "primary") -> StackConfigs:
     """Write radar, camera, fusion and brake TOMLs into `folder`; fusion's is the shipped
     one with `[fusion.realtime]` set (its endpoint comes from `--connect`). Returns every
     config's path.
@@ -56,7 +57,8 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     which lets a test pair cycles and lines exactly (tools/sim/latency.py).
     `realtime_priority` > 0: SCHED_FIFO for the latency path of radar, fusion and brake
     (`[*.realtime]`, the brake's timer), as on a vehicle. `raw_can`: the radar publishes
-    its raw CAN frames (`[radar.raw_can]`), for recordings that re-run the radar."""
+    its raw CAN frames (`[radar.raw_can]`), for recordings that re-run the radar.
+    `fusion_instance`: the instance the brake follows (the one `fusion_config` names)."""
     rt = f"\n[{{}}.realtime]\npriority = {realtime_priority}\n" if realtime_priority else ""
     folder.mkdir(parents=True, exist_ok=True)
     zenoh = f"[zenoh]\nconnect = {_toml_list([endpoint])}\n"
@@ -78,8 +80,9 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     brake = folder / "brake.toml"
     brake.write_text(
         "# The brake service on the simulated actuator's pty (a SIMULATION of the actuator).\n"
-        f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "primary"\n'
-        f'command_keys = ["{EXAMPLE_KEYS / "primary.key"}"]   # INSECURE EXAMPLE KEY\n'
+        f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "{fusion_instance}"\n'
+        f'command_keys = ["{EXAMPLE_KEYS / (fusion_instance + ".key")}"]'
+        '   # INSECURE EXAMPLE KEY\n'
         + f'\n[brake.serial]\nport = "{actuator_port}"\n'
         + ("" if heartbeat_ms is None else
            f"\n[brake.actuator]\nheartbeat_ms = {heartbeat_ms}\nttl_ms = "
@@ -90,6 +93,11 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     fusion.write_text(with_realtime(relocated_text(fusion_config, FusionConfig), "fusion",
                                     realtime_priority))
     return StackConfigs(radar, camera, fusion, brake)
+
+
+def fusion_instance(fusion_config: Path) -> str:
+    """The instance a fusion config names. Raises ConfigError for a bad file."""
+    return load_config(fusion_config, FusionConfig).fusion.instance
 
 
 def with_realtime(toml_text: str, table: str, priority: int) -> str:

@@ -28,6 +28,7 @@ class Body:
     height_m: float
     vx_mps: float
     vy_mps: float
+    z_m: float = 0.0            # bottom above the road (an overhead sign's clearance)
 
     def corners(self) -> np.ndarray:
         """(4, 2) footprint corners, counter-clockwise."""
@@ -37,7 +38,7 @@ class Body:
         """Where this body is after `dt_s` at its current velocity (for extrapolation)."""
         return Body(self.index, self.kind, self.x_m + self.vx_mps * dt_s,
                     self.y_m + self.vy_mps * dt_s, self.yaw_deg, self.length_m,
-                    self.width_m, self.height_m, self.vx_mps, self.vy_mps)
+                    self.width_m, self.height_m, self.vx_mps, self.vy_mps, self.z_m)
 
 
 def footprint(x: float, y: float, yaw_deg: float, length: float, width: float) -> np.ndarray:
@@ -197,8 +198,12 @@ class World:
                 h = math.radians(motion.heading_deg)
                 vx, vy = motion.speed_mps * math.cos(h), motion.speed_mps * math.sin(h)
             out.append(Body(i, m.spec.kind, m.x_m, m.y_m, m.spec.yaw_deg, length, width,
-                            height, vx, vy))
+                            height, vx, vy, m.spec.elevation()))
         return out
+
+    def obstacles(self) -> list[Body]:
+        """The bodies the ego can hit: false targets (plates, signs, rails) are not."""
+        return [b for b in self.bodies() if b.kind.is_obstacle]
 
     def ego_corners(self) -> np.ndarray:
         spec = self.scenario.ego
@@ -207,7 +212,7 @@ class World:
 
     def _check_collision(self) -> None:
         ego = self.ego_corners()
-        for body in self.bodies():
+        for body in self.obstacles():
             if rectangles_overlap(ego, body.corners()):
                 self.collision = Collision(
                     self.t_s, body.index, body.kind, self.ego.speed_mps,
@@ -222,7 +227,7 @@ class World:
         half = spec.width_m / 2
         ego_x, v = self.ego.x_m, self.ego.speed_mps
         best: Threat | None = None
-        for body in self.bodies():
+        for body in self.obstacles():
             c = body.corners()
             x0, x1 = float(c[:, 0].min()), float(c[:, 0].max())
             y0, y1 = float(c[:, 1].min()), float(c[:, 1].max())
@@ -243,7 +248,7 @@ class World:
         """Gap to the nearest object ahead that overlaps the ego's width now."""
         half = self.scenario.ego.width_m / 2
         gaps = []
-        for body in self.bodies():
+        for body in self.obstacles():
             c = body.corners()
             if c[:, 1].max() < -half or c[:, 1].min() > half:
                 continue

@@ -101,6 +101,10 @@ class Candidate:
     # A negative whose column meets a labelled object's image box: an object stands in
     # front of (or behind) the sensor point, at another range.
     object_in_view: bool = False
+    # The calibration the column was projected with (its ground frame stands on the
+    # column's ground) and the column's foot in it: what a depth verifier needs.
+    calibration: Calibration | None = None
+    xy_m: tuple[float, float] | None = None
 
 
 @dataclass
@@ -190,11 +194,13 @@ def object_candidates(frame: DatasetFrame, sc: Scaled, s: PaperRoiSettings
         rng_m = math.hypot(nx - cx, ny - cy)
         if not s.min_range_m <= rng_m <= s.max_range_m:
             continue
-        got = projector(frame, sc, box.z_bottom, s).boxes(np.array([[nx, ny]]))[0]
+        proj = projector(frame, sc, box.z_bottom, s)
+        got = proj.boxes(np.array([[nx, ny]]))[0]
         if got is None:
             sc.counters["object_not_visible"] = sc.counters.get("object_not_visible", 0) + 1
             continue
-        out.append(Candidate(KIND_OBJECT, i, got[0], got[1], rng_m, box.obj_class, "YES"))
+        out.append(Candidate(KIND_OBJECT, i, got[0], got[1], rng_m, box.obj_class, "YES",
+                             calibration=proj.cal, xy_m=(float(nx), float(ny))))
     return out
 
 
@@ -239,7 +245,12 @@ def background_candidates(frame: DatasetFrame, sc: Scaled, positives: list[Candi
                         s.background_max_overlap)
         if len(got) < s.background_per_object:
             sc.counters["background_no_room"] = sc.counters.get("background_no_room", 0) + 1
-        out += [Candidate(KIND_BACKGROUND, len(out) + k, roi, roi, pos.range_m, "", "NO")
+        # The positive's column, moved with its ROI: a radar target at its range and
+        # rows with nothing labelled there.
+        dx, dy = pos.column.x - pos.roi.x, pos.column.y - pos.roi.y
+        out += [Candidate(KIND_BACKGROUND, len(out) + k, roi,
+                          Roi(roi.x + dx, roi.y + dy, pos.column.w, pos.column.h),
+                          pos.range_m, "", "NO", calibration=pos.calibration, xy_m=pos.xy_m)
                 for k, roi in enumerate(got)]
     return out
 
@@ -318,12 +329,13 @@ def point_candidates(frame: DatasetFrame, sc: Scaled, points: np.ndarray, kind: 
         if len(members) < min_points:
             continue
         j = members[np.argmin(rng_m[members])]
-        got = projector(frame, sc, float(ground_z[j]), s).boxes(p[j:j + 1, :2])[0]
+        proj = projector(frame, sc, float(ground_z[j]), s)
+        got = proj.boxes(p[j:j + 1, :2])[0]
         if got is None:
             continue
         cx0, cy0, cw, ch = got[1]
         in_view = any(not (cx0 + cw - 1 < bx0 or cx0 > bx1 or cy0 + ch - 1 < by0 or cy0 > by1)
                       for bx0, by0, bx1, by1 in boxes2d)
         out.append(Candidate(kind, len(out), got[0], got[1], float(rng_m[j]), "", "NO",
-                             in_view))
+                             in_view, proj.cal, (float(p[j, 0]), float(p[j, 1]))))
     return out

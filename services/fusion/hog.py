@@ -1,0 +1,134 @@
+"""Histograms of oriented gradients (Dalal and Triggs), computed as OpenCV 4's
+`HOGDescriptor()` computes them, so that its pedestrian detector's coefficients apply.
+
+OpenCV 5 no longer ships `HOGDescriptor` in its main package; this module is the one HOG
+of the project (pure numpy and OpenCV core). Layout and arithmetic follow OpenCV's
+default descriptor: 8x8-pixel cells, 16x16-pixel blocks on an 8-pixel stride, 9
+unsigned orientation bins, square-root gamma, centred [-1, 0, 1] derivatives (reflected
+at the image's border), votes split between the two nearest bins and the four nearest
+cells, a Gaussian window over each block (sigma 4), L2-Hys normalisation (clipped at
+0.2). A descriptor orders its blocks column by column (x outer, y inner), the cells of a
+block the same way, then the bins; for a 64x128 window that is 3780 numbers, the order
+of OpenCV's `compute` (tests/fusion/test_hog.py holds reference values from it).
+"""
+
+import cv2
+import numpy as np
+
+CELL = 8
+BLOCK = 16
+STRIDE = 8
+BINS = 9
+CLIP = 0.2                      # L2-Hys
+_SIGMA = (BLOCK + BLOCK) / 8.0  # OpenCV's default winSigma
+_GAMMA = np.sqrt(np.arange(256, dtype=np.float32))
+
+
+def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
+    """The weight of each pixel of a block for its cells, separable as OpenCV's is (a
+    Gaussian window times the bilinear split between neighbouring cells, each a product
+    over the two axes): (first, second) half of the block, each (2 cells, CELL) along one
+    axis. Pixels in a block's outer half cells vote only for their own cell, with the
+    bilinear weight, as in OpenCV."""
+    idx = np.arange(BLOCK, dtype=np.float64)
+    gauss = np.exp(-((idx - BLOCK * 0.5) ** 2) / (2.0 * _SIGMA ** 2))
+    pos = (idx + 0.5) / CELL - 0.5              # position in cell units
+    lower = np.floor(pos)
+    frac = pos - lower
+    along = np.zeros((2, BLOCK))
+    for c in (0, 1):
+        along[c] = np.where(lower == c, 1.0 - frac, 0.0) + np.where(lower + 1 == c, frac, 0.0)
+    w = (along * gauss).astype(np.float32)
+    return np.ascontiguousarray(w[:, :CELL]), np.ascontiguousarray(w[:, CELL:])
+
+
+_FIRST, _SECOND = _cell_weights()
+_BIN_IDS = np.arange(BINS)
+
+
+def orientation_votes(gray: np.ndarray) -> np.ndarray:
+    """(BINS, H, W) float32: each pixel's gradient magnitude split between its two
+    nearest orientation bins. Raises ValueError for an image that is not 2-D uint8."""
+    if gray.ndim != 2 or gray.dtype != np.uint8:
+        raise ValueError(f"HOG needs a 2-D uint8 image, got {gray.dtype} {gray.shape}")
+    img = _GAMMA[gray]
+    pad = cv2.copyMakeBorder(img, 1, 1, 1, 1, cv2.BORDER_REFLECT_101)
+    dx = pad[1:-1, 2:] - pad[1:-1, :-2]
+    dy = pad[2:, 1:-1] - pad[:-2, 1:-1]
+    mag, ang = cv2.cartToPolar(dx, dy, angleInDegrees=False)
+    a = ang * np.float32(BINS / np.pi) - np.float32(0.5)
+    lo = np.floor(a)
+    upper = mag * (a - lo)
+    lower = mag - upper
+    # Angles lie in [0, 2 pi): a in [-0.5, 18), its floor -1..17, the bin that mod 9.
+    b0 = lo.astype(np.int8)
+    b0[b0 < 0] += BINS
+    b0[b0 >= BINS] -= BINS
+    votes = np.empty((BINS, *gray.shape), np.float32)
+    prev = b0 == BINS - 1                       # b1 = b0 + 1 wraps from the last bin
+    spare = np.empty_like(lower)
+    for k in range(BINS):
+        here = b0 == k
+        np.multiply(lower, here, out=votes[k])
+        votes[k] += np.multiply(upper, prev, out=spare)
+        prev = here
+    return votes
+
+
+def _blocks_along(v: np.ndarray, axis: int) -> np.ndarray:
+    """Weighted sums over each block's pixels along `axis` (cut to whole cells): that
+    axis becomes (blocks, 2 cells), appended last."""
+    v = np.moveaxis(v, axis, -1)
+    n = v.shape[-1] // CELL
+    cells = v[..., :n * CELL].reshape(*v.shape[:-1], n, CELL)
+    first = np.tensordot(cells[..., :-1, :], _FIRST, axes=([-1], [1]))  # (..., blocks, 2)
+    second = np.tensordot(cells[..., 1:, :], _SECOND, axes=([-1], [1]))
+    return first + second
+
+
+def block_grid(gray: np.ndarray) -> np.ndarray:
+    """(nbx, nby, 4 * BINS): the normalised histogram of every block of the image on the
+    block stride, block (i, j) at pixel (x, y) = (i, j) * STRIDE. Raises ValueError for an
+    image smaller than one block or not 2-D uint8."""
+    h, w = gray.shape[:2]
+    if h < BLOCK or w < BLOCK:
+        raise ValueError(f"HOG needs at least {BLOCK}x{BLOCK} pixels, got {w}x{h}")
+    votes = orientation_votes(gray)             # (BINS, H, W)
+    across = _blocks_along(votes, 2)            # (BINS, H, nbx, cx)
+    both = _blocks_along(across, 1)             # (BINS, nbx, cx, nby, cy)
+    hist = np.ascontiguousarray(both.transpose(1, 3, 2, 4, 0))  # (nbx, nby, cx, cy, BINS)
+    nbx, nby = hist.shape[:2]
+    hist = hist.reshape(nbx, nby, 4 * BINS)
+    size = 4 * BINS
+    scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + size * 0.1)
+    hist = np.minimum(hist * scale, CLIP)
+    scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + 1e-3)
+    return (hist * scale).astype(np.float32)
+
+
+def descriptor(gray: np.ndarray) -> np.ndarray:
+    """The HOG descriptor of a whole window (its size a multiple of CELL, at least one
+    block), flat, in OpenCV's order. Raises ValueError (see `block_grid`)."""
+    return block_grid(gray).ravel()
+
+
+def window_scores(grid: np.ndarray, weights: np.ndarray, bias: float,
+                  win_blocks: tuple[int, int]) -> np.ndarray:
+    """A linear detector `weights . descriptor + bias` at every window position of a block
+    grid: (positions_y, positions_x) scores, windows on the block stride. `win_blocks`:
+    the window's blocks (across, down). Raises ValueError when the grid is smaller than a
+    window or the weights do not fit it."""
+    wx, wy = win_blocks
+    nbx, nby, size = grid.shape
+    if nbx < wx or nby < wy:
+        raise ValueError(f"a {nbx}x{nby}-block grid holds no {wx}x{wy}-block window")
+    w = np.asarray(weights, np.float32).reshape(wx * wy, size)
+    # Every block against every weight block at once, then each window sums its own.
+    # einsum, not a BLAS product: BLAS threads on a loaded machine cost more than this.
+    parts = np.einsum("ps,ks->pk", grid.reshape(nbx * nby, size), w).reshape(nbx, nby, wx, wy)
+    px, py = nbx - wx + 1, nby - wy + 1
+    scores = np.zeros((px, py), np.float32)
+    for i in range(wx):
+        for j in range(wy):
+            scores += parts[i:i + px, j:j + py, i, j]
+    return scores.T + np.float32(bias)
