@@ -41,10 +41,11 @@ from common.messages import (
     RadarTracks,
     decode,
 )
-from tools.eval.mcap_io import RecordingWriter, messages
 from tools.eval.recording import RecordingSettings
 from tools.eval.runner import Task, execute, run_task
 from tools.eval.scoring import default_specs
+from tools.recording.reader import Recording
+from tools.recording.writer import RecordingWriter
 from tools.sim.scenario import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
 
@@ -83,12 +84,12 @@ def write_recording(path: Path, n_frames: int) -> dict[str, int]:
                           r=tuple(cal.r.ravel().tolist()), t_m=tuple(cal.t.ravel().tolist()),
                           fps=30.0, source="synthetic", frames_published=0, frames_dropped=0,
                           read_errors=0, healthy=True, status="")
-        w.write(CAMERA_INFO.key("ego", camera="front"), info, T0)
+        w.write_message(CAMERA_INFO.key("ego", camera="front"), info, T0)
         for i in range(n_frames):
             t = T0 + i * FRAME_NS
             msg = CompressedFrame(Header(i, "camera/front", t, 0), "front", cal.width,
                                   cal.height, jpegs[(i // per_scene) % len(jpegs)])
-            w.write(CAMERA_JPEG.key("ego", camera="front"), msg, t + 4_000_000)
+            w.write_message(CAMERA_JPEG.key("ego", camera="front"), msg, t + 4_000_000)
         end = T0 + n_frames * FRAME_NS
         t = T0 + 20_000_000
         while t < end:
@@ -96,7 +97,7 @@ def write_recording(path: Path, n_frames: int) -> dict[str, int]:
             tracks = [_track(1, x, y)]
             if cycles % EXTRA_TRACK_EVERY == 0:
                 tracks.append(_track(2, x + 3.0, y - 2.0))
-            w.write(RADAR_TRACKS.key("ego", sensor="front"),
+            w.write_message(RADAR_TRACKS.key("ego", sensor="front"),
                     RadarTracks(Header(cycles, "radar/front", t, 0), "front",
                                 OutputMode.OBJECTS, cycles, True, len(tracks), len(tracks),
                                 0, 0, tuple(tracks)),
@@ -111,8 +112,9 @@ def read_and_decode(path: Path) -> tuple[float, int]:
     t0 = time.perf_counter()
     latest = b""
     decoded = 0
-    for m in messages(path, ["aeb/ego/camera/front/jpeg", "aeb/ego/radar/front/tracks"]):
-        if m.channel.schema == "CompressedFrame":
+    topics = ["aeb/ego/camera/front/jpeg", "aeb/ego/radar/front/tracks"]
+    for m in Recording.open(path).records(topics):
+        if m.schema_name == "aeb.CompressedFrame":
             latest = m.data
         elif latest:
             decode_gray(decode(latest, CompressedFrame).jpeg)

@@ -22,7 +22,7 @@ from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
 from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
 from tests.fusion.helpers import CAL, T0, cycle, track
 from tools.eval.depth import box_scene_depth
-from tools.eval.mcap_io import RecordingWriter
+from tools.recording.writer import RecordingWriter
 from tools.sim.messages import SIM_WORLD, SimObject, SimWorld
 from tools.sim.scenario import DEFAULT_SIZE, ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
@@ -82,7 +82,7 @@ def write_sim_recording(path: Path, n_cycles: int = 8, corrupt_seqs: tuple[int, 
     frames, cycles = [], []
     jpeg_topic = CAMERA_JPEG.key(vehicle, camera="front")
     with RecordingWriter(path) as w:
-        w.write(CAMERA_INFO.key(vehicle, camera="front"), camera_info(CAL, T0), T0)
+        w.write_message(CAMERA_INFO.key(vehicle, camera="front"), camera_info(CAL, T0), T0)
         seq, t = 0, T0
         while t < end:
             scene = Scene((Obstacle(box_face_x(t), 0.0, ObjectKind.BOX),), seed=3)
@@ -93,17 +93,17 @@ def write_sim_recording(path: Path, n_cycles: int = 8, corrupt_seqs: tuple[int, 
                 frames.append((seq, t, t + 5 * MS))
             msg = CompressedFrame(Header(seq, "camera/front", t, 0), "front", CAL.width,
                                   CAL.height, jpeg)
-            w.write(jpeg_topic, msg, t + 5 * MS)
+            w.write_message(jpeg_topic, msg, t + 5 * MS)
             if with_depth and seq % depth_every == 0:
                 units = to_units(box_depth(t))[::2, ::2]
-                w.write(CAMERA_DEPTH.key(vehicle, camera="front"),
-                        DepthFrame(Header(seq, "camera/front", t, 0), "front",
-                                   units.shape[1], units.shape[0], "zstd",
-                                   encode_depth(units)), t + 6 * MS)
+                w.write_message(CAMERA_DEPTH.key(vehicle, camera="front"),
+                                DepthFrame(Header(seq, "camera/front", t, 0), "front",
+                                           units.shape[1], units.shape[0], "zstd",
+                                           encode_depth(units)), t + 6 * MS)
             seq += 1
             t += FRAME_NS
         for i, t in enumerate(range(T0, end, 20 * MS)):
-            w.write(SIM_WORLD.key(vehicle), world(t, i), t + MS)
+            w.write_message(SIM_WORLD.key(vehicle), world(t, i), t + MS)
         for j in range(n_cycles):
             t = T0 + 20 * MS + j * RADAR_NS
             x = box_face_x(t)
@@ -111,7 +111,7 @@ def write_sim_recording(path: Path, n_cycles: int = 8, corrupt_seqs: tuple[int, 
                       track(2, *GHOST_XY, 0.0, 0.0),
                       track(3, 40.0, 0.0, -BOX_SPEED, 0.0),          # beyond 25 m
                       track(4, 8.0, -1.0, 0.0, 0.0, confirmed=False))
-            w.write(RADAR_TRACKS.key(vehicle, sensor="front"), cycle(*tracks, seq=j,
+            w.write_message(RADAR_TRACKS.key(vehicle, sensor="front"), cycle(*tracks, seq=j,
                                                                       stamp_ns=t), t + 2 * MS)
             cycles.append((t, t + 2 * MS))
     return SimRecording(path, frames, cycles)

@@ -70,10 +70,21 @@ def test_bad_sources_are_errors_and_a_bad_recording_does_not_stop_the_others(inp
     code = aeb(["eval", "rois", str(recording), str(bad), "--out", str(tmp_path / "o"),
                 "--jobs", "1"])
     err = capsys.readouterr().err
-    assert code == 1 and "bad.mcap: not an MCAP file" in err
+    assert code == 1 and "bad.mcap is not an MCAP recording" in err
     assert read_records(tmp_path / "o")
     assert aeb(["eval", "rois", str(recording), "--out", str(tmp_path / "p"),
                 "--verifier", "nope"]) == 2
     assert "unknown verifier 'nope'" in capsys.readouterr().err
     assert aeb(["label", str(tmp_path / "o"), "--labels", str(tmp_path / "l.tsv")]) == 2
     assert "every ROI has ground truth" in capsys.readouterr().err
+
+
+def test_record_demo_records_a_closed_loop_run_that_eval_reads(tmp_path, capsys):
+    out = tmp_path / "demo.mcap"
+    assert aeb(["eval", "record-demo", "--out", str(out),
+                "--scenarios", "pedestrian_standing_20kph"]) == 0
+    printed = capsys.readouterr().out
+    assert "aeb/ego/sim/world:" in printed and "aeb/ego/camera/front/jpeg:" in printed
+    assert aeb(["eval", "rois", str(out), "--out", str(tmp_path / "rois"), "--jobs", "1"]) == 0
+    records = read_records(tmp_path / "rois")
+    assert any(r.truth == "YES" for r in records)

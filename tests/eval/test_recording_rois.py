@@ -11,15 +11,24 @@ from common.calibration import Calibration
 from common.config.fusion import FusionConfig
 from common.config.loader import parse_config
 from common.imaging import decode_gray
+from common.keys import CAMERA_INFO
 from common.messages import CompressedFrame, decode
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation, create
-from tests.eval.fixtures import BOX_SPEED, GHOST_XY, box_face_x, write_sim_recording
+from tests.eval.fixtures import (
+    BOX_SPEED,
+    GHOST_XY,
+    T0,
+    box_face_x,
+    camera_info,
+    write_sim_recording,
+)
 from tests.fusion.helpers import CAL
 from tools.eval import sim_truth
-from tools.eval.mcap_io import RecordingError, RecordingWriter, messages
 from tools.eval.recording import RecordingSettings, recording_records
 from tools.eval.scoring import Scorer, VerifierSpec, default_specs
+from tools.recording.reader import Recording, RecordingError
+from tools.recording.writer import RecordingWriter
 
 MAX_SKEW_NS = 100_000_000
 
@@ -73,7 +82,7 @@ def test_scores_are_the_verifiers_on_the_decoded_frame(rec):
     records = recording_records(rec.path, RecordingSettings(), Scorer(default_specs()), {})
     gate = create("edge_density")
     frames = {}
-    for m in messages(rec.path, ["aeb/ego/camera/front/jpeg"]):
+    for m in Recording.open(rec.path).records(["aeb/ego/camera/front/jpeg"]):
         f = decode(m.data, CompressedFrame)
         frames[f.header.seq] = f.jpeg
     for r in records[:12]:
@@ -96,7 +105,7 @@ def test_simulator_truth_labels_tracks_and_places_background_off_the_objects(rec
     background = [r for r in records if r.kind == "background"]
     assert len(background) == 2 * len(box)
     truth = sim_truth.Truth()
-    for m in messages(rec.path, ["aeb/ego/sim/world"]):
+    for m in Recording.open(rec.path).records(["aeb/ego/sim/world"]):
         truth.add(m.data, {})
     for r in background:
         pos = next(p for p in box if p.id == r.id.rsplit(":", 1)[0])
@@ -135,13 +144,13 @@ def test_fusion_config_geometry_and_calibration_are_used(rec, tmp_path):
 
 def test_a_file_without_radar_or_not_mcap_is_a_clear_error(tmp_path):
     empty = tmp_path / "empty.mcap"
-    with RecordingWriter(empty):
-        pass
+    with RecordingWriter(empty) as w:
+        w.write_message(CAMERA_INFO.key("ego", camera="front"), camera_info(CAL, T0), T0)
     with pytest.raises(RecordingError, match="no RadarTracks channel"):
         recording_records(empty, RecordingSettings(), Scorer(default_specs()), {})
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all")
-    with pytest.raises(RecordingError, match="not an MCAP file"):
+    with pytest.raises(RecordingError, match="not an MCAP"):
         recording_records(junk, RecordingSettings(), Scorer(default_specs()), {})
 
 

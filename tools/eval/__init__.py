@@ -1,8 +1,8 @@
 """`aeb eval` and `aeb label`: the paper's evaluation of a camera verifier on labelled
 ROIs from recordings and public data sets (docs/evaluation.md).
 
-Modules, one job each: records (the ROI set), mcap_io (recordings in the project's
-layout), recording (ROIs as fusion builds them), sim_truth (a simulator run's ground
+Modules, one job each: records (the ROI set), recording (ROIs as fusion
+builds them from a recording read with tools/recording), sim_truth (a simulator run's ground
 truth), adapters (KITTI, View-of-Delft, the paper's ROI construction), depth (lidar depth
 images, the D435 noise model), scoring (every verifier on the same ROIs), labels (the
 label file), sampling and labelweb (the label tool), metrics, report, tables and plots

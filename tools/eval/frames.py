@@ -13,8 +13,8 @@ import numpy as np
 
 from common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
 from common.messages import CompressedFrame, DecodeError, decode
-from tools.eval.mcap_io import RecordingError, messages
 from tools.eval.records import FrameRef
+from tools.recording.reader import Recording, RecordingError
 
 
 class FrameLoadError(ValueError):
@@ -42,7 +42,8 @@ def load_image(path: str | Path, scale: float, jpeg_quality: int
 
 def _frame_message(ref: FrameRef) -> CompressedFrame:
     try:
-        for m in messages(Path(ref.path), [ref.topic], ref.log_time_ns, ref.log_time_ns + 1):
+        for m in Recording.open(Path(ref.path)).records([ref.topic], ref.log_time_ns,
+                                                        ref.log_time_ns + 1):
             return decode(m.data, CompressedFrame)
     except (RecordingError, DecodeError) as exc:
         raise FrameLoadError(str(exc)) from exc

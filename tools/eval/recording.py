@@ -35,6 +35,7 @@ from common.messages import (
     RadarTracks,
     decode,
 )
+from common.messages.schema import schema_name
 from services.fusion.cameras import Camera, camera_views
 from services.fusion.core import _finite as finite_track  # fusion's own test of a track
 from services.fusion.frames import (
@@ -49,16 +50,21 @@ from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation
 from tools.eval import sim_truth
 from tools.eval.adapters.paper_rois import free_rois
-from tools.eval.mcap_io import Channel, RecordingError, channels, messages
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
+from tools.recording.reader import ChannelSummary, Recording, RecordingError
 from tools.sim.messages import SimWorld
+
+_FRAME = schema_name(CompressedFrame)
+_INFO = schema_name(CameraInfo)
+_DEPTH = schema_name(DepthFrame)
+_TRACKS = schema_name(RadarTracks)
+_WORLD = schema_name(SimWorld)
 
 # Frames kept per camera beyond fusion's ring, so that the ring can be refilled when a
 # chosen frame turns out undecodable.
 _BUFFER = RING_SIZE * 4
 _EMPTY = np.zeros((0, 0), np.uint8)
-SIM_WORLD_SCHEMA = "SimWorld"
 
 
 @dataclass(frozen=True)
@@ -101,7 +107,7 @@ def _bump(counters: dict[str, int], key: str, n: int = 1) -> None:
 class _Cameras:
     """Per camera: its topic, calibration, projector and the frames received so far."""
 
-    def __init__(self, path: Path, chans: list[Channel], s: RecordingSettings,
+    def __init__(self, recording: Recording, chans: list[ChannelSummary], s: RecordingSettings,
                  counters: dict[str, int]) -> None:
         wanted = [c.name for c in s.fusion.camera_inputs]
         config_files = {c.name: c.calibration for c in s.fusion.camera_inputs}
@@ -111,13 +117,13 @@ class _Cameras:
         for ch in chans:
             vehicle = _vehicle(ch.topic)
             got = CAMERA_JPEG.match(ch.topic, vehicle)
-            if got is not None and ch.schema == "CompressedFrame":
+            if got is not None and ch.schema_name == _FRAME:
                 self.topics[got["camera"]] = ch.topic
             got = CAMERA_INFO.match(ch.topic, vehicle)
-            if got is not None and ch.schema == "CameraInfo":
+            if got is not None and ch.schema_name == _INFO:
                 info_topics[got["camera"]] = ch.topic
             got = CAMERA_DEPTH.match(ch.topic, vehicle)
-            if got is not None and ch.schema == "DepthFrame":
+            if got is not None and ch.schema_name == _DEPTH:
                 depth_topics[got["camera"]] = ch.topic
         self.names = [n for n in wanted if n in self.topics]
         missing = [n for n in wanted if n not in self.topics]
@@ -126,7 +132,7 @@ class _Cameras:
         self.calibration_source: dict[str, str] = {}
         cals: dict[str, Calibration] = {}
         for name in self.names:
-            cals[name] = self._calibration(path, name, s, config_files.get(name, ""),
+            cals[name] = self._calibration(recording, name, s, config_files.get(name, ""),
                                            info_topics.get(name))
         geometry = ColumnGeometry(s.fusion.roi.column_height_m,
                                   s.fusion.roi.column_half_width_m, s.fusion.roi.padding_px)
@@ -166,7 +172,7 @@ class _Cameras:
             _bump(counters, exc.reason)
             return None
 
-    def _calibration(self, path: Path, name: str, s: RecordingSettings, config_file: str,
+    def _calibration(self, recording: Recording, name: str, s: RecordingSettings, config_file: str,
                      info_topic: str | None) -> Calibration:
         if name in s.calibrations:
             self.calibration_source[name] = s.calibrations[name]
@@ -174,7 +180,7 @@ class _Cameras:
         if s.prefer_config_calibration or info_topic is None:
             self.calibration_source[name] = config_file
             return Calibration.load(config_file)
-        for m in messages(path, [info_topic]):
+        for m in recording.records([info_topic]):
             try:
                 info = decode(m.data, CameraInfo)
             except DecodeError:
@@ -211,17 +217,18 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
     """Every confirmed track in range, in every camera that sees it, scored by every
     verifier. Raises RecordingError (unreadable file, no radar or camera channel),
     ConfigError (a calibration file)."""
-    chans = channels(path)
-    tracks_topics = [c.topic for c in chans if c.schema == "RadarTracks"
+    recording = Recording.open(path)
+    chans = [c for c in recording.channels().values() if c.message_encoding == "msgpack"]
+    tracks_topics = [c.topic for c in chans if c.schema_name == _TRACKS
                      and RADAR_TRACKS.match(c.topic, _vehicle(c.topic)) is not None]
     if not tracks_topics:
         raise RecordingError(f"{path}: no RadarTracks channel")
-    cams = _Cameras(path, chans, s, counters)
+    cams = _Cameras(recording, chans, s, counters)
     if not cams.names:
         raise RecordingError(f"{path}: none of the cameras fusion uses "
                              f"({', '.join(c.name for c in s.fusion.camera_inputs)}) is "
                              "recorded")
-    world_topics = [c.topic for c in chans if c.schema == SIM_WORLD_SCHEMA]
+    world_topics = [c.topic for c in chans if c.schema_name == _WORLD]
     truth = sim_truth.Truth() if world_topics else None
     decision = s.fusion.decision
     max_skew_ns = round(s.fusion.frames.max_skew_s * 1e9)
@@ -232,12 +239,12 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
     timed_frames: set[tuple[str, int]] = set()
     topics = tracks_topics + list(cams.by_topic) + list(cams.by_depth_topic) + world_topics
     depth_cache: dict[tuple[str, int], np.ndarray | None] = {}
-    for m in messages(path, topics):
-        if m.channel.topic in cams.by_depth_topic:
-            cams.add_depth(cams.by_depth_topic[m.channel.topic], m.data, counters)
+    for m in recording.records(topics):
+        if m.topic in cams.by_depth_topic:
+            cams.add_depth(cams.by_depth_topic[m.topic], m.data, counters)
             continue
-        if m.channel.topic in cams.by_topic:
-            name = cams.by_topic[m.channel.topic]
+        if m.topic in cams.by_topic:
+            name = cams.by_topic[m.topic]
             try:
                 msg = decode(m.data, CompressedFrame)
             except DecodeError:
@@ -246,7 +253,7 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
             cams.frames[name].append(_Stub(msg.header.seq, msg.header.stamp_ns,
                                            m.log_time_ns, m.data))
             continue
-        if truth is not None and m.channel.topic in world_topics:
+        if truth is not None and m.topic in world_topics:
             truth.add(m.data, counters)
             continue
         try:

@@ -7,6 +7,7 @@ is read up to its last complete record; `Recording.truncated` names such files.
 
 import heapq
 import logging
+import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -217,7 +218,7 @@ def _check_magic(path: Path) -> None:
     with open(path, "rb") as f:
         try:
             make_reader(f).get_header()
-        except (InvalidMagic, EndOfFile) as exc:
+        except (InvalidMagic, EndOfFile, struct.error) as exc:   # struct: shorter than a header
             raise RecordingError(f"{path} is not an MCAP recording ({exc})") from exc
         except McapError as exc:
             raise RecordingError(f"{path}: damaged MCAP file ({exc})") from exc

@@ -12,9 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
+import msgspec
 from mcap.writer import CompressionType, Writer
 
-from tools.recording.format import METADATA_NAME, ChannelType
+from common.messages import encode
+from tools.recording.format import METADATA_NAME, ChannelType, stack_channel
 
 CHUNK_BYTES = 1 << 20
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
@@ -140,6 +142,14 @@ class RecordingWriter:
         count.bytes += len(payload)
         if self.flush_s is not None and time.monotonic() - self._last_flush >= self.flush_s:
             self.flush()
+
+    def write_message(self, topic: str, msg: msgspec.Struct, log_time_ns: int) -> None:
+        """A stack message, encoded as on the bus; its publish time and sequence from its
+        header (the log time and 0 without one)."""
+        header = getattr(msg, "header", None)
+        self.write(topic, stack_channel(type(msg)), encode(msg), log_time_ns,
+                   header.stamp_ns if header is not None else log_time_ns,
+                   header.seq if header is not None else 0)
 
     def flush(self) -> None:
         """The chunk in progress to disk (the file stays open and readable up to here)."""
