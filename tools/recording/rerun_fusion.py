@@ -312,7 +312,8 @@ class LazyFrame(DecodedFrame):
     """A recorded frame the core sees as decoded: times at once, pixels decoded when the
     core first reads `gray` (a cycle that gates nothing in this camera decodes nothing).
     The receive time is the recorder's (`rx_mono_ns` orders frames for the paper's
-    "newest frame" policy)."""
+    "newest frame" policy). It carries no depth: a re-run with a verifier that needs depth
+    finds the camera unavailable, saying so."""
 
     __slots__ = ("_load", "_pixels", "_ref")
     _load: Callable[[str, FrameRef], np.ndarray]
@@ -323,7 +324,7 @@ class LazyFrame(DecodedFrame):
                  load: Callable[[str, FrameRef], np.ndarray]) -> None:
         for name, value in (("camera", camera), ("seq", ref.seq), ("stamp_ns", ref.stamp_ns),
                             ("rx_mono_ns", ref.log_ns), ("_ref", ref), ("_load", load),
-                            ("_pixels", None)):
+                            ("_pixels", None), ("depth_m", None)):
             object.__setattr__(self, name, value)
 
     @property
