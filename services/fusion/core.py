@@ -96,6 +96,12 @@ class FusionCore:
         self.camera_names = ",".join(names)
         self.verifier = verifier
         self.verifier_params = verifier.params()
+        # A verifier may precompute per calibration (the depth verifier's ray maps): now,
+        # not inside the first radar cycle that gates a track.
+        prepare = getattr(verifier, "prepare", None)
+        if callable(prepare):
+            for cam in self.cameras:
+                prepare(cam.projector.cal)
         self.source = f"fusion/{settings.instance}"
         self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
         self.rule = DecisionRule(settings.decision)

@@ -25,16 +25,20 @@ and rear window: at 5 m they fill much of the column 1-3 m behind the bumper).
     score = hits / band pixels with a return
 
 (0 when fewer than `min_returns` band pixels have a return: nothing there to confirm),
-verified iff score >= tau. Pixels without a return (0) count neither way, so the score
-means the same on a dense D435 image and on sparse lidar depth. Distortion is removed
-from the window's pixels when the calibration has any.
+verified iff score >= tau. Pixels without a return (0) count neither way, so the
+score means the same on a dense D435 image and on sparse lidar depth. Each pixel's ray
+(distortion removed) comes from maps computed once per calibration (`ray_maps`; `prepare`
+computes them ahead, e.g. when fusion starts, so that no radar cycle waits for them).
 
 What depth cannot tell: a structure that is really there at the range - a guard rail, a
 wall, a pole, a tree - fills the band like an obstacle does; the appearance verifiers
 judge those.
 """
 
+import threading
+from collections import OrderedDict
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Annotated
 
 import cv2
@@ -53,6 +57,8 @@ from services.fusion.verifiers import (
 )
 
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
+# Depth at or below this (metres) is "no return" (0); also the strictness of "nearer".
+_NO_RETURN = 1e-6
 
 
 class DepthParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -86,17 +92,65 @@ def _window_cols(obs: Observation, min_width: int) -> tuple[int, int]:
     return max(c0, roi.x), min(c1, roi.x + roi.w)
 
 
-def _rays(cal: Calibration, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised image coordinates (x/z, y/z) of the pixels u (W,) x v (H,), each (H, W)
-    float32 (broadcast rows and columns when there is no distortion)."""
-    k = cal.k
+@dataclass(frozen=True)
+class RayMaps:
+    """Per pixel of a calibration's image, its ray in the ground frame per unit of camera
+    depth (R^T (x/z, y/z, 1), distortion removed): horizontal `run`, `rise`, and
+    `slope` = rise / run (float32, height x width)."""
+
+    run: np.ndarray
+    rise: np.ndarray
+    slope: np.ndarray
+
+
+def _key(cal: Calibration) -> bytes:
+    # The rays depend on the image size, K, the distortion and R, not on t: the
+    # evaluation's calibrations that differ only in the ground's height share them.
+    return b"".join((np.array([cal.width, cal.height], np.int64).tobytes(),
+                     np.asarray(cal.k, np.float64).tobytes(),
+                     np.asarray(cal.dist, np.float64).tobytes(),
+                     np.asarray(cal.r, np.float64).tobytes()))
+
+
+def ray_maps(cal: Calibration) -> RayMaps:
+    """The calibration's RayMaps, computed once per (size, K, distortion, R) and kept for
+    the last `_MAPS` of them (each 3 x 4 bytes per pixel: 4.9 MB at 848x480)."""
+    key = _key(cal)
+    with _MAPS_LOCK:
+        got = _MAPS_CACHE.get(key)
+        if got is not None:
+            _MAPS_CACHE.move_to_end(key)
+            return got
+    maps = _compute_maps(cal)
+    with _MAPS_LOCK:
+        _MAPS_CACHE[key] = maps
+        while len(_MAPS_CACHE) > _MAPS:
+            _MAPS_CACHE.popitem(last=False)
+    return maps
+
+
+def _compute_maps(cal: Calibration) -> RayMaps:
+    k, w, h = cal.k, cal.width, cal.height
     if not np.any(cal.dist):
-        yn = ((v - k[1, 2]) / k[1, 1])[:, None]
-        xn = ((u[None, :] - k[0, 2] - k[0, 1] * yn) / k[0, 0])
-        return xn.astype(np.float32), np.broadcast_to(yn, xn.shape).astype(np.float32)
-    grid = np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 1, 2).astype(np.float64)
-    norm = cv2.undistortPoints(grid, k, cal.dist).reshape(len(v), len(u), 2)
-    return norm[..., 0].astype(np.float32), norm[..., 1].astype(np.float32)
+        yn = ((np.arange(h, dtype=np.float64) - k[1, 2]) / k[1, 1])[:, None]
+        xn = (np.arange(w, dtype=np.float64)[None, :] - k[0, 2] - k[0, 1] * yn) / k[0, 0]
+        yn = np.broadcast_to(yn, xn.shape)
+    else:
+        v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+        pts = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
+        norm = cv2.undistortPoints(pts, k, cal.dist).reshape(h, w, 2)
+        xn, yn = norm[..., 0], norm[..., 1]
+    r = cal.r
+    run = np.hypot(r[0, 0] * xn + r[1, 0] * yn + r[2, 0], r[0, 1] * xn + r[1, 1] * yn + r[2, 1])
+    rise = r[0, 2] * xn + r[1, 2] * yn + r[2, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(run > 1e-9, rise / run, np.inf)
+    return RayMaps(run.astype(np.float32), rise.astype(np.float32), slope.astype(np.float32))
+
+
+_MAPS = 8
+_MAPS_CACHE: OrderedDict[bytes, RayMaps] = OrderedDict()
+_MAPS_LOCK = threading.Lock()
 
 
 class DepthConsistency:
@@ -113,6 +167,10 @@ class DepthConsistency:
     def params(self) -> dict[str, ParamValue]:
         return msgspec.structs.asdict(self.p)
 
+    def prepare(self, calibration: Calibration) -> None:
+        """Compute the calibration's ray maps now rather than in the first verify()."""
+        ray_maps(calibration)
+
     def tolerance_m(self, distance_m: float) -> float:
         return float(self.p.k_sigma * self.model.rms_m(distance_m) + self.p.margin_m)
 
@@ -128,33 +186,27 @@ class DepthConsistency:
         centre = -cal.r.T @ cal.t
         expected = float(np.hypot(obs.xy_m[0] - centre[0], obs.xy_m[1] - centre[1]))
         tol = self.tolerance_m(expected)
-        xn, yn = _rays(cal, np.arange(c0, c1, dtype=np.float64),
-                       np.arange(r0, r1, dtype=np.float64))
-        # Each ray in the ground frame (R^T (xn, yn, 1)), per unit of camera depth: its
-        # horizontal run and its rise.
-        r = cal.r.astype(np.float32)
-        gx = r[0, 0] * xn + r[1, 0] * yn + r[2, 0]
-        gy = r[0, 1] * xn + r[1, 1] * yn + r[2, 1]
-        rise = r[0, 2] * xn + r[1, 2] * yn + r[2, 2]
-        run = np.hypot(gx, gy)
-        cz = np.float32(centre[2])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            band_h = cz + expected * rise / run
-        band = (run > 1e-6) & (band_h >= p.min_height_m) & (band_h <= p.max_height_m)
+        maps = ray_maps(cal)
+        cz = float(centre[2])
         d = obs.depth_m[r0:r1, c0:c1]
-        returns = band & (d > 0)
-        n_returns = int(np.count_nonzero(returns))
-        dist = d * run
-        height = cz + d * rise
-        hit = (returns & (dist >= expected - tol) & (dist <= expected + tol + p.extent_m)
-               & (height >= p.min_height_m) & (height <= p.max_height_m))
-        n_hit = int(np.count_nonzero(hit))
-        near = int(np.count_nonzero(returns & (dist < expected - tol)))
+        if d.dtype != np.float32:
+            d = d.astype(np.float32)
+        # In the band: the ray at the track's distance stands min..max height above the
+        # ground, i.e. rise / run within [(min - cz) / r, (max - cz) / r].
+        band = cv2.inRange(maps.slope[r0:r1, c0:c1], (p.min_height_m - cz) / expected,
+                           (p.max_height_m - cz) / expected)
+        returns = cv2.bitwise_and(band, cv2.inRange(d, _NO_RETURN, np.inf))
+        n_returns = cv2.countNonZero(returns)
+        dist = cv2.multiply(d, maps.run[r0:r1, c0:c1])
+        lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
+        at = cv2.inRange(dist, expected - tol, expected + tol + p.extent_m)
+        high = cv2.inRange(lift, p.min_height_m - cz, p.max_height_m - cz)
+        n_hit = cv2.countNonZero(cv2.bitwise_and(cv2.bitwise_and(returns, at), high))
+        near = cv2.countNonZero(cv2.bitwise_and(
+            returns, cv2.inRange(dist, -np.inf, expected - tol - _NO_RETURN)))
         score = n_hit / n_returns if n_returns >= p.min_returns else 0.0
-        band_px = int(np.count_nonzero(band))
         return GateResult(score, score >= p.tau,
-                          {"returns": float(n_returns), "band_px": float(band_px),
-                           "hits": float(n_hit),
+                          {"returns": float(n_returns), "hits": float(n_hit),
                            "nearer": near / n_returns if n_returns else 0.0,
                            "expected_m": expected, "tol_m": tol})
 

@@ -21,6 +21,8 @@ records the verifier's name and parameters.
 
 To add one: write a class with `name`, `needs_depth`, `params()` and `verify()`, a msgspec
 Struct for its parameters, and register a factory with `@register("name")` (see docs/fusion.md).
+A verifier may also define `prepare(calibration)`: fusion calls it for each camera when it
+starts (the depth verifier computes its ray maps there).
 """
 
 import math

@@ -1,8 +1,8 @@
 """Inputs for the evaluation tests, generated here (never real data in the repository):
 
 - a simulator-like recording in the project's MCAP layout: rendered frames of a box
-  approaching, radar cycles with a track on it and a ghost track on nothing, CameraInfo
-  and the ground truth on `sim/world`;
+  approaching, radar cycles with a track on it and a ghost track on nothing, CameraInfo,
+  the ground truth on `sim/world` and optionally its depth;
 - a KITTI object folder and a View-of-Delft folder with synthetic images, labels,
   calibration, lidar (and radar) points in the data sets' own conventions.
 """
@@ -16,10 +16,12 @@ import cv2
 import numpy as np
 
 from common.calibration import Calibration
+from common.depth_image import encode_depth, to_units
 from common.imaging import encode_jpeg
-from common.keys import CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
-from common.messages import CameraInfo, CompressedFrame, Header
+from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
+from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
 from tests.fusion.helpers import CAL, T0, cycle, track
+from tools.eval.depth import box_scene_depth
 from tools.eval.mcap_io import RecordingWriter
 from tools.sim.messages import SIM_WORLD, SimObject, SimWorld
 from tools.sim.scenario import DEFAULT_SIZE, ObjectKind
@@ -63,10 +65,19 @@ class SimRecording:
     cycles: list[tuple[int, int]]            # (radar stamp, log time)
 
 
+def box_depth(t_ns: int) -> np.ndarray:
+    """The box of `world` at `t_ns` and the road as a depth image (box_scene_depth)."""
+    length, width, height = DEFAULT_SIZE[ObjectKind.BOX]
+    x = box_face_x(t_ns)
+    return box_scene_depth(CAL, ((x, x + length, -width / 2, width / 2, 0.0, height),))
+
+
 def write_sim_recording(path: Path, n_cycles: int = 8, corrupt_seqs: tuple[int, ...] = (),
-                        vehicle: str = "ego") -> SimRecording:
+                        vehicle: str = "ego", with_depth: bool = False,
+                        depth_every: int = 1) -> SimRecording:
     """Frames at 30 fps (logged 5 ms after capture), radar cycles every 75 ms (logged
-    2 ms after), the world at 50 Hz."""
+    2 ms after), the world at 50 Hz; with `with_depth` a DepthFrame (decimated 2) with
+    every `depth_every`-th frame, logged 1 ms after it."""
     end = T0 + n_cycles * RADAR_NS + 40 * MS
     frames, cycles = [], []
     jpeg_topic = CAMERA_JPEG.key(vehicle, camera="front")
@@ -83,6 +94,12 @@ def write_sim_recording(path: Path, n_cycles: int = 8, corrupt_seqs: tuple[int, 
             msg = CompressedFrame(Header(seq, "camera/front", t, 0), "front", CAL.width,
                                   CAL.height, jpeg)
             w.write(jpeg_topic, msg, t + 5 * MS)
+            if with_depth and seq % depth_every == 0:
+                units = to_units(box_depth(t))[::2, ::2]
+                w.write(CAMERA_DEPTH.key(vehicle, camera="front"),
+                        DepthFrame(Header(seq, "camera/front", t, 0), "front",
+                                   units.shape[1], units.shape[0], "zstd",
+                                   encode_depth(units)), t + 6 * MS)
             seq += 1
             t += FRAME_NS
         for i, t in enumerate(range(T0, end, 20 * MS)):

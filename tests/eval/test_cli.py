@@ -8,6 +8,7 @@ import pytest
 from tests.eval.fixtures import write_kitti, write_sim_recording
 from tools.cli import main as aeb
 from tools.eval.records import read_records
+from tools.eval.scoring import default_specs
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def test_run_on_a_recording_and_a_data_set_in_two_processes(inputs, tmp_path, ca
     assert {r.kind for r in records} == {"track", "background", "object", "lidar"}
     run = json.loads((out / "run.json").read_text())
     assert run["workers"] == 2 and run["counters"]["frames"] == 3
-    assert set(run["verifiers"]) == {"edge_density", "adaptive_edge_density"}
+    assert set(run["verifiers"]) == {s.name for s in default_specs()}
     assert (out / "truth-labels.tsv").read_text().count("\tYES\t") == sum(
         r.truth == "YES" for r in records)
     report = json.loads((out / "report.json").read_text())

@@ -80,7 +80,7 @@ def test_scores_are_the_verifiers_on_the_decoded_frame(rec):
         gray = decode_gray(frames[r.frame_ref.seq])
         expected = gate.verify(Observation(gray, Roi(*r.roi), Roi(*r.column), r.range_m))
         assert r.scores["edge_density"].score == expected.score == r.density
-        assert set(r.scores) == {"adaptive_edge_density", "edge_density"}
+        assert set(r.scores) == {s.name for s in default_specs()}
         assert r.scores["edge_density"].us > 0
     # Full-frame timing once per frame used.
     timed = [r for r in records if r.frame_canny_us is not None]
@@ -143,3 +143,27 @@ def test_a_file_without_radar_or_not_mcap_is_a_clear_error(tmp_path):
     junk.write_bytes(b"not an mcap file at all")
     with pytest.raises(RecordingError, match="not an MCAP file"):
         recording_records(junk, RecordingSettings(), Scorer(default_specs()), {})
+
+
+def test_recorded_depth_reaches_the_depth_verifier_paired_by_capture_stamp(tmp_path, rec):
+    with_depth = write_sim_recording(tmp_path / "depth.mcap", with_depth=True,
+                                     depth_every=2)
+    counters: dict[str, int] = {}
+    specs = [VerifierSpec("depth", "depth"), VerifierSpec("edge_density", "edge_density")]
+    records = recording_records(with_depth.path, RecordingSettings(), Scorer(specs),
+                                counters)
+    scored = [r for r in records if r.scores["depth"].score is not None]
+    # Depth is recorded with every other frame: the others leave depth not applicable.
+    assert scored and len(scored) < len(records) and counters["frame_without_depth"] > 0
+    assert all(r.has_depth for r in scored)
+    box = [r for r in scored if r.track_id == 1]
+    ghost = [r for r in scored if r.track_id == 2]
+    background = [r for r in scored if r.kind == "background"]
+    assert box and ghost and background
+    assert all(r.scores["depth"].verified for r in box)
+    assert not any(r.scores["depth"].verified for r in ghost + background)
+    # Without a depth topic every depth score is not applicable, nothing counted.
+    counters = {}
+    plain = recording_records(rec.path, RecordingSettings(), Scorer(specs), counters)
+    assert all(r.scores["depth"].score is None for r in plain)
+    assert "frame_without_depth" not in counters

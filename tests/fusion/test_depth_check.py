@@ -106,3 +106,47 @@ def test_missing_depth_or_geometry_is_an_error_and_bad_params_are_refused():
     with pytest.raises(VerifierConfigError):
         create("depth", {"tau": 2.0})
     assert create("depth", {"tau": 0.3}).params()["tau"] == 0.3
+
+
+def test_known_limit_a_wall_or_rail_at_the_range_passes_like_an_obstacle():
+    # Depth confirms what really stands at the range: a wall along the road's edge and a
+    # guard rail 0.3-0.8 m high (a radar return off either is a real surface).
+    wall = (5.0, 40.0, 3.0, 3.3, 0.0, 2.5)
+    rail = (5.0, 40.0, -3.3, -3.0, 0.3, 0.8)
+    depth = render_depth(CAL, boxes=(wall, rail))
+    assert VERIFIER.verify(observe(depth, 12.0, 3.0)).verified
+    assert VERIFIER.verify(observe(depth, 12.0, -3.0)).verified
+
+
+def test_ray_maps_are_shared_by_calibrations_that_differ_only_in_t_and_undistort():
+    from services.fusion import depth_check
+
+    raised = Calibration.from_matrices(CAL.width, CAL.height, CAL.k, CAL.dist, CAL.r,
+                                       CAL.t + np.array([0.0, 0.3, 0.0]))
+    assert depth_check.ray_maps(raised) is depth_check.ray_maps(CAL)
+    # A distorted camera: each pixel's ray is cv2.undistortPoints' (a small image).
+    import cv2
+
+    k = np.array([[60.0, 0.0, 32.0], [0.0, 60.0, 24.0], [0.0, 0.0, 1.0]])
+    dist = np.array([-0.3, 0.1, 0.0, 0.0, 0.0])
+    bent = Calibration.from_matrices(64, 48, k, dist, CAL.r, CAL.t)
+    maps = depth_check.ray_maps(bent)
+    for u, v in ((0, 0), (63, 47), (40, 10)):
+        xn, yn = cv2.undistortPoints(np.array([[[u, v]]], np.float64), k, dist)[0, 0]
+        ray = CAL.r.T @ np.array([xn, yn, 1.0])
+        assert maps.run[v, u] == pytest.approx(np.hypot(ray[0], ray[1]), rel=1e-5)
+        assert maps.rise[v, u] == pytest.approx(ray[2], rel=1e-5, abs=1e-6)
+
+
+def test_fusion_prepares_the_verifier_for_each_cameras_calibration():
+    from tests.fusion.helpers import make_core
+
+    seen = []
+
+    class Preparing(DepthConsistency):
+        def prepare(self, calibration: Calibration) -> None:
+            seen.append(calibration)
+            super().prepare(calibration)
+
+    core = make_core(Preparing(DepthParams()))
+    assert seen == [core.cameras[0].projector.cal]

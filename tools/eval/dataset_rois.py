@@ -107,6 +107,8 @@ def dataset_records(kind: str, root: Path, frame_ids: list[str], s: DatasetSetti
         ref = FrameRef("image", str(frame.image_path), scale=sc.scale,
                        jpeg_quality=s.jpeg_quality)
         for n, c in enumerate(candidates):
+            if depth is not None and c.calibration is not None:
+                scorer.prepare(c.calibration)
             obs = Observation(gray, c.roi, c.column, c.range_m, depth, c.calibration, c.xy_m)
             scores = scorer.score(obs)
             frame_us = scorer.full_frame_us(gray) if s.timing and n == 0 else None

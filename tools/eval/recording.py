@@ -10,6 +10,11 @@ the ring (fusion never holds one) and the choice is made again; it is counted.
 
 Recordings of the simulator carry its ground truth (`sim/world`); their tracks are then
 labelled by it (tools/eval/sim_truth.py) and get background negatives like a data set's.
+
+Depth: where the recording holds a camera's `camera/<name>/depth`, the depth with the
+chosen frame's capture stamp is decoded as fusion decodes it and given to every verifier
+(with the calibration and the track's position); a frame without its depth leaves the
+depth verifiers not applicable for its ROIs (`frame_without_depth`).
 """
 
 import math
@@ -21,11 +26,25 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.config.fusion import FusionSettings
-from common.keys import CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
-from common.messages import CameraInfo, CompressedFrame, DecodeError, RadarTracks, decode
+from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
+from common.messages import (
+    CameraInfo,
+    CompressedFrame,
+    DecodeError,
+    DepthFrame,
+    RadarTracks,
+    decode,
+)
 from services.fusion.cameras import Camera, camera_views
 from services.fusion.core import _finite as finite_track  # fusion's own test of a track
-from services.fusion.frames import RING_SIZE, DecodedFrame, FrameError, FrameFeed, decode_frame
+from services.fusion.frames import (
+    RING_SIZE,
+    DecodedFrame,
+    FrameError,
+    FrameFeed,
+    decode_depth_frame,
+    decode_frame,
+)
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation
 from tools.eval import sim_truth
@@ -88,6 +107,7 @@ class _Cameras:
         config_files = {c.name: c.calibration for c in s.fusion.camera_inputs}
         self.topics: dict[str, str] = {}
         info_topics: dict[str, str] = {}
+        depth_topics: dict[str, str] = {}
         for ch in chans:
             vehicle = _vehicle(ch.topic)
             got = CAMERA_JPEG.match(ch.topic, vehicle)
@@ -96,6 +116,9 @@ class _Cameras:
             got = CAMERA_INFO.match(ch.topic, vehicle)
             if got is not None and ch.schema == "CameraInfo":
                 info_topics[got["camera"]] = ch.topic
+            got = CAMERA_DEPTH.match(ch.topic, vehicle)
+            if got is not None and ch.schema == "DepthFrame":
+                depth_topics[got["camera"]] = ch.topic
         self.names = [n for n in wanted if n in self.topics]
         missing = [n for n in wanted if n not in self.topics]
         if missing:
@@ -111,6 +134,37 @@ class _Cameras:
         self.cameras = [Camera(n, ColumnProjector(cals[n], geometry)) for n in self.names]
         self.frames: dict[str, deque[_Stub]] = {n: deque(maxlen=_BUFFER) for n in self.names}
         self.by_topic = {self.topics[n]: n for n in self.names}
+        # Depth payloads by capture stamp, per camera (only cameras with a depth topic).
+        self.depth: dict[str, dict[int, bytes]] = {n: {} for n in self.names
+                                                   if n in depth_topics}
+        self.by_depth_topic = {depth_topics[n]: n for n in self.depth}
+
+    def add_depth(self, name: str, payload: bytes, counters: dict[str, int]) -> None:
+        try:
+            stamp = decode(payload, DepthFrame).header.stamp_ns
+        except DecodeError:
+            _bump(counters, "depth_message")
+            return
+        held = self.depth[name]
+        held[stamp] = payload
+        while len(held) > _BUFFER:
+            del held[min(held)]
+
+    def depth_at(self, name: str, stamp_ns: int, cal: Calibration,
+                 counters: dict[str, int]) -> np.ndarray | None:
+        """The camera's depth for the frame captured at `stamp_ns` (metres at the
+        frame's size), or None (no depth recorded for it, or unusable: counted)."""
+        if name not in self.depth:
+            return None
+        payload = self.depth[name].get(stamp_ns)
+        if payload is None:
+            _bump(counters, "frame_without_depth")
+            return None
+        try:
+            return decode_depth_frame(payload, cal.width, cal.height)[1]
+        except FrameError as exc:
+            _bump(counters, exc.reason)
+            return None
 
     def _calibration(self, path: Path, name: str, s: RecordingSettings, config_file: str,
                      info_topic: str | None) -> Calibration:
@@ -176,8 +230,12 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
     session = path.stem
     out: list[RoiRecord] = []
     timed_frames: set[tuple[str, int]] = set()
-    topics = tracks_topics + list(cams.by_topic) + world_topics
+    topics = tracks_topics + list(cams.by_topic) + list(cams.by_depth_topic) + world_topics
+    depth_cache: dict[tuple[str, int], np.ndarray | None] = {}
     for m in messages(path, topics):
+        if m.channel.topic in cams.by_depth_topic:
+            cams.add_depth(cams.by_depth_topic[m.channel.topic], m.data, counters)
+            continue
         if m.channel.topic in cams.by_topic:
             name = cams.by_topic[m.channel.topic]
             try:
@@ -222,16 +280,23 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
             if view.frame is None or gray is None or stub is None:
                 _bump(counters, "cycle_without_frame")
                 continue
+            key = (name, stub.stamp_ns)
+            if key not in depth_cache:
+                depth_cache.clear()       # cycles move forward, like the frame cache
+                depth_cache[key] = cams.depth_at(name, stub.stamp_ns, cal, counters)
+            depth = depth_cache[key]
+            if depth is not None:
+                scorer.prepare(cal)
             light, median = lighting(gray)
             world = truth.world_at(stamp) if truth is not None else None
-            positives: list[RoiRecord] = []
+            positives: list[tuple[RoiRecord, tuple[float, float]]] = []
             for i, track in enumerate(tracks):
                 roi, column = view.rois[i], view.columns[i]
                 if roi is None or column is None:
                     _bump(counters, "track_not_visible")
                     continue
                 x, y = view.xy[i]
-                obs = Observation(gray, roi, column, math.hypot(x, y))
+                obs = Observation(gray, roi, column, math.hypot(x, y), depth, cal, (x, y))
                 scores = scorer.score(obs)
                 frame_us = None
                 if s.timing and (name, stub.seq) not in timed_frames:
@@ -252,37 +317,44 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
                            if track.range_rate_mps < 0 else None),
                     track_id=track.track_id, obj_class=obj_class, truth=label,
                     density=scorer.density(obs, scores), lighting=light,
-                    frame_median=median, scores=scores, frame_canny_us=frame_us)
+                    frame_median=median, has_depth=depth is not None, scores=scores,
+                    frame_canny_us=frame_us)
                 out.append(rec)
                 if label == "YES":
-                    positives.append(rec)
+                    positives.append((rec, (x, y)))
             if world is not None and positives and s.background_per_object > 0:
-                out += _background(world, view.frame.stamp_ns, cal, gray, positives, s,
-                                   scorer, rng, counters, (light, median))
+                out += _background(world, view.frame.stamp_ns, cal, gray, depth, positives,
+                                   s, scorer, rng, counters, (light, median))
     counters["rois"] = counters.get("rois", 0) + len(out)
     return out
 
 
 def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
-                gray: np.ndarray, positives: list[RoiRecord], s: RecordingSettings,
-                scorer: Scorer, rng: np.random.Generator, counters: dict[str, int],
-                light: tuple[str, float]) -> list[RoiRecord]:
+                gray: np.ndarray, depth: np.ndarray | None,
+                positives: list[tuple[RoiRecord, tuple[float, float]]],
+                s: RecordingSettings, scorer: Scorer, rng: np.random.Generator,
+                counters: dict[str, int], light: tuple[str, float]) -> list[RoiRecord]:
     """Background negatives of a simulated frame: the positives' sizes and rows, where
-    the ground truth has no object."""
+    the ground truth has no object; each keeps its positive's column (moved with it) and
+    range, as a radar target there would."""
     occupied = sim_truth.object_boxes(world, frame_stamp, cal)
     out = []
-    for pos in positives:
+    for pos, xy in positives:
         got = free_rois(Roi(*pos.roi), occupied, cal.width, s.background_per_object, rng)
         if len(got) < s.background_per_object:
             _bump(counters, "background_no_room")
+        # The positive's column, moved with its ROI (what a verifier of the column sees).
+        px, py, pw, ph = pos.column
+        dx, dy = px - pos.roi[0], py - pos.roi[1]
         for k, roi in enumerate(got):
-            obs = Observation(gray, roi, roi, pos.range_m)
+            column = Roi(roi.x + dx, roi.y + dy, pw, ph)
+            obs = Observation(gray, roi, column, pos.range_m, depth, cal, xy)
             scores = scorer.score(obs)
             out.append(RoiRecord(
                 id=f"{pos.id}:bg{k}", source=pos.source, session=pos.session,
                 frame=pos.frame, t_ns=pos.t_ns, camera=pos.camera, image_w=pos.image_w,
-                image_h=pos.image_h, roi=roi, column=roi, range_m=pos.range_m,
+                image_h=pos.image_h, roi=roi, column=column, range_m=pos.range_m,
                 kind="background", frame_ref=pos.frame_ref,
                 truth="NO", density=scorer.density(obs, scores), lighting=light[0],
-                frame_median=light[1], scores=scores))
+                frame_median=light[1], has_depth=depth is not None, scores=scores))
     return out

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from common.calibration import Calibration
 from services.fusion.roi import Roi
 from services.fusion.verifiers import (
     Observation,
@@ -77,6 +78,13 @@ class Scorer:
         self.verifiers: list[tuple[str, Verifier]] = [(s.label, create(s.name, s.params))
                                                       for s in specs]
         self._gate = create(PAPER_GATE)
+
+    def prepare(self, calibration: Calibration) -> None:
+        """Let verifiers precompute for this calibration (outside the timed verify)."""
+        for _, v in self.verifiers:
+            prepare = getattr(v, "prepare", None)
+            if callable(prepare):
+                prepare(calibration)
 
     def params(self) -> dict[str, dict[str, ParamValue]]:
         return {label: v.params() for label, v in self.verifiers}
