@@ -81,9 +81,29 @@ def test_false_targets_are_no_obstacles_for_the_ground_truth():
     sc = load_scenario(find_scenario("no_threat_overhead_sign_30kph"))
     world = World(sc)
     assert world.threat() is None and world.in_path_gap() is None
+    assert world.false_target_gap() == pytest.approx(45.0 - 0.1)    # the board's near face
     assert {o.kind for o in sc.object} <= FALSE_TARGETS
     assert all(not k.is_obstacle for k in FALSE_TARGETS)
     assert sc.object[0].elevation() == 5.0
+
+
+def test_the_timeline_plot_shows_the_false_target(tmp_path):
+    from tools.sim.plot import plot_timeline
+    from tools.sim.verdict import Sample, judge
+
+    sc = load_scenario(find_scenario("no_threat_manhole_30kph"))
+    world = World(sc)
+    samples = []
+    while not world.passed_everything():
+        samples.append(Sample(world.t_s, world.ego.x_m, world.ego.speed_mps, None, None,
+                              "NONE", "ARMED", 0.0, 0.0, world.false_target_gap()))
+        world.step(0.1, 0.0)
+    gaps = [s.false_target_gap_m for s in samples if s.false_target_gap_m is not None]
+    assert gaps[0] == pytest.approx(39.6) and min(gaps) < 1.0
+    verdict = judge(sc.name, sc.kind, samples, world.collision)
+    assert verdict.passed and verdict.outcome == "no activation"
+    png = plot_timeline(samples, verdict, tmp_path / "p.png")
+    assert png.read_bytes()[:4] == b"\x89PNG"
 
 
 @pytest.mark.parametrize("name", FALSE_TARGET_SCENARIOS)

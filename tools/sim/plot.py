@@ -22,7 +22,13 @@ def plot_timeline(samples: list[Sample], verdict: Verdict, path: str | Path,
     t = [s.t_s for s in samples]
     fig, axes = plt.subplots(5, 1, figsize=(10, 11), sharex=True)
     ax = axes[0]
-    ax.plot(t, [s.gap_m if s.gap_m is not None else float("nan") for s in samples], "k-")
+    ax.plot(t, [s.gap_m if s.gap_m is not None else float("nan") for s in samples], "k-",
+            label="obstacle")
+    if any(s.false_target_gap_m is not None for s in samples):
+        ax.plot(t, [s.false_target_gap_m if s.false_target_gap_m is not None else float("nan")
+                    for s in samples], color="grey", ls="--",
+                label="false target (radar only: nothing to hit)")
+        ax.legend(loc="upper right", fontsize=8)
     ax.set_ylabel("gap to in-path\nobject (m)")
     ax.axhline(0, color="r", lw=0.8)
     ax = axes[1]

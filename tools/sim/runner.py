@@ -250,7 +250,8 @@ class Simulator:
         sample = Sample(w.t_s, w.ego.x_m, w.ego.speed_mps,
                         gap if gap is not None else (threat.gap_m if threat else None),
                         threat.ttc_s if threat else None,
-                        self.decision, self.brake_state, self.actuator.commanded_pct(), position)
+                        self.decision, self.brake_state, self.actuator.commanded_pct(), position,
+                        w.false_target_gap())
         run.samples.append(sample)
         if self.on_sample is not None:
             self.on_sample(sample)

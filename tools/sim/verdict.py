@@ -29,6 +29,7 @@ class Sample:
     brake_state: str             # the brake service's latest state ("" before any)
     commanded_pct: float         # level in the last command the actuator received
     position_pct: float          # actuator position
+    false_target_gap_m: float | None = None   # nearest false target in the ego's width
 
 
 @dataclass(frozen=True)

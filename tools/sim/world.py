@@ -245,10 +245,18 @@ class World:
         return best
 
     def in_path_gap(self) -> float | None:
-        """Gap to the nearest object ahead that overlaps the ego's width now."""
+        """Gap to the nearest obstacle ahead that overlaps the ego's width now."""
+        return self._gap_in_width(self.obstacles())
+
+    def false_target_gap(self) -> float | None:
+        """Gap to the nearest false target (plate, sign, rail, ghost) ahead that overlaps
+        the ego's width now: what the radar sees in the path with nothing to hit."""
+        return self._gap_in_width([b for b in self.bodies() if not b.kind.is_obstacle])
+
+    def _gap_in_width(self, bodies: list[Body]) -> float | None:
         half = self.scenario.ego.width_m / 2
         gaps = []
-        for body in self.obstacles():
+        for body in bodies:
             c = body.corners()
             if c[:, 1].max() < -half or c[:, 1].min() > half:
                 continue
