@@ -1,0 +1,173 @@
+"""The fault-injection run: one stack (the closed-loop session of `aeb demo`: router,
+radar, camera, fusion and brake started by the launcher of `aeb up`, on the SIMULATED
+radar link, camera and actuator), every fault injected in rounds, the stack recovering
+between injections (a killed process is restarted by the launcher)."""
+
+import random
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+from common.config.brake import BrakeConfig
+from common.config.loader import load_config
+from common.messages import BrakeState
+from common.net import free_port
+from services.brake.shell import TIMER_PERIOD_S
+from tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome, catalogue
+from tools.faults.links import CanGate, NetnsLink, RelayLink
+from tools.faults.observe import Observer
+from tools.launch.table import Launch
+from tools.sim.session import closed_loop
+
+LINE_MARGIN_MS = 10.0     # FAILSAFE decided -> its line read by the actuator (pty)
+STEADY_S = 1.0            # settled this long before the next injection
+
+
+@dataclass
+class Record:
+    fault: str
+    required: str
+    outcomes: list[Outcome] = field(default_factory=list)
+    recover_s: list[float] = field(default_factory=list)
+    unrecovered: int = 0
+    skipped: str = ""
+
+
+@dataclass
+class RunInfo:
+    mode: str
+    rounds_planned: int
+    rounds_done: int = 0
+    seconds: float = 0.0
+    link: str = ""
+    stopped_early: str = ""
+    unexpected_exits: list[str] = field(default_factory=list)
+
+
+def bounds_for(brake_toml: Path) -> Bounds:
+    s = load_config(brake_toml, BrakeConfig).brake
+    return Bounds(failsafe_ms=s.deadline_ms + TIMER_PERIOD_S * 1000 + LINE_MARGIN_MS,
+                  watchdog_ms=s.actuator.ttl_ms + 50.0, camera_ms=500.0, frozen_ms=2000.0,
+                  unplug_ms=100.0, replug_ms=3000.0, refuse_ms=500.0, recover_s=60.0)
+
+
+def settled(ctx: Context, timeout_s: float, steady_s: float = STEADY_S) -> bool:
+    """Every service up (the launcher's view), the brake armed on fusion's commands,
+    fusion saying NONE, the actuator released, all of it for `steady_s` without a break
+    (a stack just back may still stumble once)."""
+    deadline = time.monotonic() + timeout_s
+    sim = ctx.loop.sim
+    since: float | None = None
+    while time.monotonic() < deadline:
+        try:
+            running = all(ctx.loop.supervisor.child(s).running() for s in (*SERVICES, "router"))
+        except KeyError:
+            running = False
+        last = ctx.observer.status.last()
+        fresh = last is not None and time.monotonic_ns() - last.rx_ns < 300_000_000
+        if running and fresh and last is not None and last.msg.state is BrakeState.ARMED \
+                and sim.settled():
+            since = time.monotonic() if since is None else since
+            if time.monotonic() - since >= steady_s:
+                return True
+        else:
+            since = None
+        time.sleep(0.05)
+    return False
+
+
+def _make_link(port: int) -> tuple[NetnsLink | RelayLink, str]:
+    ns = NetnsLink()
+    problem = ns.make()
+    if not problem:
+        return ns, ""
+    return RelayLink(port), f"network namespaces unavailable ({problem}): loopback relay"
+
+
+def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | None = None,
+        only: list[str] | None = None, seed: int = 19,
+        on_progress: Callable[[str], None] | None = None) -> tuple[list[Record], RunInfo]:
+    """Start the stack, inject each fault `rounds` times (a round: each fault once, in
+    catalogue order), stop. `time_budget_s`: no new round starts after it."""
+    rng = random.Random(seed)
+    faults = [f for f in catalogue() if only is None or any(o in f.name for o in only)]
+    records = {f.name: Record(f.name, f.required) for f in faults}
+    info = RunInfo(mode, rounds)
+    port = free_port()
+    local = f"tcp/127.0.0.1:{port}"
+    link, link_note = _make_link(port)
+    info.link = link_note or f"network namespace {getattr(link, 'ns', '')} + veth"
+    extra_listen = (link.endpoint(port),) if isinstance(link, NetnsLink) else ()
+
+    def adapt(launch: Launch) -> Launch:
+        return link.adapt(launch, local, port)
+
+    t_start = time.monotonic()
+    say = on_progress or (lambda text: print(text, file=log, flush=True))
+    try:
+        with closed_loop(out, port=port, log=log, restart="always",
+                         router_listen=extra_listen, adapt=adapt) as loop:
+            gate = CanGate(loop.feed.sink)
+            loop.feed.sink = gate
+            observer = Observer(loop.bus, loop.actuator)
+            ctx = Context(loop, observer, bounds_for(Path(out) / "run" / "brake.toml"), rng,
+                          gate, link, "")
+            if not settled(ctx, 60.0):
+                info.stopped_early = "the stack never settled before the first injection"
+                return list(records.values()), info
+            for r in range(rounds):
+                if time_budget_s is not None and time.monotonic() - t_start > time_budget_s:
+                    info.stopped_early = (f"time budget of {time_budget_s:.0f} s reached "
+                                          f"after {r} rounds")
+                    break
+                for fault in faults:
+                    _one(ctx, fault, records[fault.name], say, r, info)
+                info.rounds_done = r + 1
+                say(f"round {r + 1}/{rounds} done ({time.monotonic() - t_start:.0f} s)")
+    finally:
+        link.remove()
+        info.seconds = time.monotonic() - t_start
+    return list(records.values()), info
+
+
+def _one(ctx: Context, fault: Fault, rec: Record, say: Callable[[str], None], r: int,
+         info: RunInfo) -> None:
+    problem = fault.available(ctx)
+    if problem:
+        rec.skipped = problem
+        return
+    before = _pids(ctx)
+    try:
+        outcome = fault.inject(ctx)
+    except (OSError, KeyError, RuntimeError) as exc:
+        outcome = Outcome(False, None, f"injection failed: {exc!r}")
+    rec.outcomes.append(outcome)
+    t0 = time.monotonic()
+    if settled(ctx, ctx.bounds.recover_s):
+        rec.recover_s.append(time.monotonic() - t0)
+    else:
+        rec.unrecovered += 1
+        outcome.lost += 1
+        outcome.detail += "; the stack did not settle afterwards"
+    # a process the fault did not kill that has a new pid died by itself: lost
+    killed = getattr(fault, "service", None) if getattr(fault, "sig", None) is \
+        signal.SIGKILL else None
+    for name, pid in _pids(ctx).items():
+        if name != killed and pid != before[name]:
+            info.unexpected_exits.append(f"{name} during {fault.name} (round {r + 1})")
+            outcome.lost += 1
+            outcome.detail += f"; {name} exited unexpectedly"
+    resp = "-" if outcome.response_ms is None else f"{outcome.response_ms:.1f} ms"
+    say(f"  [{r + 1}] {fault.name}: {'ok' if outcome.ok else 'FAILED'} {resp} "
+        f"{outcome.detail}")
+
+
+def _pids(ctx: Context) -> dict[str, int | None]:
+    out: dict[str, int | None] = {}
+    for name in (*SERVICES, "router"):
+        proc = ctx.loop.supervisor.child(name).proc
+        out[name] = None if proc is None else proc.pid
+    return out

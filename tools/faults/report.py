@@ -1,0 +1,122 @@
+"""The fault table: per fault, injections, responses within bound, p50 / max response
+and recovery times, anything lost; as Markdown, JSON and a PNG."""
+
+import json
+import platform
+import statistics
+from pathlib import Path
+from typing import Any
+
+from tools.faults.harness import Record, RunInfo
+
+
+def _stats(values: list[float]) -> tuple[float | None, float | None]:
+    if not values:
+        return None, None
+    return statistics.median(values), max(values)
+
+
+def rows(records: list[Record]) -> list[dict[str, Any]]:
+    out = []
+    for rec in records:
+        times = [o.response_ms for o in rec.outcomes if o.response_ms is not None]
+        p50, mx = _stats(times)
+        r50, rmax = _stats(rec.recover_s)
+        failures = [o.detail for o in rec.outcomes if not o.ok]
+        out.append({
+            "fault": rec.fault, "required": rec.required, "injections": len(rec.outcomes),
+            "within_bound": sum(o.ok for o in rec.outcomes), "p50_ms": p50, "max_ms": mx,
+            "recover_p50_s": r50, "recover_max_s": rmax,
+            "lost": sum(o.lost for o in rec.outcomes), "unrecovered": rec.unrecovered,
+            "skipped": rec.skipped, "first_failures": failures[:3],
+            "detail": rec.outcomes[-1].detail if rec.outcomes else "",
+        })
+    return out
+
+
+def _ms(v: float | None) -> str:
+    return "-" if v is None else f"{v:.1f}"
+
+
+def _s(v: float | None) -> str:
+    return "-" if v is None else f"{v:.1f}"
+
+
+def markdown(table: list[dict[str, Any]], info: RunInfo) -> str:
+    lines = [f"mode {info.mode}: {info.rounds_done} of {info.rounds_planned} rounds in "
+             f"{info.seconds / 60:.1f} min; link cut: {info.link}"
+             + (f"; stopped early: {info.stopped_early}" if info.stopped_early else ""), "",
+             "| fault | required response | injections | within bound | p50 ms | max ms "
+             "| recovery p50 / max s | lost |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for r in table:
+        if r["skipped"]:
+            lines.append(f"| {r['fault']} | {r['required']} | skipped: {r['skipped']} "
+                         "| | | | | |")
+            continue
+        lines.append(f"| {r['fault']} | {r['required']} | {r['injections']} | "
+                     f"{r['within_bound']} | {_ms(r['p50_ms'])} | {_ms(r['max_ms'])} | "
+                     f"{_s(r['recover_p50_s'])} / {_s(r['recover_max_s'])} | {r['lost']} |")
+    failed = [r for r in table if r["first_failures"]]
+    if failed:
+        lines += ["", "Failures (first of each fault):", ""]
+        lines += [f"- {r['fault']}: {r['first_failures'][0]}" for r in failed]
+    if info.unexpected_exits:
+        lines += ["", "Processes that exited without being killed: "
+                  + "; ".join(info.unexpected_exits[:10])]
+    return "\n".join(lines) + "\n"
+
+
+def plot(table: list[dict[str, Any]], records: list[Record], path: Path) -> Path | None:
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    shown = [(r, rec) for r, rec in zip(table, records, strict=True) if rec.outcomes]
+    fig, ax = plt.subplots(figsize=(11, 0.45 * len(shown) + 1.5))
+    for i, (r, rec) in enumerate(shown):
+        times = [o.response_ms for o in rec.outcomes if o.response_ms is not None]
+        ok = [o.response_ms for o in rec.outcomes if o.ok and o.response_ms is not None]
+        bad = [o.response_ms for o in rec.outcomes if not o.ok and o.response_ms is not None]
+        ax.scatter(ok, [i] * len(ok), s=8, color="tab:green", alpha=0.5)
+        ax.scatter(bad, [i] * len(bad), s=14, color="tab:red", marker="x")
+        if times:
+            ax.plot([r["p50_ms"]], [i], marker="|", markersize=14, color="black")
+    ax.set_yticks(range(len(shown)))
+    ax.set_yticklabels([f"{r['fault']} ({r['within_bound']}/{r['injections']})"
+                        for r, _ in shown], fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel("response time, ms (log; green within bound, red x outside, | median)")
+    ax.invert_yaxis()
+    ax.grid(True, axis="x", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write(out: Path, records: list[Record], info: RunInfo) -> tuple[Path, Path, Path | None]:
+    out.mkdir(parents=True, exist_ok=True)
+    table = rows(records)
+    md = out / "faults.md"
+    md.write_text(markdown(table, info))
+    js = out / "faults.json"
+    js.write_text(json.dumps({
+        "mode": info.mode, "rounds_planned": info.rounds_planned,
+        "rounds_done": info.rounds_done, "seconds": round(info.seconds, 1),
+        "link": info.link, "stopped_early": info.stopped_early,
+        "unexpected_exits": info.unexpected_exits,
+        "machine": {"node": platform.node(), "cpus": _cpus(), "python": platform.python_version(),
+                    "kernel": platform.release()},
+        "faults": table,
+        "responses_ms": {rec.fault: [o.response_ms for o in rec.outcomes] for rec in records},
+    }, indent=1))
+    png = plot(table, records, out / "faults.png")
+    return md, js, png
+
+
+def _cpus() -> int:
+    import os
+    return len(os.sched_getaffinity(0))
