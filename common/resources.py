@@ -11,6 +11,7 @@ from pathlib import Path
 
 DEPLOY = Path(__file__).resolve().parent.parent / "deploy"
 EXAMPLE_CALIBRATION = DEPLOY / "calibration" / "d435_848x480.toml"
+EXAMPLE_KEYS = DEPLOY / "keys"   # INSECURE example command keys: demo and simulator only
 SINGLE_HOST_TABLE = DEPLOY / "single-host.toml"
 ARS408_RECORDING = DEPLOY / "recordings" / "ars408" / "candump-2026-06-24_154259.log"
 

@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evidence": ("tools.recording.evidence", "a folder of evidence per WARNING and BRAKE"),
     "foxglove": ("tools.foxglove.bridge", "live view of the bus in Foxglove (WebSocket)"),
     "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
+    "keygen": ("tools.keygen", "make the BrakeCommand key of a fusion instance"),
     "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
     "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
     "hz": ("tools.topics.hz", "publish rate of a key: mean, min, max and std of the period"),

@@ -17,6 +17,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from common.command_auth import KeyFileError, load_key, new_key, write_key
 from common.log import add_log_level, setup_logging
 from common.resources import DEPLOY
 
@@ -59,7 +60,26 @@ def write_copy(target: Path, force: bool = False) -> list[Path]:
 
     shutil.copytree(DEPLOY, target, ignore=_SKIP, dirs_exist_ok=True, copy_function=copy)
     rewrite_units(target, target.resolve(), installed_aeb())
+    replace_example_keys(target / "keys")
     return sorted(written)
+
+
+def replace_example_keys(folder: Path) -> list[Path]:
+    """Every insecure example key in `folder` replaced by a fresh key of the same
+    instance (same file name, mode 0600), so that a vehicle's copy never runs on a
+    published key. Returns the files replaced. Raises OSError, KeyFileError."""
+    replaced: list[Path] = []
+    for path in sorted(folder.glob("*.key")):
+        key = load_key(path)
+        if key.insecure_example:
+            write_key(path, new_key(key.instance), overwrite=True)
+            replaced.append(path)
+    readme = folder / "README.md"
+    if replaced:
+        readme.write_text("# BrakeCommand keys of this vehicle\n\nMade by `aeb init`; secret: "
+                          "readable by the fusion and brake services only.\nRotation: "
+                          "docs/security.md.\n")
+    return replaced
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     target = Path(args.dir)
     try:
         files = write_copy(target, args.force)
-    except (FileExistsError, OSError) as exc:
+    except (FileExistsError, OSError, KeyFileError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {len(files)} files to {target}/ (from {DEPLOY})\n"
@@ -82,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
           "fusion.toml, brake.toml, calibration/\n"
           f"  check:  aeb up --check --table {target}/single-host.toml\n"
           f"  run:    aeb up --table {target}/single-host.toml\n"
-          f"  under systemd: {target}/systemd/ (docs/deploy.md)")
+          f"  under systemd: {target}/systemd/ (docs/deploy.md)\n"
+          f"  command keys: fresh ones in {target}/keys/ (docs/security.md)")
     return 0
 
 

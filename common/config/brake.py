@@ -7,6 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config.base import ServiceConfig
+from common.config.paths import ConfigPath
 from common.config.realtime import RealtimeSettings
 from common.keys import FUSION_BRAKE_CMD
 from common.messages.brake import FailsafePolicy
@@ -62,6 +63,19 @@ class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     age_clock: AgeClock = AgeClock.MONOTONIC
     max_age_ms: _Ms = 100.0
     max_future_ms: Annotated[float, msgspec.Meta(ge=0)] = 5.0
+    # Key files (common/command_auth.py) of `instance`, by key id: only commands with a
+    # valid MAC of one of them are followed. Two during a key rotation. Required.
+    command_keys: tuple[ConfigPath, ...] = ()
+    # An authenticated sequence number may run ahead of the last accepted one by at most
+    # 16 + this rate times the time since it (seq_jump otherwise): a jump cannot lock out
+    # the stream that follows it.
+    max_command_rate_hz: Annotated[float, msgspec.Meta(gt=0, le=10000)] = 200.0
+    # Evidence of a healthy stream before arming (and before leaving FAILSAFE): the
+    # recover_count consecutive commands must span at least recover_window_ms, each
+    # built from radar data younger than max_data_age_ms (a burst of queued commands,
+    # e.g. after SIGCONT, is not evidence).
+    recover_window_ms: Annotated[float, msgspec.Meta(ge=0, le=60000)] = 300.0
+    max_data_age_ms: Annotated[float, msgspec.Meta(gt=0, le=60000)] = 150.0
     serial: SerialSettings = msgspec.field(default_factory=SerialSettings)
     actuator: ActuatorSettings = msgspec.field(default_factory=ActuatorSettings)
     # SCHED_FIFO for the command callback (validate, decide, write) and the Zenoh I/O

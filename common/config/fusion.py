@@ -154,6 +154,9 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     cameras: Annotated[tuple[CameraInput, ...], msgspec.Meta(max_length=8)] = ()
     # SCHED_FIFO for the radar callback (decide, publish) and the Zenoh I/O threads
     realtime: RealtimeSettings = msgspec.field(default_factory=RealtimeSettings)
+    # Key file of this instance (`aeb keygen`; common/command_auth.py): every BrakeCommand
+    # is signed with it. Empty: unsigned commands, which no brake follows (shadow mode).
+    command_key: ConfigPath = ""
 
     def __post_init__(self) -> None:
         names = [c.name for c in self.cameras]

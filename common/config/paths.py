@@ -24,6 +24,16 @@ def _is_path(annotation: Any) -> bool:
                for m in getattr(annotation, "__metadata__", ()))
 
 
+def _is_path_tuple(annotation: Any) -> bool:
+    """`tuple[ConfigPath, ...]` (possibly Annotated itself)."""
+    inner = getattr(annotation, "__origin__", None)
+    if inner is not None and getattr(annotation, "__metadata__", None):
+        annotation = inner
+    args: tuple[Any, ...] = getattr(annotation, "__args__", ())
+    return getattr(annotation, "__origin__", None) is tuple and len(args) > 0 \
+        and _is_path(args[0])
+
+
 def resolve_path(value: str, base: Path) -> str:
     """`value` against `base` (the config file's folder), unless it is empty, absolute,
     a URL or a device index."""
@@ -46,6 +56,10 @@ def resolve_paths(cfg: S, base: Path, resolved: list[tuple[str, str]] | None = N
                 resolved.append((value, new))
         elif isinstance(value, msgspec.Struct):
             new = resolve_paths(value, base, resolved)
+        elif isinstance(value, tuple) and _is_path_tuple(field.type):
+            new = tuple(resolve_path(v, base) for v in value)
+            if resolved is not None:
+                resolved += [(v, n) for v, n in zip(value, new, strict=True) if v != n]
         elif isinstance(value, tuple) and any(isinstance(v, msgspec.Struct) for v in value):
             new = tuple(resolve_paths(v, base, resolved) if isinstance(v, msgspec.Struct)
                         else v for v in value)

@@ -5,6 +5,7 @@ from common.messages.camera import CameraInfo, CompressedFrame
 from common.messages.codec import DecodeError, decode, encode
 from common.messages.fusion import (
     BrakeCommand,
+    CommandAuth,
     Decision,
     Verification,
     VerifiedTarget,
@@ -32,6 +33,7 @@ __all__ = [
     "BusState",
     "CameraInfo",
     "CanFrame",
+    "CommandAuth",
     "CompressedFrame",
     "Decision",
     "DecodeError",

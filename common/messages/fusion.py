@@ -99,6 +99,19 @@ class VerifiedTargets(msgspec.Struct, frozen=True):
     cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)
 
 
+class CommandAuth(msgspec.Struct, frozen=True):
+    """Who made a BrakeCommand (common/command_auth.py, docs/security.md).
+
+    `mac` is HMAC-SHA256, with the key `key_id` names, over the encoded command up to
+    the MAC's own 32 bytes, which are the last 32 bytes of the payload: it covers every
+    other field, the sequence number, the stamps and `session` (random per fusion
+    process start) included."""
+
+    key_id: str
+    session: int
+    mac: bytes
+
+
 class BrakeCommand(msgspec.Struct, frozen=True):
     """Exactly one per radar cycle per fusion instance: the most severe decision, or a
     plain heartbeat (decision NONE, level 0).
@@ -121,3 +134,5 @@ class BrakeCommand(msgspec.Struct, frozen=True):
     reason: str
     radar_seq: int
     radar_last_frame_mono_ns: int
+    # Last, so that the MAC is the payload's last bytes; None: unsigned (never followed)
+    auth: CommandAuth | None = None

@@ -14,9 +14,12 @@ back the current level goes out at once.
 """
 
 from collections import Counter, deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 
+from common.command_auth import CommandKey
 from common.config.brake import BrakeSettings
+from common.counters import saturated, saturating_add
 from common.messages import BrakeCommand, BrakeState, Decision, FailsafePolicy
 from services.brake.commands import Accepted, CommandValidator, Rejection
 from services.brake.protocol import (
@@ -76,7 +79,9 @@ class CoreView:
 
 
 class BrakeCore:
-    def __init__(self, settings: BrakeSettings, expected_key: str, now_ns: int) -> None:
+    def __init__(self, settings: BrakeSettings, expected_key: str, now_ns: int,
+                 keys: Mapping[str, CommandKey]) -> None:
+        """`keys`: the command keys of `settings.instance`, by key id."""
         s = self.settings = settings
         self._deadline = _ns(s.deadline_ms)
         self._min_hold = _ns(s.min_brake_hold_ms)
@@ -85,8 +90,11 @@ class BrakeCore:
         self._ack_timeout = _ns(s.actuator.ack_timeout_ms)
         self._ttl_ms = s.actuator.ttl_ms
         self.validator = CommandValidator(
-            expected_key, s.instance, s.age_clock, _ns(s.max_age_ms), _ns(s.max_future_ms)
+            expected_key, s.instance, s.age_clock, _ns(s.max_age_ms), _ns(s.max_future_ms),
+            keys, s.max_command_rate_hz,
         )
+        self._recover_window = _ns(s.recover_window_ms)
+        self._max_data_age = _ns(s.max_data_age_ms)
         self.rejected: Counter[str] = Counter()
         self.counters: Counter[str] = Counter()
         self.version = 0      # bumped on every change that deserves a status at once
@@ -98,6 +106,7 @@ class BrakeCore:
         self._last_rx: int | None = None
         self._last_seq = -1
         self._consecutive = 0
+        self._streak_start = now_ns    # receipt of the first command of the current streak
         self._trusted = False
         self._requested = 0.0
         self._held_level = 0.0
@@ -226,8 +235,8 @@ class BrakeCore:
             since_ns=self.since_ns, last_cmd_seq=self._last_seq,
             last_cmd_rx_ns=self._last_rx or 0, commanded_level_pct=self.commanded_level_pct,
             actuator_position_pct=self.position_pct, actuator_state=self.actuator_state,
-            actuator_connected=self._link_up, rejected=dict(self.rejected),
-            counters=dict(self.counters),
+            actuator_connected=self._link_up, rejected=saturated(self.rejected),
+            counters=saturated(self.counters),
         )
 
     # ---- levels -------------------------------------------------------------------
@@ -258,11 +267,19 @@ class BrakeCore:
         cmd = acc.cmd
         self.counters["commands"] += 1
         if acc.gap:
-            self.counters["seq_gaps"] += acc.gap
+            saturating_add(self.counters, "seq_gaps", acc.gap)
         if acc.restart:
             self.counters["stream_restarts"] += 1
-        contiguous = alive and acc.gap == 0
-        self._consecutive = self._consecutive + 1 if contiguous else 1
+        # evidence of a healthy stream (for arming): consecutive commands built from
+        # fresh radar data; a command from stale data ends the streak
+        if acc.data_age_ns > self._max_data_age:
+            self.counters["stale_data_commands"] += 1
+            self._consecutive = 0
+        elif alive and acc.gap == 0 and not acc.restart and self._consecutive > 0:
+            self._consecutive += 1
+        else:
+            self._consecutive = 1
+            self._streak_start = now
         self._last_rx = now
         self._last_seq = cmd.header.seq
         self._rx_in_failsafe = self._failsafe
@@ -313,6 +330,7 @@ class BrakeCore:
             self._enter_failsafe(now)
         fresh = self._last_rx is not None and now - self._last_rx < self._deadline
         if (not self._trusted and fresh and self._consecutive >= self.settings.recover_count
+                and now - self._streak_start >= self._recover_window
                 and not (self._failsafe and self._hold_blocks_exit(now))):
             self._trusted = True
             if self._failsafe:
@@ -356,7 +374,8 @@ class BrakeCore:
         if cmd_state is BrakeState.FAILSAFE:
             return f"{self._fs_why} (policy {s.policy.value})"
         if cmd_state is BrakeState.STANDBY:
-            return f"waiting for {s.recover_count} consecutive valid commands from {s.instance}"
+            return (f"waiting for {s.recover_count} consecutive valid commands from "
+                    f"{s.instance} over {s.recover_window_ms:g} ms")
         if cmd_state is BrakeState.BRAKING:
             return "minimum brake hold" if held else "brake requested"
         return f"following {s.instance}"

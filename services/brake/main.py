@@ -7,6 +7,7 @@ import msgspec
 
 from common import systemd
 from common.bus import Bus, BusError
+from common.command_auth import KeyFileError, load_keyring
 from common.config.brake import BrakeConfig
 from common.log import kv, setup_logging
 from common.service import (
@@ -42,13 +43,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.port:
         serial = msgspec.structs.replace(cfg.brake.serial, port=args.port)
         cfg = msgspec.structs.replace(cfg, brake=msgspec.structs.replace(cfg.brake, serial=serial))
+    try:
+        keys = load_keyring(cfg.brake.command_keys, cfg.brake.instance)
+    except KeyFileError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     if args.check:
         return config_checked("brake", args)
     log = setup_logging("brake", cfg.log.level.value)
     stop = stop_event_on_signals()
     # the timer thread waits at most ~1 ms for the GIL instead of the default 5 ms
     sys.setswitchinterval(0.001)
-    shell = BrakeShell(cfg, log, Watchdog())
+    shell = BrakeShell(cfg, log, Watchdog(), keys)
     shell.start()
     # Ready once the deadline timer and the actuator link run, before the bus: without a
     # router the brake still enforces its fail-safe, which is its service

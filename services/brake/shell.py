@@ -21,14 +21,16 @@ start already leads to FAILSAFE.
 import logging
 import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import zenoh
 
 from common import systemd
 from common.bus import Bus, TypedPublisher
 from common.clock import mono_ns, wall_ns
+from common.command_auth import CommandKey, load_keyring
 from common.config.brake import AgeClock, BrakeConfig
+from common.counters import saturated
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
@@ -73,8 +75,13 @@ def next_frame(frame: Command) -> Command:
 
 class BrakeShell:
     def __init__(self, cfg: BrakeConfig, log: logging.Logger,
-                 watchdog: Watchdog | None = None) -> None:
+                 watchdog: Watchdog | None = None,
+                 keys: Mapping[str, CommandKey] | None = None) -> None:
+        """`keys`: the command keys to accept; None: read `brake.command_keys`. Raises
+        KeyFileError when those files are missing, unreadable, or for another instance."""
         s = cfg.brake
+        if keys is None:
+            keys = load_keyring(s.command_keys, s.instance)
         self.watchdog = watchdog or Watchdog(env={})   # fed by the timer loop
         self.cfg = cfg
         self._log = log
@@ -83,7 +90,12 @@ class BrakeShell:
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
-                              mono_ns())
+                              mono_ns(), keys)
+        for key in keys.values():
+            if key.insecure_example:
+                log.warning(kv("insecure_example_key", key_id=key.key_id, path=key.path,
+                               note="published with the source: demo and simulator only; "
+                                    "make your own with `aeb keygen`"))
         self.link = SerialLink(s.serial, self._on_link_up, self._on_link_down, self._on_rx, log)
         self._lines = LineAhead()
         self._last_frame: Command | None = None   # the last line written
@@ -327,6 +339,6 @@ class BrakeShell:
             actuator_position_pct=v.actuator_position_pct, actuator_state=v.actuator_state,
             actuator_connected=v.actuator_connected, cmd_to_serial_us=self.cmd_to_serial_us,
             radar_to_serial_us=self.radar_to_serial_us, rejected=v.rejected,
-            counters={**v.counters, **self.errors}, state_since_mono_ns=v.since_ns,
+            counters=saturated({**v.counters, **self.errors}), state_since_mono_ns=v.since_ns,
             last_cmd_rx_mono_ns=v.last_cmd_rx_ns, command_state=v.command_state,
         )

@@ -15,6 +15,7 @@ import msgspec
 from common import systemd
 from common.bus import Bus, BusError
 from common.calibration import Calibration
+from common.command_auth import CommandSigner, KeyFileError, load_key
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError
 from common.log import kv, setup_logging
@@ -79,6 +80,24 @@ def main(argv: list[str] | None = None) -> int:
         for warning in cal.warnings():
             log.warning(kv("calibration_implausible", camera=name, file=cal.origin,
                            detail=warning))
+    signer = None
+    if s.command_key:
+        try:
+            key = load_key(s.command_key)
+        except KeyFileError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        if key.instance != s.instance:
+            print(f"error: {s.command_key}: key of instance {key.instance!r}, this is "
+                  f"{s.instance!r}", file=sys.stderr)
+            return 2
+        signer = CommandSigner(key)
+        if key.insecure_example:
+            log.warning(kv("insecure_example_key", key_id=key.key_id, path=key.path,
+                           note="published with the source: demo and simulator only"))
+    else:
+        log.warning(kv("commands_unsigned", instance=s.instance,
+                       note="no fusion.command_key: no brake follows these commands"))
     if args.check:
         return config_checked("fusion", args)
     stop = stop_event_on_signals()
@@ -91,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         rhythm = RadarRhythm()
         decoders = [FrameDecoder.for_policy(cal.width, cal.height, s.frames, log, name, rhythm)
                     for name, cal in cals.items()]
-        shell = FusionShell(bus, s, core, decoders, log, cals, rhythm)
+        shell = FusionShell(bus, s, core, decoders, log, cals, rhythm, signer)
         shell.start()
         apply_process(s.realtime, log)
         token = bus.declare_health("fusion", s.instance)

@@ -15,6 +15,7 @@ import zenoh
 from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
+from common.command_auth import CommandSigner
 from common.config.fusion import FusionSettings
 from common.counters import ReasonCounter
 from common.keys import CAMERA_INFO, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
@@ -39,12 +40,13 @@ class FusionShell:
     """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
     single camera). `calibrations`: what each camera's CameraInfo is checked against.
     `rhythm`: told every radar cycle's arrival (decoders with decode = before_radar
-    share it)."""
+    share it). `signer`: signs every BrakeCommand (None: published unsigned)."""
 
     def __init__(self, bus: Bus, settings: FusionSettings, core: FusionCore,
                  decoders: FrameDecoder | Sequence[FrameDecoder], log: logging.Logger,
                  calibrations: Calibration | Mapping[str, Calibration] | None = None,
-                 rhythm: RadarRhythm | None = None) -> None:
+                 rhythm: RadarRhythm | None = None,
+                 signer: CommandSigner | None = None) -> None:
         self.bus = bus
         self.s = settings
         self.core = core
@@ -53,6 +55,7 @@ class FusionShell:
             raise ValueError(f"{len(self.decoders)} decoders for {len(core.cameras)} cameras")
         self.camera_names = [c.name for c in core.cameras]
         self.rhythm = rhythm
+        self.signer = signer
         self.log = log
         self.counters = ReasonCounter()
         self._rl = RateLimitedLog(log)
@@ -137,7 +140,10 @@ class FusionShell:
             decided_ns = mono_ns()
             command = msgspec.structs.replace(
                 command, header=msgspec.structs.replace(command.header, pub_mono_ns=decided_ns))
-            self._cmd_pub.put(command)
+            if self.signer is None:
+                self._cmd_pub.put(command)
+            else:
+                self._cmd_pub.put_bytes(self.signer.sign(command))
             if decided is None:
                 targets = failed.targets
             else:

@@ -1,6 +1,6 @@
 """A stand-in fusion instance for the brake tests: publishes one BrakeCommand every
-`--period-ms` (BRAKE at `--level` when > 0, else NONE) until SIGTERM. The tests SIGKILL
-or SIGSTOP it to make the command stream stop.
+`--period-ms` (BRAKE at `--level` when > 0, else NONE), signed with `--key`, until
+SIGTERM. The tests SIGKILL or SIGSTOP it to make the command stream stop.
 
     python -m tests.brake.publisher --connect tcp/127.0.0.1:7447 --level 60
 """
@@ -10,6 +10,7 @@ import sys
 import time
 
 from common.bus import Bus
+from common.command_auth import CommandSigner, load_key
 from common.keys import FUSION_BRAKE_CMD
 from common.service import stop_event_on_signals
 from tests.brake.helpers import command
@@ -23,8 +24,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--vehicle", default="ego")
     parser.add_argument("--period-ms", type=float, default=20.0)
     parser.add_argument("--level", type=float, default=0.0)
+    parser.add_argument("--key", help="key file to sign with (default: unsigned)")
     args = parser.parse_args(argv)
     stop = stop_event_on_signals()
+    signer = CommandSigner(load_key(args.key)) if args.key else None
     period = args.period_ms / 1000
     with Bus.open(client_settings(args.connect), args.vehicle,
                   f"fusion/{args.instance}") as bus:
@@ -32,7 +35,11 @@ def main(argv: list[str] | None = None) -> int:
         seq = 0
         next_t = time.monotonic()
         while not stop.is_set():
-            pub.put(command(seq, args.level, instance=args.instance))
+            cmd = command(seq, args.level, instance=args.instance)
+            if signer is None:
+                pub.put(cmd)
+            else:
+                pub.put_bytes(signer.sign(cmd))
             seq += 1
             next_t += period
             now = time.monotonic()

@@ -11,9 +11,11 @@ from pathlib import Path
 from typing import Any
 
 from common.bus import Bus
+from common.command_auth import CommandSigner
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeState, BrakeStatus
 from services.brake.shell import TIMER_PERIOD_S
+from tests.brake.helpers import TEST_KEY, write_test_key
 from tests.support import (
     START_TIMEOUT_S,
     HealthWatch,
@@ -35,6 +37,8 @@ def toml_text(tables: dict[str, dict[str, Any]]) -> str:
             return "true" if v else "false"
         if isinstance(v, str):
             return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
         return repr(v)
 
     out = []
@@ -99,11 +103,14 @@ class BrakeRig:
     period_ms: float
 
     def publisher(self, level: float = 0.0, period_ms: float = 20.0,
-                  instance: str = "primary", name: str = "publisher") -> ServiceProcess:
+                  instance: str = "primary", name: str = "publisher",
+                  key: Path | None = None) -> ServiceProcess:
+        """A fusion-like process signing with `key` (default: the test key)."""
         return ServiceProcess(
             name, python_module("tests.brake.publisher", "--connect", self.endpoint,
                                 "--level", str(level), "--period-ms", str(period_ms),
-                                "--instance", instance),
+                                "--instance", instance,
+                                "--key", str(key or write_test_key(self.log_dir))),
             self.log_dir,
         )
 
@@ -126,6 +133,7 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
     [brake] fields; nested tables as `serial={...}`, `actuator={...}`."""
     nested = {k: brake.pop(k) for k in ("serial", "actuator") if k in brake}
     link = log_dir / "actuator"
+    brake.setdefault("command_keys", [str(write_test_key(log_dir))])
     tables: dict[str, dict[str, Any]] = {
         "brake": brake,
         "brake.serial": {"port": str(link), **nested.get("serial", {})},
@@ -173,6 +181,7 @@ class Stream:
 
     def __init__(self, bus: Bus, level: float = 0.0, period_ms: float = 20.0) -> None:
         self.pub = bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+        self.signer = CommandSigner(TEST_KEY)    # a new session, as a fusion start
         self.level = level
         self.period_s = period_ms / 1000
         self.seq = 0
@@ -199,12 +208,16 @@ class Stream:
             raise TimeoutError("stream thread did not run the injection")
         return result[0]
 
+    def put(self, msg: BrakeCommand) -> None:
+        """Publish `msg` signed in this stream's session."""
+        self.pub.put_bytes(self.signer.sign(msg))
+
     def _run(self) -> None:
         from tests.brake.helpers import command
 
         while not self._stop.is_set():
             msg = command(self.seq, self.level)
-            self.pub.put(msg)
+            self.put(msg)
             self.sent.append(msg)
             self.seq += 1
             with self._lock:

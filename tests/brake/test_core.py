@@ -5,10 +5,11 @@ import math
 
 import pytest
 
+from common.command_auth import CommandSigner
 from common.config.brake import BrakeConfig
 from common.config.loader import parse_config
 from common.keys import FUSION_BRAKE_CMD
-from common.messages import BrakeState, Decision, encode
+from common.messages import BrakeState, Decision
 from services.brake.core import BrakeCore, Outgoing
 from services.brake.protocol import (
     Ack,
@@ -20,7 +21,7 @@ from services.brake.protocol import (
     Nak,
     decode,
 )
-from tests.brake.helpers import command, payload
+from tests.brake.helpers import SIGNER, TEST_KEY, command, keyring, payload
 
 KEY = FUSION_BRAKE_CMD.key("ego", instance="primary")
 OTHER_KEY = FUSION_BRAKE_CMD.key("ego", instance="candidate")
@@ -34,13 +35,16 @@ class Rig:
     `auto_ack` is off) on a fake clock."""
 
     def __init__(self, auto_ack: bool = True, **brake: object) -> None:
+        # arming evidence over two of this rig's 20 ms periods, unless a test says
+        brake.setdefault("recover_window_ms", 40.0)
         self.settings = parse_config({"brake": brake}, BrakeConfig).brake
         self.t = T0
-        self.core = BrakeCore(self.settings, KEY, self.t)
+        self.core = BrakeCore(self.settings, KEY, self.t, keyring())
         self.lines: list[tuple[int, Command]] = []
         self.auto_ack = auto_ack
         self.position = 0.0
         self.seq = 0
+        self.signer = SIGNER
 
     @property
     def state(self) -> BrakeState:
@@ -89,8 +93,10 @@ class Rig:
              age_ms: float = 1.0, **kw: object) -> None:
         seq = self.seq if seq is None else seq
         self.seq = max(self.seq, seq + 1)
+        kw.setdefault("signer", self.signer)
         data = payload(seq, level, pub_mono_ns=self.t - round(age_ms * MS),
-                       stamp_ns=WALL0 + self.t - T0 - round(age_ms * MS), **kw)
+                       stamp_ns=WALL0 + self.t - T0 - round(age_ms * MS),
+                       **kw)  # type: ignore[arg-type]
         self.raw(data, key)
 
     def raw(self, data: bytes, key: str = KEY) -> None:
@@ -337,9 +343,24 @@ def test_a_restarted_publisher_is_followed_after_silence():
     rig.stream(20)
     rig.advance(200)
     rig.seq = 0                                      # fusion restarted: sequence from 0
+    rig.signer = CommandSigner(TEST_KEY, session=2)  # ... in a new session
     rig.stream(3)
     assert rig.state is BrakeState.ARMED
     assert rig.core.counters["stream_restarts"] == 1
+
+
+def test_a_rewound_or_frozen_sequence_of_the_same_session_never_restarts_the_stream():
+    rig = Rig().armed()
+    rig.stream(20)
+    last = rig.seq - 1
+    for _ in range(3):                               # silence, then the same seq again
+        rig.advance(250)
+        rig.send(0.0, seq=last)
+        rig.send(0.0, seq=0)
+    assert rig.state is BrakeState.FAILSAFE
+    assert rig.core.counters["stream_restarts"] == 0
+    assert rig.core.rejected["duplicate"] == 3 and rig.core.rejected["old_sequence"] == 3
+    assert rig.core.view().last_cmd_seq == last
 
 
 # ---- rejections ---------------------------------------------------------------------------
@@ -467,7 +488,7 @@ def test_status_version_moves_on_every_change():
 
 def test_a_command_never_writes_more_than_one_line():
     rig = Rig().armed()
-    out = rig.core.on_command(encode(command(rig.seq, pub_mono_ns=rig.t)), KEY, rig.t,
+    out = rig.core.on_command(SIGNER.sign(command(rig.seq, pub_mono_ns=rig.t)), KEY, rig.t,
                               WALL0 + rig.t - T0)
     assert isinstance(out, Outgoing) and out.cmd is not None and out.cmd.header.seq == rig.seq
 

@@ -12,7 +12,7 @@ import pytest
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeState, encode
 from services.brake.protocol import HostMode
-from tests.brake.helpers import command
+from tests.brake.helpers import command, write_test_key
 from tests.brake.rig import BrakeRig, Stream, brake_rig
 from tests.support import (
     HealthWatch,
@@ -76,7 +76,7 @@ def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
 
         def forged(next_seq: int) -> None:
             last = next_seq - 1
-            put = stream.pub.put
+            put = stream.put
             put(command(last, 100.0))                                    # duplicate
             put(command(last - 3, 100.0))                                # old sequence
             put(command(next_seq, 100.0,
@@ -194,7 +194,9 @@ def test_silence_from_the_start_is_failsafe_even_without_a_router(tmp_path: Path
     endpoint = f"tcp/127.0.0.1:{port}"
     link = tmp_path / "actuator"
     sim, pair = SimActuator.on_pty(link)
-    (tmp_path / "brake.toml").write_text(f'[brake.serial]\nport = "{link}"\n')
+    (tmp_path / "brake.toml").write_text(
+        f'[brake]\ncommand_keys = ["{write_test_key(tmp_path)}"]\n'
+        f'[brake.serial]\nport = "{link}"\n')
     proc = ServiceProcess("brake", python_module("services.brake", "--config",
                                                  str(tmp_path / "brake.toml"),
                                                  "--connect", endpoint), tmp_path)

@@ -10,6 +10,7 @@ from common.messages import BrakeState
 from services.brake.core import Outgoing
 from services.brake.protocol import SEQ_MODULO, Command, HostMode, decode, encode
 from services.brake.shell import BrakeShell, LineAhead, next_frame
+from tests.brake.helpers import keyring
 from tests.support import wait_for
 from tools.sim.actuator import SimActuator
 
@@ -20,7 +21,7 @@ def test_a_failing_timer_tick_is_counted_and_the_deadline_still_holds(
     sim, pair = SimActuator.on_pty(link)
     sim.start()
     cfg = BrakeConfig(brake=BrakeSettings(serial=SerialSettings(port=str(link))))
-    shell = BrakeShell(cfg, logging.getLogger("test_shell"))
+    shell = BrakeShell(cfg, logging.getLogger("test_shell"), keys=keyring())
     real_tick = shell.core.on_tick
     ticks: list[int] = []
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from common.config.fusion import FusionConfig
 from common.config.loader import relocated_text
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
 
 CALIBRATION = EXAMPLE_CALIBRATION
 FUSION_CONFIG = DEPLOY / "fusion.toml"
@@ -79,6 +79,7 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     brake.write_text(
         "# The brake service on the simulated actuator's pty (a SIMULATION of the actuator).\n"
         f'vehicle = "ego"\n{zenoh}\n[brake]\ninstance = "primary"\n'
+        f'command_keys = ["{EXAMPLE_KEYS / "primary.key"}"]   # INSECURE EXAMPLE KEY\n'
         + f'\n[brake.serial]\nport = "{actuator_port}"\n'
         + ("" if heartbeat_ms is None else
            f"\n[brake.actuator]\nheartbeat_ms = {heartbeat_ms}\nttl_ms = "
