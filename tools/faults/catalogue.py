@@ -397,8 +397,11 @@ class SerialUnplug(Fault):
         return Outcome(ok, detect, f"reconnected {replug:.0f} ms after the replug")
 
 
-def _forged_command(seq: int, level: float) -> BrakeCommand:
+def _forged_command(seq: int, level: float, signed: bool) -> BrakeCommand:
+    """A command of instance `primary`: unsigned, or with a made-up key id and MAC."""
     fields = msgspec.structs.asdict(example(BrakeCommand))
+    if not signed and "auth" in fields:
+        fields["auth"] = None
     now_w, now_m = wall_ns(), mono_ns()
     # source "intruder": the brake does not look at it; the harness's own eyes do
     fields.update(header=Header(seq=seq, source="intruder", stamp_ns=now_w, pub_mono_ns=now_m),
@@ -421,13 +424,13 @@ class Intruder(Fault):
         rejected0 = sum(last.msg.rejected.values()) if last else 0
         mark = obs.status.mark()
         t0 = mono_ns()
-        # a sequence far ahead of fusion's (would lock fusion out), a replayed real
-        # command, and one with the next sequence number
+        # a sequence far ahead of fusion's (would lock fusion out) and the next one,
+        # unsigned or with a forged MAC, and a real command recorded and replayed
         real = obs.commands.last()
         seqs = [2**62, (real.msg.header.seq + 1) if real else 1]
         for i in range(self.burst):
             seq = seqs[i % 2] + i
-            pub.put(_forged_command(seq, 100.0))
+            pub.put(_forged_command(seq, 100.0, signed=i % 4 < 2))
             if real is not None and i == 0:
                 pub.put_bytes(encode(real.msg))
             time.sleep(0.02)                   # a publisher's pace, not a flood

@@ -45,7 +45,7 @@ from common.keys import CAMERA_JPEG, EGO_MOTION, FUSION_BRAKE_CMD, RADAR_TRACKS
 from common.keys import REGISTRY as KEYS
 from common.messages import BrakeCommand, CompressedFrame, Decision, Header
 from common.messages.codec import DecodeError, decode, encode
-from common.resources import DEPLOY
+from common.resources import DEPLOY, EXAMPLE_KEYS
 from tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
 from tools.faults.samples import example
 
@@ -190,7 +190,7 @@ class _Consumers:
 
         cfg = BrakeConfig()
         self.brake_key = FUSION_BRAKE_CMD.key(VEHICLE, instance=cfg.brake.instance)
-        self.brake = BrakeCore(cfg.brake, self.brake_key, 0)
+        self.brake = BrakeCore(cfg.brake, self.brake_key, 0, example_keyring())
         self.ego = EgoMotionForwarder(EgoMotionSettings(max_age_s=1e9, min_interval_s=0.0),
                                       [0])
         fusion_cfg = load_config(DEPLOY / "fusion.toml", FusionConfig)
@@ -247,13 +247,44 @@ def key_seeds() -> dict[str, bytes]:
     return seeds
 
 
+def example_keyring() -> dict[str, Any]:
+    """The INSECURE example key of fusion `primary` (deploy/keys), as the sim stack uses."""
+    from common.command_auth import load_keyring
+    return load_keyring([str(EXAMPLE_KEYS / "primary.key")], "primary")
+
+
+_signer: list[Any] = []
+
+
+def sign(cmd: BrakeCommand) -> bytes:
+    """`cmd` encoded and signed as fusion `primary` would."""
+    from common.command_auth import CommandSigner
+    if not _signer:
+        _signer.append(CommandSigner(next(iter(example_keyring().values()))))
+    payload: bytes = _signer[0].sign(cmd)
+    return payload
+
+
 def brake_command_seed(seq: int, pub_mono_ns: int) -> bytes:
-    """A valid command of fusion `primary` (the brake's default instance)."""
+    """A valid, signed command of fusion `primary` (the brake's default instance)."""
     fields = msgspec.structs.asdict(example(BrakeCommand))
     fields.update(header=Header(seq=seq, source="fusion/primary", stamp_ns=pub_mono_ns,
                                 pub_mono_ns=pub_mono_ns),
-                  instance="primary", decision=Decision.NONE, brake_level_pct=0.0)
-    return encode(BrakeCommand(**fields))
+                  instance="primary", decision=Decision.NONE, brake_level_pct=0.0, auth=None)
+    return sign(BrakeCommand(**fields))
+
+
+def resigned(payload: bytes) -> bytes:
+    """A mutated command signed again when it still decodes (a fusion with a bug: the
+    brake's checks after the MAC), else as it is."""
+    try:
+        cmd = decode(payload, BrakeCommand)
+    except DecodeError:
+        return payload
+    try:
+        return sign(msgspec.structs.replace(cmd, auth=None))
+    except (ValueError, OverflowError, TypeError, msgspec.EncodeError):
+        return payload
 
 
 def fuzz_payloads(n: int, rng: random.Random, progress: Progress) -> list[Tally]:
@@ -285,6 +316,8 @@ def fuzz_payloads(n: int, rng: random.Random, progress: Progress) -> list[Tally]
                 # fresh: an old stamp would only ever be refused as too old
                 seed = brake_command_seed(i, consumers.now + 10_000_000 - 1_000_000)
             payload = mutate_msgpack(rng, seed) if rng.random() < 0.95 else seed
+            if name == FUSION_BRAKE_CMD.name and rng.random() < 0.5:
+                payload = resigned(payload)
             tally.inputs += 1
             try:
                 if handler is not None:
@@ -370,7 +403,8 @@ def fuzz_serial(n: int, rng: random.Random, progress: Progress) -> Tally:
 
     tally = Tally("serial lines -> brake line reader, protocol, core")
     cfg = BrakeConfig()
-    core = BrakeCore(cfg.brake, FUSION_BRAKE_CMD.key(VEHICLE, instance="primary"), 0)
+    core = BrakeCore(cfg.brake, FUSION_BRAKE_CMD.key(VEHICLE, instance="primary"), 0,
+                     example_keyring())
     core.on_link(True, 0)
     reader = LineReader()
     seeds = [encode_line(Ack(s, p, st)) for s in (0, 1, 9999) for p in (0.0, 55.5, 100.0)
@@ -457,8 +491,10 @@ def _start_objects(name: str, cfg: Any) -> None:
     """What a service builds from its config at start, before any I/O. Raises what
     the service turns into exit code 2 (ConfigError and the service's own)."""
     if name == "brake":
+        from common.command_auth import load_keyring
         from services.brake.core import BrakeCore
-        BrakeCore(cfg.brake, FUSION_BRAKE_CMD.key(VEHICLE, instance="primary"), 0)
+        keys = load_keyring(cfg.brake.command_keys, cfg.brake.instance)
+        BrakeCore(cfg.brake, FUSION_BRAKE_CMD.key(VEHICLE, instance="primary"), 0, keys)
     elif name == "radar":
         from services.radar.core import RadarCore
         from services.radar.ports import check_settings
@@ -471,6 +507,7 @@ def _start_objects(name: str, cfg: Any) -> None:
 
 
 def fuzz_configs(n: int, rng: random.Random, progress: Progress) -> Tally:
+    from common.command_auth import KeyFileError
     from common.config.loader import resolve_paths
     from services.fusion.verifiers import VerifierConfigError
     from services.radar.ports import ConfigurationError
@@ -491,7 +528,7 @@ def fuzz_configs(n: int, rng: random.Random, progress: Progress) -> Tally:
             cfg: Any = resolve_paths(parse_config(tree, cfg_type, name), path.parent)
             _start_objects(name, cfg)
             tally.accepted += 1
-        except (ConfigError, ConfigurationError, VerifierConfigError) as exc:
+        except (ConfigError, ConfigurationError, VerifierConfigError, KeyFileError) as exc:
             tally.rejected[f"{name}:{type(exc).__name__}"] += 1
         except Exception as exc:
             tally.crash(json.dumps(tree, default=repr)[:400], exc)

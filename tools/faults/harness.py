@@ -5,15 +5,16 @@ between injections (a killed process is restarted by the launcher)."""
 
 import random
 import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from common.config.brake import BrakeConfig
 from common.config.loader import load_config
-from common.messages import BrakeState
+from common.messages import BrakeState, VerifierStatus
 from common.net import free_port
 from services.brake.shell import TIMER_PERIOD_S
 from tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome, catalogue
@@ -23,7 +24,7 @@ from tools.launch.table import Launch
 from tools.sim.session import closed_loop
 
 LINE_MARGIN_MS = 10.0     # FAILSAFE decided -> its line read by the actuator (pty)
-STEADY_S = 1.0            # settled this long before the next injection
+STEADY_S = 0.5            # settled this long before the next injection
 
 
 @dataclass
@@ -67,9 +68,13 @@ def settled(ctx: Context, timeout_s: float, steady_s: float = STEADY_S) -> bool:
         except KeyError:
             running = False
         last = ctx.observer.status.last()
-        fresh = last is not None and time.monotonic_ns() - last.rx_ns < 300_000_000
-        if running and fresh and last is not None and last.msg.state is BrakeState.ARMED \
-                and sim.settled():
+        now = time.monotonic_ns()
+        fresh = last is not None and now - last.rx_ns < 300_000_000
+        targets = ctx.observer.targets.last()
+        camera_ok = targets is not None and now - targets.rx_ns < 300_000_000 \
+            and targets.msg.verifier_status is VerifierStatus.OK
+        if running and fresh and camera_ok and last is not None \
+                and last.msg.state is BrakeState.ARMED and sim.settled():
             since = time.monotonic() if since is None else since
             if time.monotonic() - since >= steady_s:
                 return True
@@ -77,6 +82,44 @@ def settled(ctx: Context, timeout_s: float, steady_s: float = STEADY_S) -> bool:
             since = None
         time.sleep(0.05)
     return False
+
+
+class Drive:
+    """The SIMULATED ego drives past cars parked beside its lane, over and over, while
+    faults are injected: the radar has objects in every cycle (a cycle can be cut in
+    its middle), the camera's picture changes (a frozen one can be told), and nothing is
+    in the ego's path (fusion says NONE, the brake stays armed)."""
+
+    RUN_S = 8.0
+
+    def __init__(self, sim: Any) -> None:
+        import msgspec
+
+        from tools.sim.scenario import find_scenario, load_scenario
+        base = load_scenario(find_scenario("no_threat_parked_cars_30kph"))
+        car = base.object[0]
+        self.scenario = msgspec.structs.replace(
+            base, name="faults_parked_cars_20kph", duration_s=120.0,
+            ego=msgspec.structs.replace(base.ego, speed_kph=20.0),
+            object=tuple(msgspec.structs.replace(car, x_m=20.0 + 12.0 * i)
+                         for i in range(12)))
+        self.sim = sim
+        self.runs = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="drive", daemon=True)
+
+    def start(self) -> "Drive":
+        self._thread.start()
+        return self
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self.sim.run(self.scenario, timeout_s=self.RUN_S)
+            self.runs += 1
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(self.RUN_S + 5.0)
 
 
 def _make_link(port: int) -> tuple[NetnsLink | RelayLink, str]:
@@ -113,6 +156,7 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
             gate = CanGate(loop.feed.sink)
             loop.feed.sink = gate
             observer = Observer(loop.bus, loop.actuator)
+            drive = Drive(loop.sim).start()
             ctx = Context(loop, observer, bounds_for(Path(out) / "run" / "brake.toml"), rng,
                           gate, link, "")
             if not settled(ctx, 60.0):
@@ -127,6 +171,7 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
                     _one(ctx, fault, records[fault.name], say, r, info)
                 info.rounds_done = r + 1
                 say(f"round {r + 1}/{rounds} done ({time.monotonic() - t_start:.0f} s)")
+            drive.stop()
     finally:
         link.remove()
         info.seconds = time.monotonic() - t_start
