@@ -14,7 +14,9 @@ from typing import Annotated, Any, TypeVar
 import msgspec
 
 _MARK = "aeb_config_path"
-ConfigPath = Annotated[str, msgspec.Meta(extra={_MARK: True})]
+# No path holds a NUL byte: refused as a bad field here, not as a ValueError from the OS
+# call that would meet it first
+ConfigPath = Annotated[str, msgspec.Meta(pattern="^[^\x00]*$", extra={_MARK: True})]
 
 S = TypeVar("S", bound=msgspec.Struct)
 

@@ -191,7 +191,8 @@ class _Consumers:
         cfg = BrakeConfig()
         self.brake_key = FUSION_BRAKE_CMD.key(VEHICLE, instance=cfg.brake.instance)
         self.brake = BrakeCore(cfg.brake, self.brake_key, 0, example_keyring())
-        self.ego = EgoMotionForwarder(EgoMotionSettings(max_age_s=1e9, min_interval_s=0.0),
+        self.ego = EgoMotionForwarder(EgoMotionSettings(forward=True, max_age_s=1e9,
+                                                        min_interval_s=0.0),
                                       [0])
         fusion_cfg = load_config(DEPLOY / "fusion.toml", FusionConfig)
         self.fusion, cals = build_core(fusion_cfg)

@@ -122,7 +122,9 @@ class Drive:
         self._thread.join(self.RUN_S + 5.0)
 
 
-def _make_link(port: int) -> tuple[NetnsLink | RelayLink, str]:
+def _make_link(port: int, kind: str) -> tuple[NetnsLink | RelayLink, str]:
+    if kind == "relay":
+        return RelayLink(port), "loopback relay (asked for)"
     ns = NetnsLink()
     problem = ns.make()
     if not problem:
@@ -132,16 +134,19 @@ def _make_link(port: int) -> tuple[NetnsLink | RelayLink, str]:
 
 def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | None = None,
         only: list[str] | None = None, seed: int = 19,
-        on_progress: Callable[[str], None] | None = None) -> tuple[list[Record], RunInfo]:
+        on_progress: Callable[[str], None] | None = None,
+        link_kind: str = "auto") -> tuple[list[Record], RunInfo]:
     """Start the stack, inject each fault `rounds` times (a round: each fault once, in
-    catalogue order), stop. `time_budget_s`: no new round starts after it."""
+    catalogue order), stop. `time_budget_s`: no new round starts after it. `only`:
+    faults whose name contains one of these. `link_kind`: "auto" (network namespaces,
+    else the loopback relay) or "relay"."""
     rng = random.Random(seed)
     faults = [f for f in catalogue() if only is None or any(o in f.name for o in only)]
     records = {f.name: Record(f.name, f.required) for f in faults}
     info = RunInfo(mode, rounds)
     port = free_port()
     local = f"tcp/127.0.0.1:{port}"
-    link, link_note = _make_link(port)
+    link, link_note = _make_link(port, link_kind)
     info.link = link_note or f"network namespace {getattr(link, 'ns', '')} + veth"
     extra_listen = (link.endpoint(port),) if isinstance(link, NetnsLink) else ()
 

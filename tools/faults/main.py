@@ -38,6 +38,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--time-budget-s", type=float,
                    help=f"start no new round after this long (soak: {SOAK_BUDGET_S} s)")
     p.add_argument("--only", help="comma-separated parts of fault names to run")
+    p.add_argument("--link", choices=["auto", "relay"], default="auto",
+                   help="the cut link: fusion in its own network namespace (auto, where "
+                        "it can be made; else) or behind a loopback TCP relay")
     p.add_argument("--seed", type=int, default=19)
     p.add_argument("--out", default="out/faults")
     add_log_level(p, "WARNING")
@@ -60,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
           f"and actuator; logs in {out / 'stack.log'}", flush=True)
     t0 = time.monotonic()
     try:
-        records, info = harness.run(out, rounds, mode, sys.stdout, budget, only, args.seed)
+        records, info = harness.run(out, rounds, mode, sys.stdout, budget, only, args.seed,
+                                    link_kind=args.link)
     except (StackStartError, ConfigError, BusError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
