@@ -104,7 +104,7 @@ def test_table_counts_injections_bounds_and_losses(tmp_path):
     assert table[0]["p50_ms"] == 201.5 and table[0]["max_ms"] == 300.0
     assert table[0]["lost"] == 1 and table[0]["recover_p50_s"] == 2.0
     text = markdown(table, info)
-    assert "| SIGKILL fusion | brake FAILSAFE | 4 | 2 | 201.5 | 300.0 |" in text
+    assert "| SIGKILL fusion | brake FAILSAFE | 4 | 2 | - | 201.5 | 300.0 |" in text
     assert "skipped: no netns" in text and "late" in text
     md, js, png = write(tmp_path, [rec, skipped], info)
     assert md.is_file() and js.is_file() and png is not None and png.stat().st_size > 1000

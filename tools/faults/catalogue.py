@@ -67,6 +67,7 @@ class Outcome:
     response_ms: float | None
     detail: str = ""
     lost: int = 0          # e.g. actuator lines braking for an intruder, dead processes
+    bound_ms: float | None = None
 
 
 @dataclass
@@ -137,7 +138,8 @@ def failsafe_response(ctx: Context, inject: Callable[[], None], settle_s: float 
         early_ms = (t0 - fs.msg.state_since_mono_ns) / MS
         return Outcome(False, response, f"already FAILSAFE {early_ms:.0f} ms before the fault")
     return Outcome(response <= ctx.bounds.failsafe_ms, response,
-                   f"from {source}; line {(lines[0] - t0) / MS:.0f} ms after the injection")
+                   f"from {source}; line {(lines[0] - t0) / MS:.0f} ms after the injection",
+                   bound_ms=ctx.bounds.failsafe_ms)
 
 
 def _wait_failsafe_line(ctx: Context, t0: int, timeout_s: float) -> list[int]:
@@ -170,7 +172,7 @@ def camera_unavailable_response(ctx: Context, inject: Callable[[], None], bound_
     detail = got.msg.unavailable_reason[:80]
     if failsafe:
         return Outcome(False, response, f"brake went FAILSAFE; {detail}", lost=1)
-    return Outcome(response <= bound_ms, response, detail)
+    return Outcome(response <= bound_ms, response, detail, bound_ms=bound_ms)
 
 
 # -- the faults ------------------------------------------------------------------------------
@@ -227,7 +229,8 @@ class KillOrStop(Fault):
         if not lines:
             return Outcome(False, None, "no line before the trip")
         response = (trip.rx_ns - lines[-1]) / MS
-        return Outcome(response <= ctx.bounds.watchdog_ms, response, "from the last line")
+        return Outcome(response <= ctx.bounds.watchdog_ms, response, "from the last line",
+                       bound_ms=ctx.bounds.watchdog_ms)
 
 
 def _router_pid(ctx: Context) -> int:
@@ -394,7 +397,8 @@ class SerialUnplug(Fault):
             return Outcome(False, detect, "not reconnected", lost=1)
         replug = (back.rx_ns - t1) / MS
         ok = detect <= ctx.bounds.unplug_ms and replug <= ctx.bounds.replug_ms
-        return Outcome(ok, detect, f"reconnected {replug:.0f} ms after the replug")
+        return Outcome(ok, detect, f"reconnected {replug:.0f} ms after the replug",
+                       bound_ms=ctx.bounds.unplug_ms)
 
 
 def _forged_command(seq: int, level: float, signed: bool) -> BrakeCommand:
@@ -442,7 +446,8 @@ class Intruder(Fault):
         followed = bool(statuses) and bool(fusion_cmds) and statuses[-1].msg.last_cmd_seq \
             in fusion_cmds[-5:]
         response = None if counted is None else (counted.rx_ns - t0) / MS
-        ok = counted is not None and not braked and followed
+        ok = counted is not None and not braked and followed \
+            and response is not None and response <= ctx.bounds.refuse_ms
         why = []
         if braked:
             why.append(f"brake moved: {len(braked)} lines up to "
@@ -451,7 +456,8 @@ class Intruder(Fault):
             why.append("no rejection counted")
         if not followed:
             why.append("fusion not in command")
-        return Outcome(ok, response, "; ".join(why) or "refused", lost=len(braked))
+        return Outcome(ok, response, "; ".join(why) or "refused", lost=len(braked),
+                       bound_ms=ctx.bounds.refuse_ms)
 
 
 FLOOD_KEYS: tuple[tuple[KeySpec[Any], dict[str, str]], ...] = (
@@ -496,7 +502,8 @@ class GarbageFlood(Fault):
             return Outcome(False, None, f"{', '.join(dead)} died; {detail}", lost=len(dead))
         if ok_status is None:
             return Outcome(False, None, f"brake not armed after the flood; {detail}")
-        return Outcome(True, (ok_status.rx_ns - t_end) / MS, detail, lost=0)
+        return Outcome(True, (ok_status.rx_ns - t_end) / MS, detail,
+                       bound_ms=ctx.bounds.recover_s * 1000)
 
 
 def _alive(ctx: Context, service: str, pid: int) -> bool:

@@ -24,7 +24,7 @@ from tools.launch.table import Launch
 from tools.sim.session import closed_loop
 
 LINE_MARGIN_MS = 10.0     # FAILSAFE decided -> its line read by the actuator (pty)
-STEADY_S = 0.5            # settled this long before the next injection
+STEADY_S = 0.3            # settled this long before the next injection
 
 
 @dataclass

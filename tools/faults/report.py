@@ -23,9 +23,12 @@ def rows(records: list[Record]) -> list[dict[str, Any]]:
         p50, mx = _stats(times)
         r50, rmax = _stats(rec.recover_s)
         failures = [o.detail for o in rec.outcomes if not o.ok]
+        bounds = [o.bound_ms for o in rec.outcomes if o.bound_ms is not None]
         out.append({
             "fault": rec.fault, "required": rec.required, "injections": len(rec.outcomes),
-            "within_bound": sum(o.ok for o in rec.outcomes), "p50_ms": p50, "max_ms": mx,
+            "within_bound": sum(o.ok for o in rec.outcomes),
+            "no_response": sum(o.response_ms is None for o in rec.outcomes),
+            "bound_ms": max(bounds) if bounds else None, "p50_ms": p50, "max_ms": mx,
             "recover_p50_s": r50, "recover_max_s": rmax,
             "lost": sum(o.lost for o in rec.outcomes), "unrecovered": rec.unrecovered,
             "skipped": rec.skipped, "first_failures": failures[:3],
@@ -46,16 +49,17 @@ def markdown(table: list[dict[str, Any]], info: RunInfo) -> str:
     lines = [f"mode {info.mode}: {info.rounds_done} of {info.rounds_planned} rounds in "
              f"{info.seconds / 60:.1f} min; link cut: {info.link}"
              + (f"; stopped early: {info.stopped_early}" if info.stopped_early else ""), "",
-             "| fault | required response | injections | within bound | p50 ms | max ms "
-             "| recovery p50 / max s | lost |",
-             "|---|---|---:|---:|---:|---:|---:|---:|"]
+             "| fault | required response | injections | within bound | bound ms | p50 ms "
+             "| max ms | recovery p50 / max s | lost |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in table:
         if r["skipped"]:
             lines.append(f"| {r['fault']} | {r['required']} | skipped: {r['skipped']} "
-                         "| | | | | |")
+                         "| | | | | | |")
             continue
         lines.append(f"| {r['fault']} | {r['required']} | {r['injections']} | "
-                     f"{r['within_bound']} | {_ms(r['p50_ms'])} | {_ms(r['max_ms'])} | "
+                     f"{r['within_bound']} | {_ms(r['bound_ms'])} | {_ms(r['p50_ms'])} | "
+                     f"{_ms(r['max_ms'])} | "
                      f"{_s(r['recover_p50_s'])} / {_s(r['recover_max_s'])} | {r['lost']} |")
     failed = [r for r in table if r["first_failures"]]
     if failed:
@@ -84,11 +88,18 @@ def plot(table: list[dict[str, Any]], records: list[Record], path: Path) -> Path
         ax.scatter(bad, [i] * len(bad), s=14, color="tab:red", marker="x")
         if times:
             ax.plot([r["p50_ms"]], [i], marker="|", markersize=14, color="black")
+        if r["bound_ms"] is not None:
+            ax.plot([r["bound_ms"]], [i], marker="|", markersize=10, color="tab:red")
+        if r["no_response"]:
+            ax.annotate(f"{r['no_response']} without response", (0.02, i),
+                        xycoords=("axes fraction", "data"), va="center", fontsize=7,
+                        color="tab:red")
     ax.set_yticks(range(len(shown)))
     ax.set_yticklabels([f"{r['fault']} ({r['within_bound']}/{r['injections']})"
                         for r, _ in shown], fontsize=8)
     ax.set_xscale("log")
-    ax.set_xlabel("response time, ms (log; green within bound, red x outside, | median)")
+    ax.set_xlabel("response time, ms (log): green within bound, red x outside; "
+                  "black | median, red | bound")
     ax.invert_yaxis()
     ax.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()

@@ -38,7 +38,7 @@ def write_table(folder: Path, endpoint: str, configs: StackConfigs,
                 candidate: bool = False, realtime_priority: int = 0,
                 restart: str = "never", router_listen: tuple[str, ...] = ()) -> Path:
     """The session's process table (the same launcher as `aeb up`). `restart` is the
-    table's restart mode; a process restarted is started again after 0.2 s whatever
+    table's restart mode; a process restarted is started again after 0.05 s whatever
     its history (a fault-injection run kills processes on purpose, many times).
     `router_listen`: more endpoints for the router (e.g. on a network namespace's
     link)."""
@@ -49,7 +49,7 @@ def write_table(folder: Path, endpoint: str, configs: StackConfigs,
         "[router]", f"listen = {listen}", f"realtime_priority = {realtime_priority}", "",
         "[zenoh]", f'connect = ["{endpoint}"]', "",
         "[restart]", f'mode = "{restart}"',
-        "backoff = { initial_s = 0.2, max_s = 0.2, factor = 1.0 }", "",
+        "backoff = { initial_s = 0.05, max_s = 0.05, factor = 1.0 }", "",
     ]
     for name in SERVICES:
         lines += ["[[service]]", f'name = "{name}"', f'aeb = "{name}"',
