@@ -41,6 +41,7 @@ from benchmarks.figures import Figure
 from benchmarks.processes import stop_processes
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
+from common.command_auth import CommandSigner, new_key, write_key
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, Decision, Header, VerifierStatus
@@ -50,6 +51,7 @@ from tools.sim.actuator import SimActuator
 from tools.sim.pty_pair import PtyPair
 
 WARMUP = 20
+KEY = new_key("primary")   # this run's command key, given to the brake in its config
 BASELINE_INSTANCE = "bench"
 
 
@@ -91,7 +93,9 @@ def _command(seq: int, instance: str, level: float) -> BrakeCommand:
 
 def _publish(bus: Bus, count: int, rate_hz: float) -> tuple[list[int], list[int]]:
     """`count` commands to the brake (5 NONE to arm, then BRAKE 50%) and, half a period
-    later each time, the same to the baseline relay; their publish times."""
+    later each time, the same to the baseline relay, each signed as fusion signs them;
+    their publish times."""
+    signer = CommandSigner(KEY)
     brake = bus.publisher(FUSION_BRAKE_CMD, instance="primary")
     relay = bus.publisher(FUSION_BRAKE_CMD, instance=BASELINE_INSTANCE)
     brake_ns: list[int] = []
@@ -103,7 +107,7 @@ def _publish(bus: Bus, count: int, rate_hz: float) -> tuple[list[int], list[int]
         for pub, instance, times in ((brake, "primary", brake_ns),
                                      (relay, BASELINE_INSTANCE, relay_ns)):
             msg = _command(seq, instance, level)
-            pub.put(msg)
+            pub.put_bytes(signer.sign(msg))
             times.append(msg.header.pub_mono_ns)
             next_t += half
             time.sleep(max(0.0, next_t - time.monotonic()))
@@ -204,7 +208,9 @@ def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
                                        endpoint], stdout=log, stderr=log))
         _wait(lambda: _port_open(port), 60, "router")
         config = work / "brake.toml"
-        config.write_text(f'[brake]\nmax_age_ms = 1000.0\n[brake.serial]\n'
+        write_key(work / "primary.key", KEY)
+        config.write_text(f'[brake]\nmax_age_ms = 1000.0\n'
+                          f'command_keys = ["{work / "primary.key"}"]\n[brake.serial]\n'
                           f'port = "{work / "actuator"}"\n')
         sim.start()
         procs.append(subprocess.Popen([sys.executable, "-m", "services.brake", "--config",

@@ -30,6 +30,7 @@ def command(
     pub_mono_ns: int | None = None,
     stamp_ns: int | None = None,
     decision: Decision | None = None,
+    radar_last_frame_mono_ns: int | None = None,
 ) -> BrakeCommand:
     """BRAKE at `level` when level > 0, else NONE; stamps default to now (the radar's
     last frame: the publish time)."""
@@ -43,7 +44,8 @@ def command(
         instance=instance, decision=decision, brake_level_pct=level,
         verifier_status=VerifierStatus.OK, held=False, track_id=7 if level else -1,
         range_m=8.0 if level else None, ttc_s=1.2 if level else None, reason="test",
-        radar_seq=seq, radar_last_frame_mono_ns=now_mono,
+        radar_seq=seq, radar_last_frame_mono_ns=(
+            now_mono if radar_last_frame_mono_ns is None else radar_last_frame_mono_ns),
     )
 
 

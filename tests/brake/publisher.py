@@ -9,6 +9,8 @@ import argparse
 import sys
 import time
 
+import msgspec
+
 from common.bus import Bus
 from common.command_auth import CommandSigner, load_key
 from common.keys import FUSION_BRAKE_CMD
@@ -25,12 +27,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--period-ms", type=float, default=20.0)
     parser.add_argument("--level", type=float, default=0.0)
     parser.add_argument("--key", help="key file to sign with (default: unsigned)")
+    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 (a TLS client)")
     args = parser.parse_args(argv)
     stop = stop_event_on_signals()
     signer = CommandSigner(load_key(args.key)) if args.key else None
     period = args.period_ms / 1000
-    with Bus.open(client_settings(args.connect), args.vehicle,
-                  f"fusion/{args.instance}") as bus:
+    settings = msgspec.structs.replace(client_settings(args.connect),
+                                       config_file=args.zenoh_config)
+    with Bus.open(settings, args.vehicle, f"fusion/{args.instance}") as bus:
         pub = bus.publisher(FUSION_BRAKE_CMD, instance=args.instance)
         seq = 0
         next_t = time.monotonic()

@@ -12,15 +12,16 @@ from typing import Any
 
 from common.bus import Bus
 from common.command_auth import CommandSigner
+from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeState, BrakeStatus
 from services.brake.shell import TIMER_PERIOD_S
 from tests.brake.helpers import TEST_KEY, write_test_key
+from tests.brake.secure import SecureProfile, secure_router
 from tests.support import (
     START_TIMEOUT_S,
     HealthWatch,
     ServiceProcess,
-    open_bus,
     python_module,
     router_process,
 )
@@ -101,16 +102,20 @@ class BrakeRig:
     commands: Log          # what the primary publishers put on the bus, as seen here
     deadline_ms: float
     period_ms: float
+    secure: SecureProfile | None = None
 
     def publisher(self, level: float = 0.0, period_ms: float = 20.0,
                   instance: str = "primary", name: str = "publisher",
                   key: Path | None = None) -> ServiceProcess:
-        """A fusion-like process signing with `key` (default: the test key)."""
+        """A fusion-like process signing with `key` (default: the test key); on the
+        secure profile with the certificate of `instance`."""
+        zenoh = [] if self.secure is None else ["--zenoh-config", str(self.secure.client(
+            "fusion" if instance == "primary" else f"fusion-{instance}"))]
         return ServiceProcess(
             name, python_module("tests.brake.publisher", "--connect", self.endpoint,
                                 "--level", str(level), "--period-ms", str(period_ms),
                                 "--instance", instance,
-                                "--key", str(key or write_test_key(self.log_dir))),
+                                "--key", str(key or write_test_key(self.log_dir)), *zenoh),
             self.log_dir,
         )
 
@@ -128,9 +133,11 @@ class BrakeRig:
 
 
 @contextmanager
-def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
+def brake_rig(log_dir: Path, secure: bool = False, **brake: Any) -> Iterator[BrakeRig]:
     """Everything started and the brake service's liveliness token seen. `brake` holds
-    [brake] fields; nested tables as `serial={...}`, `actuator={...}`."""
+    [brake] fields; nested tables as `serial={...}`, `actuator={...}`. `secure`: the
+    secure profile (TLS router with access control; this process observes as the
+    monitor, which may read everything and write nothing)."""
     nested = {k: brake.pop(k) for k in ("serial", "actuator") if k in brake}
     link = log_dir / "actuator"
     brake.setdefault("command_keys", [str(write_test_key(log_dir))])
@@ -141,16 +148,22 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
     if "actuator" in nested:
         tables["brake.actuator"] = nested["actuator"]
     config = log_dir / "brake.toml"
-    config.write_text(toml_text(tables))
     with ExitStack() as stack:
-        endpoint = stack.enter_context(router_process(log_dir))
+        profile = stack.enter_context(secure_router(log_dir)) if secure else None
+        endpoint = profile.endpoint if profile else stack.enter_context(
+            router_process(log_dir))
+        if profile is not None:
+            tables = {"zenoh": {"config_file": str(profile.client("brake"))}, **tables}
+        config.write_text(toml_text(tables))
         sim, pair = SimActuator.on_pty(link, seed=7)
         stack.callback(pair.remove)
         stack.enter_context(sim)
         proc = ServiceProcess("brake", python_module("services.brake", "--config", str(config),
                                                       "--connect", endpoint), log_dir)
         stack.callback(proc.stop)
-        bus = stack.enter_context(open_bus(endpoint, source="test"))
+        bus = stack.enter_context(Bus.open(ZenohSettings(
+            mode=ZenohMode.CLIENT, connect=(endpoint,),
+            config_file=str(profile.client("monitor")) if profile else ""), "ego", "test"))
         status, commands = Log(), Log()
         bus.subscribe(BRAKE_STATUS, status)
         bus.subscribe(FUSION_BRAKE_CMD, commands, instance="primary")
@@ -161,7 +174,7 @@ def brake_rig(log_dir: Path, **brake: Any) -> Iterator[BrakeRig]:
             raise AssertionError(f"brake did not start:\n{proc.output()}") from None
         yield BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
                        float(brake.get("deadline_ms", 200.0)),
-                       TIMER_PERIOD_S * 1000)
+                       TIMER_PERIOD_S * 1000, profile)
         assert proc.alive(), f"brake process died:\n{proc.output()}"
 
 

@@ -77,19 +77,24 @@ def test_secure_profile_mutual_tls_and_access_control(tmp_path):
 
     sessions: list[zenoh.Session] = []
     try:
-        fusion, brake, monitor, radar = (client(n) for n in ("fusion", "brake", "monitor",
-                                                             "radar"))
-        sessions += [fusion, brake, monitor, radar]
+        fusion = client("fusion", "fusion-primary")
+        candidate = client("fusion-candidate")
+        brake, monitor, radar = (client(n) for n in ("brake", "monitor", "radar"))
+        sessions += [fusion, candidate, brake, monitor, radar]
         got: list[tuple[str, str]] = []
         lock = threading.Lock()
+
+        payloads_seen: dict[str, set[bytes]] = {"primary": set()}
 
         def collect(who: str):
             def cb(sample: zenoh.Sample) -> None:
                 with lock:
                     got.append((who, str(sample.key_expr)))
+                    if who == "brake" and str(sample.key_expr).endswith("primary/brake_cmd"):
+                        payloads_seen["primary"].add(sample.payload.to_bytes())
             return cb
 
-        brake.declare_subscriber("aeb/ego/fusion/primary/brake_cmd", collect("brake"))
+        brake.declare_subscriber("aeb/ego/fusion/*/brake_cmd", collect("brake"))
         # The brake may not subscribe to what is not its input: denied, receives nothing.
         brake.declare_subscriber("aeb/ego/radar/front/tracks", collect("brake"))
         monitor.declare_subscriber("aeb/ego/**", collect("monitor"))
@@ -104,9 +109,14 @@ def test_secure_profile_mutual_tls_and_access_control(tmp_path):
             fusion.put("aeb/ego/fusion/primary/brake_cmd", b"cmd")
             fusion.put("aeb/ego/brake/status", b"forged")          # not fusion's key
             fusion.put("aeb/ego/radar/front/status", b"forged")    # not fusion's key
+            fusion.put("aeb/ego/camera/front/jpeg", b"forged")     # only the camera's
             radar.put("aeb/ego/radar/front/tracks", b"tracks")     # the radar's own key
+            # the candidate holds a fusion certificate, but not the primary's
+            candidate.put("aeb/ego/fusion/primary/brake_cmd", b"forged")
+            candidate.put("aeb/ego/fusion/candidate/brake_cmd", b"shadow")  # its own
             with lock:
                 return {("brake", "aeb/ego/fusion/primary/brake_cmd"),
+                        ("brake", "aeb/ego/fusion/candidate/brake_cmd"),
                         ("monitor", "aeb/ego/radar/front/tracks")} <= set(got)
 
         wait_for(flowed, 60, 0.1, "brake command through the secure router")
@@ -115,8 +125,13 @@ def test_secure_profile_mutual_tls_and_access_control(tmp_path):
         with lock:
             # The brake's radar subscription was refused: the tracks reach the monitor only.
             assert set(got) == {("brake", "aeb/ego/fusion/primary/brake_cmd"),
+                                ("brake", "aeb/ego/fusion/candidate/brake_cmd"),
                                 ("monitor", "aeb/ego/fusion/primary/brake_cmd"),
+                                ("monitor", "aeb/ego/fusion/candidate/brake_cmd"),
                                 ("monitor", "aeb/ego/radar/front/tracks")}
+            # what reached the brake on the primary's key came from the primary only
+            primary = [k for w, k in got if w == "brake" and k.endswith("primary/brake_cmd")]
+            assert primary and payloads_seen["primary"] == {b"cmd"}
         assert set(alive) == {"aeb/ego/health/fusion/primary"}
         del tokens
     finally:

@@ -6,9 +6,10 @@
 #
 # OUTDIR receives ca.pem (the root every process trusts), ca-key.pem (keep it off the
 # vehicle), router.pem/router-key.pem (names: 127.0.0.1, localhost and every
-# ROUTER_ADDRESS, e.g. 192.168.10.1) and <svc>.pem/<svc>-key.pem for radar, camera,
-# fusion, brake and monitor (common name = the service name, which the router's access
-# control matches). Keys are EC P-256, certificates valid 825 days.
+# ROUTER_ADDRESS, e.g. 192.168.10.1) and <name>.pem/<name>-key.pem for radar, camera,
+# fusion-primary, fusion-candidate, brake and monitor (common name = that name, which the
+# router's access control matches; one per fusion instance). Keys are EC P-256,
+# certificates valid 825 days. Another fusion instance: add its name to the list below.
 set -eu
 out=${1:?usage: make-certs.sh OUTDIR [ROUTER_ADDRESS ...]}
 shift
@@ -41,8 +42,9 @@ for addr in "$@"; do
   esac
 done
 leaf router "$sans" "serverAuth,clientAuth"
-for svc in radar camera fusion brake monitor; do
+for svc in radar camera fusion-primary fusion-candidate brake monitor; do
   leaf "$svc" "DNS:$svc" "clientAuth"
 done
 chmod 600 ./*-key.pem
-echo "certificates in $(pwd): ca.pem router.pem radar.pem camera.pem fusion.pem brake.pem monitor.pem"
+echo "certificates in $(pwd): ca.pem router.pem radar.pem camera.pem fusion-primary.pem" \
+  "fusion-candidate.pem brake.pem monitor.pem"
