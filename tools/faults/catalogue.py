@@ -42,11 +42,8 @@ from common.keys import (
     KeySpec,
 )
 from common.messages import (
-    BrakeCommand,
     BrakeState,
     CompressedFrame,
-    Decision,
-    Header,
     VerifierStatus,
 )
 from common.messages.codec import DecodeError, decode, encode
@@ -401,52 +398,35 @@ class SerialUnplug(Fault):
                        bound_ms=ctx.bounds.unplug_ms)
 
 
-def _forged_command(seq: int, level: float, signed: bool) -> BrakeCommand:
-    """A command of instance `primary`: unsigned, or with a made-up key id and MAC."""
-    fields = msgspec.structs.asdict(example(BrakeCommand))
-    if not signed and "auth" in fields:
-        fields["auth"] = None
-    now_w, now_m = wall_ns(), mono_ns()
-    # source "intruder": the brake does not look at it; the harness's own eyes do
-    fields.update(header=Header(seq=seq, source="intruder", stamp_ns=now_w, pub_mono_ns=now_m),
-                  instance="primary", decision=Decision.BRAKE if level > 0 else Decision.NONE,
-                  brake_level_pct=level)
-    return BrakeCommand(**fields)
-
-
 class Intruder(Fault):
+    """The SIMULATED attacker of tools/sim/intruder.py on the harness's session."""
+
     name = "intruder publishes commands"
     required = "refused and counted, brake unmoved, fusion still in command"
+    ATTACKS = ("ahead", "jump", "forged", "replay", "flood")
 
-    def __init__(self, burst: int = 10) -> None:
-        self.burst = burst
+    def __init__(self, flood_s: float = 0.2) -> None:
+        self.flood_s = flood_s
 
     def inject(self, ctx: Context) -> Outcome:
+        from tools.sim.intruder import run as attack
         obs = ctx.observer
-        pub = ctx.publisher(FUSION_BRAKE_CMD, instance="primary")
         last = obs.status.last()
         rejected0 = sum(last.msg.rejected.values()) if last else 0
         mark = obs.status.mark()
-        t0 = mono_ns()
-        # a sequence far ahead of fusion's (would lock fusion out) and the next one,
-        # unsigned or with a forged MAC, and a real command recorded and replayed
-        real = obs.commands.last()
-        seqs = [2**62, (real.msg.header.seq + 1) if real else 1]
-        for i in range(self.burst):
-            seq = seqs[i % 2] + i
-            pub.put(_forged_command(seq, 100.0, signed=i % 4 < 2))
-            if real is not None and i == 0:
-                pub.put_bytes(encode(real.msg))
-            time.sleep(0.02)                   # a publisher's pace, not a flood
+        started: list[int] = []     # the first attack's time (after its recording)
+        sent = attack(ctx.loop.bus, "primary", self.ATTACKS, record_s=0.2,
+                      replay_delay_s=0.15, flood_s=self.flood_s, flood_hz=500.0,
+                      progress=lambda what: started.append(mono_ns()))
+        t0 = started[0] if started else mono_ns()
         counted = obs.status.wait(lambda s: sum(s.rejected.values()) > rejected0, mark, 2.0)
-        time.sleep(0.5)                        # fusion's commands must flow meanwhile
+        t_end = mono_ns()
+        # fusion's own commands must be what the brake follows once the attack is over
+        followed = obs.status.wait(lambda s: s.last_cmd_seq in _fusion_seqs(obs, t_end),
+                                   obs.status.mark(), 1.0)
         braked = [r for r in ctx.loop.actuator.commands_since(t0) if r.cmd.level_pct > 0]
-        statuses = obs.status.since(mark)
-        fusion_cmds = [c.msg.header.seq for c in obs.commands.since(0) if c.rx_ns >= t0]
-        followed = bool(statuses) and bool(fusion_cmds) and statuses[-1].msg.last_cmd_seq \
-            in fusion_cmds[-5:]
         response = None if counted is None else (counted.rx_ns - t0) / MS
-        ok = counted is not None and not braked and followed \
+        ok = counted is not None and not braked and followed is not None \
             and response is not None and response <= ctx.bounds.refuse_ms
         why = []
         if braked:
@@ -454,10 +434,16 @@ class Intruder(Fault):
                        f"{max(r.cmd.level_pct for r in braked)} %")
         if counted is None:
             why.append("no rejection counted")
-        if not followed:
+        if followed is None:
             why.append("fusion not in command")
-        return Outcome(ok, response, "; ".join(why) or "refused", lost=len(braked),
-                       bound_ms=ctx.bounds.refuse_ms)
+        total = sum(sent.values())
+        return Outcome(ok, response, "; ".join(why) or f"{total} commands refused",
+                       lost=len(braked), bound_ms=ctx.bounds.refuse_ms)
+
+
+def _fusion_seqs(obs: Observer, since_ns: int) -> set[int]:
+    return {c.msg.header.seq for c in obs.commands.since(max(0, obs.commands.mark() - 50))
+            if c.rx_ns >= since_ns}
 
 
 FLOOD_KEYS: tuple[tuple[KeySpec[Any], dict[str, str]], ...] = (

@@ -600,7 +600,11 @@ def main(argv: list[str] | None = None) -> int:
             last[0] = now
             print(f"  {target}: {done:,} / {total:,}", flush=True)
 
-    tallies = run(args.scale, args.seed, list(_iter_targets(args.targets)), progress)
+    try:
+        tallies = run(args.scale, args.seed, list(_iter_targets(args.targets)), progress)
+    except KeyboardInterrupt:
+        print("interrupted: no table written", file=sys.stderr)
+        return 130
     table = markdown(tallies)
     print("\n" + table)
     for t in tallies:

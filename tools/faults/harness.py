@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from common.command_auth import load_keyring
 from common.config.brake import BrakeConfig
 from common.config.loader import load_config
 from common.messages import BrakeState, VerifierStatus
@@ -135,11 +136,14 @@ def _make_link(port: int, kind: str) -> tuple[NetnsLink | RelayLink, str]:
 def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | None = None,
         only: list[str] | None = None, seed: int = 19,
         on_progress: Callable[[str], None] | None = None,
-        link_kind: str = "auto") -> tuple[list[Record], RunInfo]:
+        link_kind: str = "auto",
+        stop: threading.Event | None = None) -> tuple[list[Record], RunInfo]:
     """Start the stack, inject each fault `rounds` times (a round: each fault once, in
     catalogue order), stop. `time_budget_s`: no new round starts after it. `only`:
     faults whose name contains one of these. `link_kind`: "auto" (network namespaces,
-    else the loopback relay) or "relay"."""
+    else the loopback relay) or "relay". `stop` set: no new injection starts, the stack
+    is stopped and what was measured is returned."""
+    stop = stop or threading.Event()
     rng = random.Random(seed)
     faults = [f for f in catalogue() if only is None or any(o in f.name for o in only)]
     records = {f.name: Record(f.name, f.required) for f in faults}
@@ -160,7 +164,9 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
                          router_listen=extra_listen, adapt=adapt) as loop:
             gate = CanGate(loop.feed.sink)
             loop.feed.sink = gate
-            observer = Observer(loop.bus, loop.actuator)
+            brake_cfg = load_config(Path(out) / "run" / "brake.toml", BrakeConfig).brake
+            keys = load_keyring(brake_cfg.command_keys, brake_cfg.instance)
+            observer = Observer(loop.bus, loop.actuator, keys)
             drive = Drive(loop.sim).start()
             ctx = Context(loop, observer, bounds_for(Path(out) / "run" / "brake.toml"), rng,
                           gate, link, "")
@@ -173,7 +179,12 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
                                           f"after {r} rounds")
                     break
                 for fault in faults:
+                    if stop.is_set():
+                        break
                     _one(ctx, fault, records[fault.name], say, r, info)
+                if stop.is_set():
+                    info.stopped_early = f"stopped by a signal in round {r + 1}"
+                    break
                 info.rounds_done = r + 1
                 say(f"round {r + 1}/{rounds} done ({time.monotonic() - t_start:.0f} s)")
             drive.stop()

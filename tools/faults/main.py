@@ -14,6 +14,7 @@ could not start.
 """
 
 import argparse
+import logging
 import sys
 import time
 from pathlib import Path
@@ -21,6 +22,7 @@ from pathlib import Path
 from common.bus import BusError
 from common.config.loader import ConfigError
 from common.log import add_log_level, setup_logging
+from common.service import stop_event_on_signals
 from tools.faults import harness, report
 from tools.sim.session import StackStartError
 
@@ -54,6 +56,8 @@ def main(argv: list[str] | None = None) -> int:
         return fuzz.main(args_in[1:])
     args = parse_args(args_in)
     setup_logging("faults", args.log_level)
+    # the harness's own session sees the garbage it floods: its decode warnings are noise
+    logging.getLogger("bus").setLevel(logging.ERROR)
     rounds = args.rounds or (SOAK_ROUNDS if args.soak else 1)
     budget = args.time_budget_s or (SOAK_BUDGET_S if args.soak else None)
     mode = "soak" if args.soak else ("quick" if rounds == 1 else f"{rounds} rounds")
@@ -62,9 +66,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"aeb faults ({mode}): the real stack on a SIMULATED vehicle, radar link, camera "
           f"and actuator; logs in {out / 'stack.log'}", flush=True)
     t0 = time.monotonic()
+    # SIGINT / SIGTERM: the current injection ends, the stack stops, the table is written
+    # (no watchdog: the stack's teardown waits for its processes)
+    stop = stop_event_on_signals(grace_s=None)
     try:
         records, info = harness.run(out, rounds, mode, sys.stdout, budget, only, args.seed,
-                                    link_kind=args.link)
+                                    link_kind=args.link, stop=stop)
     except (StackStartError, ConfigError, BusError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -4,12 +4,13 @@ time on this host's monotonic clock) and the simulated actuator's events."""
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from common.bus import Bus
 from common.clock import mono_ns
+from common.command_auth import CommandKey, mac_problem
 from common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
 from common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
 from common.messages.codec import DecodeError, decode
@@ -73,10 +74,11 @@ class Stream(Generic[T]):
 
 class Observer:
     """Subscribes on the harness's own bus session. Status and targets that do not
-    come from the stack's own processes (the harness's floods) are not recorded."""
+    come from the stack's own processes (the harness's floods) are not recorded, nor
+    commands that do not authenticate with `keys` (fusion's command keys)."""
 
-    def __init__(self, bus: Bus, actuator: Any, brake_source: str = "brake/main",
-                 fusion_instance: str = "primary") -> None:
+    def __init__(self, bus: Bus, actuator: Any, keys: Mapping[str, CommandKey],
+                 brake_source: str = "brake/main", fusion_instance: str = "primary") -> None:
         cond = threading.Condition()
         self.status: Stream[BrakeStatus] = Stream(cond)
         self.targets: Stream[VerifiedTargets] = Stream(cond)
@@ -85,6 +87,7 @@ class Observer:
         self.frame_payload: bytes | None = None
         self._brake_source = brake_source
         self._fusion_source = f"fusion/{fusion_instance}"
+        self._keys = keys
         self._subs = [
             bus.subscribe_raw(BRAKE_STATUS, self._on_status),
             bus.subscribe_raw(FUSION_TARGETS, self._on_targets, instance=fusion_instance),
@@ -119,7 +122,7 @@ class Observer:
             msg = decode(payload, BrakeCommand)
         except DecodeError:
             return
-        if msg.header.source != self._fusion_source:
+        if msg.header.source != self._fusion_source or mac_problem(payload, msg, self._keys):
             self.forged_seen += 1
             return
         self.commands.add(Seen(rx_ns, msg))
