@@ -108,3 +108,21 @@ def test_table_counts_injections_bounds_and_losses(tmp_path):
     assert "skipped: no netns" in text and "late" in text
     md, js, png = write(tmp_path, [rec, skipped], info)
     assert md.is_file() and js.is_file() and png is not None and png.stat().st_size > 1000
+
+
+def test_tables_of_two_runs_combine_into_one(tmp_path):
+    from tools.faults.report import combine
+    a, b = Record("SIGKILL radar", "FAILSAFE"), Record("frozen camera", "unavailable")
+    a.outcomes, a.recover_s = [Outcome(True, 200.0, bound_ms=260.0)] * 3, [1.0] * 3
+    b.skipped = "not in this run"
+    write(tmp_path / "one", [a, b], RunInfo("soak", 3, 3, 60.0, "netns"))
+    a2, b2 = Record("SIGKILL radar", "FAILSAFE"), Record("frozen camera", "unavailable")
+    a2.skipped = "not in this run"
+    b2.outcomes = [Outcome(True, 900.0, bound_ms=2000.0), Outcome(False, None, "none")]
+    write(tmp_path / "two", [a2, b2], RunInfo("soak", 2, 2, 30.0, "netns"))
+    records, info = combine([tmp_path / "one" / "faults.json", tmp_path / "two" / "faults.json"])
+    by = {r.fault: r for r in records}
+    assert len(by["SIGKILL radar"].outcomes) == 3 and not by["SIGKILL radar"].skipped
+    assert [o.ok for o in by["frozen camera"].outcomes] == [True, False]
+    assert info.seconds == 90.0 and len(info.runs) == 2
+    assert "2 runs" in markdown(rows(records), info)

@@ -47,6 +47,7 @@ class RunInfo:
     link: str = ""
     stopped_early: str = ""
     unexpected_exits: list[str] = field(default_factory=list)
+    runs: list[dict[str, Any]] = field(default_factory=list)   # of a combined table
 
 
 def bounds_for(brake_toml: Path) -> Bounds:
@@ -137,15 +138,17 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
         only: list[str] | None = None, seed: int = 19,
         on_progress: Callable[[str], None] | None = None,
         link_kind: str = "auto",
-        stop: threading.Event | None = None) -> tuple[list[Record], RunInfo]:
+        stop: threading.Event | None = None,
+        skip: list[str] | None = None) -> tuple[list[Record], RunInfo]:
     """Start the stack, inject each fault `rounds` times (a round: each fault once, in
     catalogue order), stop. `time_budget_s`: no new round starts after it. `only`:
-    faults whose name contains one of these. `link_kind`: "auto" (network namespaces,
-    else the loopback relay) or "relay". `stop` set: no new injection starts, the stack
-    is stopped and what was measured is returned."""
+    faults whose name contains one of these, `skip`: not those. `link_kind`: "auto"
+    (network namespaces, else the loopback relay) or "relay". `stop` set: no new
+    injection starts, the stack is stopped and what was measured is returned."""
     stop = stop or threading.Event()
     rng = random.Random(seed)
-    faults = [f for f in catalogue() if only is None or any(o in f.name for o in only)]
+    faults = [f for f in catalogue() if (only is None or any(o in f.name for o in only))
+              and not any(k in f.name for k in skip or [])]
     records = {f.name: Record(f.name, f.required) for f in faults}
     info = RunInfo(mode, rounds)
     port = free_port()

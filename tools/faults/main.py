@@ -40,6 +40,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--time-budget-s", type=float,
                    help=f"start no new round after this long (soak: {SOAK_BUDGET_S} s)")
     p.add_argument("--only", help="comma-separated parts of fault names to run")
+    p.add_argument("--skip", help="comma-separated parts of fault names not to run")
+    p.add_argument("--combine", nargs="+", metavar="FAULTS_JSON",
+                   help="no run: one table from the faults.json of several runs (e.g. "
+                        "two groups of faults run one after the other) into --out")
     p.add_argument("--link", choices=["auto", "relay"], default="auto",
                    help="the cut link: fusion in its own network namespace (auto, where "
                         "it can be made; else) or behind a loopback TCP relay")
@@ -62,7 +66,13 @@ def main(argv: list[str] | None = None) -> int:
     budget = args.time_budget_s or (SOAK_BUDGET_S if args.soak else None)
     mode = "soak" if args.soak else ("quick" if rounds == 1 else f"{rounds} rounds")
     out = Path(args.out)
+    if args.combine:
+        records, info = report.combine([Path(p) for p in args.combine])
+        md, js, png = report.write(out, records, info)
+        print(md.read_text())
+        return 0
     only = [o.strip() for o in args.only.split(",")] if args.only else None
+    skip = [o.strip() for o in args.skip.split(",")] if args.skip else None
     print(f"aeb faults ({mode}): the real stack on a SIMULATED vehicle, radar link, camera "
           f"and actuator; logs in {out / 'stack.log'}", flush=True)
     t0 = time.monotonic()
@@ -71,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals(grace_s=None)
     try:
         records, info = harness.run(out, rounds, mode, sys.stdout, budget, only, args.seed,
-                                    link_kind=args.link, stop=stop)
+                                    link_kind=args.link, stop=stop, skip=skip)
     except (StackStartError, ConfigError, BusError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -7,6 +7,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
+from tools.faults.catalogue import Outcome
 from tools.faults.harness import Record, RunInfo
 
 
@@ -46,8 +47,12 @@ def _s(v: float | None) -> str:
 
 
 def markdown(table: list[dict[str, Any]], info: RunInfo) -> str:
-    lines = [f"mode {info.mode}: {info.rounds_done} of {info.rounds_planned} rounds in "
-             f"{info.seconds / 60:.1f} min; link cut: {info.link}"
+    runs = "; ".join(f"{r['mode']}: {r['rounds_done']} rounds in {r['seconds'] / 60:.1f} min"
+                     for r in info.runs)
+    head = (f"{len(info.runs)} runs ({runs})" if info.runs else
+            f"mode {info.mode}: {info.rounds_done} of {info.rounds_planned} rounds in "
+            f"{info.seconds / 60:.1f} min")
+    lines = [f"{head}; link cut: {info.link}"
              + (f"; stopped early: {info.stopped_early}" if info.stopped_early else ""), "",
              "| fault | required response | injections | within bound | bound ms | p50 ms "
              "| max ms | recovery p50 / max s | lost |",
@@ -122,10 +127,49 @@ def write(out: Path, records: list[Record], info: RunInfo) -> tuple[Path, Path, 
         "machine": {"node": platform.node(), "cpus": _cpus(), "python": platform.python_version(),
                     "kernel": platform.release()},
         "faults": table,
-        "responses_ms": {rec.fault: [o.response_ms for o in rec.outcomes] for rec in records},
+        "runs": info.runs or [_run_dict(info)],
+        "outcomes": {rec.fault: {"required": rec.required, "skipped": rec.skipped,
+                                 "unrecovered": rec.unrecovered, "recover_s": rec.recover_s,
+                                 "list": [[o.ok, o.response_ms, o.lost, o.bound_ms,
+                                           o.detail[:120]] for o in rec.outcomes]}
+                     for rec in records},
     }, indent=1))
     png = plot(table, records, out / "faults.png")
     return md, js, png
+
+
+def _run_dict(info: RunInfo) -> dict[str, Any]:
+    return {"mode": info.mode, "rounds_done": info.rounds_done, "seconds": info.seconds,
+            "stopped_early": info.stopped_early, "link": info.link}
+
+
+def combine(paths: list[Path]) -> tuple[list[Record], RunInfo]:
+    """The records of several runs' faults.json as one table (a fault run in several
+    runs has all their injections). Raises OSError, ValueError (not a faults.json)."""
+    records: dict[str, Record] = {}
+    info = RunInfo("combined", 0)
+    for path in paths:
+        data = json.loads(path.read_text())
+        for name, o in data["outcomes"].items():
+            rec = records.setdefault(name, Record(name, o["required"]))
+            if not o["list"]:
+                if not rec.outcomes:
+                    rec.skipped = rec.skipped or o["skipped"]
+                continue
+            rec.skipped = ""
+            rec.outcomes += [Outcome(ok, resp, detail, lost, bound)
+                             for ok, resp, lost, bound, detail in o["list"]]
+            rec.recover_s += o["recover_s"]
+            rec.unrecovered += o["unrecovered"]
+        info.runs += data.get("runs", [])
+        info.rounds_planned += data["rounds_planned"]
+        info.rounds_done = max(info.rounds_done, data["rounds_done"])
+        info.seconds += data["seconds"]
+        info.unexpected_exits += data["unexpected_exits"]
+        info.link = info.link or data["link"]
+        if data["stopped_early"]:
+            info.stopped_early += f"{path.parent.name}: {data['stopped_early']} "
+    return list(records.values()), info
 
 
 def _cpus() -> int:
