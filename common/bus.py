@@ -21,7 +21,7 @@ from common.clock import mono_ns
 from common.config.base import ZenohMode, ZenohSettings
 from common.counters import ReasonCounter
 from common.keys import HEALTH, Congestion, KeySpec, Priority
-from common.log import RateLimitedLog
+from common.log import RateLimitedLog, kv
 from common.messages import DecodeError, decode, encode
 from common.messages.schema import zenoh_encoding
 
@@ -31,6 +31,9 @@ _log = logging.getLogger("bus")
 # a client retries its router from 100 ms, doubling up to this: a router that comes up
 # late is joined within a second
 CONNECT_RETRY_MAX_MS = 1000
+# a wait for the router is logged after this long, then again at this interval
+WAIT_LOG_FIRST_S = 0.5
+WAIT_LOG_INTERVAL_S = 5.0
 
 _PRIORITY = {
     Priority.REAL_TIME: zenoh.Priority.REAL_TIME,
@@ -83,7 +86,11 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
             }
         values.update(settings.overrides)
         for key, value in values.items():
-            conf.insert_json5(key, json.dumps(value))
+            try:
+                conf.insert_json5(key, json.dumps(value))
+            except zenoh.ZError as exc:
+                raise BusError(f"invalid zenoh configuration: {key} = {value!r}: "
+                               f"{exc}") from exc
     except (zenoh.ZError, TypeError, ValueError) as exc:
         # ZError: a key, value or file zenoh refuses; TypeError/ValueError: an override
         # that is not JSON
@@ -152,8 +159,68 @@ class Bus:
 
     @classmethod
     def open(cls, settings: ZenohSettings, vehicle: str, source: str) -> "Bus":
-        """Open a session from settings. Raises BusError."""
+        """Open a session from settings (blocks until a router answers). Raises BusError."""
         return cls(open_session(settings), vehicle, source)
+
+    @classmethod
+    def open_until_stopped(cls, settings: ZenohSettings, vehicle: str, source: str,
+                           stop: threading.Event,
+                           log: logging.Logger | None = None) -> "Bus | None":
+        """Open a session while `stop` can still end the wait: None once `stop` is set
+        before a router answered (nothing was done yet: the caller exits cleanly).
+
+        `zenoh.open` blocks until a router is reachable and a signal handler only runs
+        once it returns, so the session is opened on a helper thread while this thread
+        waits on `stop`. The wait is logged at once with the endpoints, then every
+        `WAIT_LOG_INTERVAL_S` while Zenoh keeps retrying. Raises BusError.
+        """
+        log = log or _log
+        result: list[Bus | BaseException] = []
+        done = threading.Event()
+        abandoned = threading.Event()
+        handover = threading.Lock()
+
+        def opener() -> None:
+            try:
+                bus: Bus | BaseException = cls.open(settings, vehicle, source)
+            except BaseException as exc:  # handed to the waiting thread
+                bus = exc
+            with handover:
+                if isinstance(bus, Bus) and abandoned.is_set():
+                    bus.close()  # nobody will take it
+                result.append(bus)
+                done.set()
+
+        threading.Thread(target=opener, name="bus-open", daemon=True).start()
+        endpoints = ",".join(settings.connect or settings.listen) or "(config file)"
+        started = mono_ns()
+        if not done.wait(WAIT_LOG_FIRST_S):
+            log.warning(kv("waiting_for_router", endpoints=endpoints, mode=settings.mode.value,
+                           retry_max_ms=CONNECT_RETRY_MAX_MS))
+        next_log = started + int((WAIT_LOG_FIRST_S + WAIT_LOG_INTERVAL_S) * 1e9)
+        while not done.wait(0.05):
+            if stop.is_set():
+                with handover:
+                    if done.is_set():
+                        break
+                    abandoned.set()
+                log.info(kv("stopped_waiting_for_router", endpoints=endpoints,
+                            waited_s=round((mono_ns() - started) / 1e9, 1)))
+                return None
+            if mono_ns() >= next_log:
+                next_log += int(WAIT_LOG_INTERVAL_S * 1e9)
+                log.warning(kv("still_waiting_for_router", endpoints=endpoints,
+                               waited_s=round((mono_ns() - started) / 1e9, 1)))
+        outcome = result[0]
+        if isinstance(outcome, BaseException):
+            raise outcome
+        if stop.is_set():
+            outcome.close()
+            return None
+        if mono_ns() - started > int(WAIT_LOG_FIRST_S * 1e9):
+            log.info(kv("router_reached", endpoints=endpoints,
+                        waited_s=round((mono_ns() - started) / 1e9, 1)))
+        return outcome
 
     def __enter__(self) -> "Bus":
         return self

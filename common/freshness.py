@@ -22,7 +22,8 @@ class InputHealth:
 
 class Freshness:
     """One input. `alive` iff the newest sample is at most `max_age_s` old. `on_rate` iff
-    alive and the rate measured over `window_s` is within `tolerance` (fraction) of nominal.
+    alive and the rate measured over `window_s` is within `tolerance` (fraction) of nominal
+    (with `rate_is_minimum`: not below nominal by more than that, however far above).
     """
 
     def __init__(
@@ -32,6 +33,7 @@ class Freshness:
         nominal_rate_hz: float | None = None,
         tolerance: float = 0.3,
         window_s: float = 2.0,
+        rate_is_minimum: bool = False,
     ) -> None:
         if max_age_s <= 0:
             raise ValueError(f"{name}: max_age_s must be positive")
@@ -39,6 +41,7 @@ class Freshness:
         self.max_age_ns = int(max_age_s * 1e9)
         self.nominal_rate_hz = nominal_rate_hz
         self.tolerance = tolerance
+        self.rate_is_minimum = rate_is_minimum
         self.window_ns = int(window_s * 1e9)
         self._arrivals: deque[int] = deque()
         self.count = 0
@@ -47,6 +50,7 @@ class Freshness:
     def from_spec(cls, spec: KeySpec[Any], name: str | None = None, **kw: Any) -> "Freshness":
         if spec.max_age_s is None:
             raise ValueError(f"key {spec.name!r} has no max age")
+        kw.setdefault("rate_is_minimum", spec.rate_is_minimum)
         return cls(name or spec.name, spec.max_age_s, spec.rate_hz, **kw)
 
     def observe(self, now_ns: int) -> None:
@@ -85,9 +89,9 @@ class Freshness:
         if self.nominal_rate_hz is None:
             on_rate = alive
         else:
-            on_rate = alive and abs(rate - self.nominal_rate_hz) <= (
-                self.tolerance * self.nominal_rate_hz
-            )
+            below = self.nominal_rate_hz - rate
+            off = below if self.rate_is_minimum else abs(below)
+            on_rate = alive and off <= self.tolerance * self.nominal_rate_hz
         return InputHealth(self.name, alive, on_rate, self.age_s(now_ns), rate,
                            self.nominal_rate_hz)
 

@@ -60,8 +60,10 @@ class KeySpec(Generic[T]):
     """One key of the bus.
 
     `pattern` is relative to ``aeb/<vehicle>/`` and names its parameters in braces.
-    `rate_hz` is the nominal publish rate (None: on change or on request); `max_age_s` is
-    how old the newest sample may be before a consumer calls the input stale.
+    `rate_hz` is the nominal publish rate (None: on change or on request); with
+    `rate_is_minimum` it is a lower bound ("at least"; the publisher adds samples on
+    events). `max_age_s` is how old the newest sample may be before a consumer calls the
+    input stale.
     """
 
     name: str
@@ -70,6 +72,7 @@ class KeySpec(Generic[T]):
     rate_hz: float | None
     max_age_s: float | None
     qos: QoS
+    rate_is_minimum: bool = False
 
     @property
     def params(self) -> tuple[str, ...]:
@@ -115,6 +118,7 @@ RADAR_TRACKS: KeySpec[RadarTracks] = KeySpec(
 RADAR_STATUS: KeySpec[RadarStatus] = KeySpec(
     "radar_status", "radar/{sensor}/status", RadarStatus,
     rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.BLOCK),
+    rate_is_minimum=True,      # 1 Hz and on every change
 )
 CAMERA_JPEG: KeySpec[CompressedFrame] = KeySpec(
     "camera_jpeg", "camera/{camera}/jpeg", CompressedFrame,
@@ -137,6 +141,7 @@ FUSION_BRAKE_CMD: KeySpec[BrakeCommand] = KeySpec(
 BRAKE_STATUS: KeySpec[BrakeStatus] = KeySpec(
     "brake_status", "brake/status", BrakeStatus,
     rate_hz=10.0, max_age_s=0.3, qos=QoS(Priority.INTERACTIVE_HIGH, Congestion.BLOCK),
+    rate_is_minimum=True,      # at least 10 Hz, also on every command (13.3 Hz)
 )
 EGO_MOTION: KeySpec[EgoMotion] = KeySpec(
     "ego_motion", "vehicle/motion", EgoMotion,

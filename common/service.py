@@ -4,11 +4,13 @@ logging set-up, and a stop event wired to SIGINT/SIGTERM."""
 import argparse
 import os
 import signal
+import sys
 import threading
 from typing import TypeVar
 
 import msgspec
 
+from common.bus import BusError, zenoh_config
 from common.config.base import ServiceConfig
 from common.config.loader import load_config_or_exit
 from common.log import add_log_level
@@ -32,12 +34,22 @@ def service_argparser(name: str, description: str) -> argparse.ArgumentParser:
 
 
 def load_service_config(args: argparse.Namespace, config_type: type[C]) -> C:
-    """The validated config with command-line overrides applied; exits 2 when invalid."""
+    """The validated config with command-line overrides applied, its Zenoh settings
+    built into a Zenoh config as the bus will (file, keys, overrides); prints and exits 2
+    when invalid, so that `--check` rejects what a start would."""
     cfg = load_config_or_exit(args.config, config_type)
     if args.connect:
-        cfg = msgspec.structs.replace(
-            cfg, zenoh=msgspec.structs.replace(cfg.zenoh, connect=tuple(args.connect))
-        )
+        try:
+            zenoh_settings = msgspec.structs.replace(cfg.zenoh, connect=tuple(args.connect))
+        except ValueError as exc:   # a malformed endpoint
+            print(f"error: --connect: {exc}", file=sys.stderr)
+            raise SystemExit(2) from exc
+        cfg = msgspec.structs.replace(cfg, zenoh=zenoh_settings)
+    try:
+        zenoh_config(cfg.zenoh)
+    except BusError as exc:
+        print(f"error: {args.config or '<defaults>'}: zenoh: {exc}", file=sys.stderr)
+        raise SystemExit(2) from exc
     if args.vehicle:
         cfg = msgspec.structs.replace(cfg, vehicle=args.vehicle)
     if args.log_level:

@@ -12,7 +12,11 @@ from common.config.realtime import RealtimeSettings
 from common.keys import FUSION_BRAKE_CMD
 from common.messages.brake import FailsafePolicy
 
-_Ms = Annotated[float, msgspec.Meta(gt=0)]
+# Timing settings stay below a minute: longer ones are typos, and timers convert them to
+# integer nanoseconds
+MAX_MS = 60_000.0
+_Ms = Annotated[float, msgspec.Meta(gt=0, le=MAX_MS)]
+_MsOrZero = Annotated[float, msgspec.Meta(ge=0, le=MAX_MS)]
 _Pct = Annotated[float, msgspec.Meta(ge=0, le=100)]
 
 
@@ -50,19 +54,24 @@ class ActuatorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     def __post_init__(self) -> None:
         if self.ttl_ms < 2 * self.heartbeat_ms:
             raise ValueError("ttl_ms must be at least two heartbeats (2 * heartbeat_ms)")
+        if self.ack_timeout_ms > self.ttl_ms:
+            # the actuator would release on its own watchdog before a missing ack is
+            # noticed as a FAULT
+            raise ValueError(f"ack_timeout_ms ({self.ack_timeout_ms:g}) must not be longer "
+                             f"than the actuator's own timeout ttl_ms ({self.ttl_ms})")
 
 
 class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     instance: str = "primary"          # the one fusion instance whose commands count
     deadline_ms: _Ms = 200.0           # no valid command for this long: FAILSAFE
     recover_count: Annotated[int, msgspec.Meta(ge=1)] = 3   # consecutive commands to arm
-    min_brake_hold_ms: Annotated[float, msgspec.Meta(ge=0)] = 1000.0
+    min_brake_hold_ms: _MsOrZero = 1000.0
     policy: FailsafePolicy = FailsafePolicy.HOLD
-    failsafe_hold_s: Annotated[float, msgspec.Meta(gt=0)] = 5.0       # policy `hold`
+    failsafe_hold_s: Annotated[float, msgspec.Meta(gt=0, le=3600)] = 5.0  # policy `hold`
     failsafe_stop_level_pct: _Pct = 30.0                              # policy `stop`
     age_clock: AgeClock = AgeClock.MONOTONIC
     max_age_ms: _Ms = 100.0
-    max_future_ms: Annotated[float, msgspec.Meta(ge=0)] = 5.0
+    max_future_ms: _MsOrZero = 5.0
     # Key files (common/command_auth.py) of `instance`, by key id: only commands with a
     # valid MAC of one of them are followed. Two during a key rotation. Required.
     command_keys: tuple[ConfigPath, ...] = ()
@@ -85,6 +94,11 @@ class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     def __post_init__(self) -> None:
         if not math.isfinite(self.failsafe_hold_s):
             raise ValueError("failsafe_hold_s must be finite")
+        if self.max_age_ms > self.deadline_ms:
+            # a command the brake still accepts as fresh would already have missed the
+            # deadline
+            raise ValueError(f"max_age_ms ({self.max_age_ms:g}) must not be longer than "
+                             f"deadline_ms ({self.deadline_ms:g})")
 
 
 class BrakeConfig(ServiceConfig, frozen=True, forbid_unknown_fields=True):

@@ -56,7 +56,7 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     camera: str = _DEFAULT_CAMERA
     # |frame capture - radar cycle| allowed; farther frames make the verifier unavailable.
-    max_skew_s: Positive = 0.1
+    max_skew_s: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.1
     # True: the frame nearest the radar cycle, with each track predicted (constant
     # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
     align: bool = True

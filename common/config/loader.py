@@ -1,6 +1,7 @@
 """Load a TOML file into a validated config type; fail fast naming the field. Paths in the
 file are resolved against its folder (common/config/paths.py)."""
 
+import math
 import sys
 import tomllib
 from pathlib import Path
@@ -21,9 +22,46 @@ def parse_config(data: dict[str, Any], config_type: type[T], origin: str = "<con
     """Validate a mapping as `config_type` (paths stay as given). Raises ConfigError naming
     the offending field."""
     try:
-        return msgspec.convert(data, config_type, strict=True)
+        cfg = msgspec.convert(data, config_type, strict=True)
     except msgspec.ValidationError as exc:
         raise ConfigError(f"{origin}: invalid configuration: {exc}") from exc
+    bad = first_unusable_number(cfg)
+    if bad is not None:
+        raise ConfigError(f"{origin}: invalid configuration: {bad[0]} is {bad[1]!r}: "
+                          f"every number in a configuration must be finite and at most "
+                          f"{MAX_MAGNITUDE:g} in magnitude")
+    return cfg
+
+
+# No setting needs more (a timeout of 1e9 s is 31 years); beyond, seconds in nanoseconds
+# overflow float arithmetic and threading timeouts raise OverflowError.
+MAX_MAGNITUDE = 1e9
+
+
+def first_unusable_number(value: Any, where: str = "$") -> tuple[str, float] | None:
+    """The path (``$.brake.deadline_ms``) and value of the first NaN, infinite or larger
+    than `MAX_MAGNITUDE` float at any depth of a config (struct fields, tables, arrays),
+    or None.
+
+    No setting means "unlimited" by infinity: an `inf` or `nan` that passed a range check
+    (``inf > 0``) would otherwise reach arithmetic that raises (``round(inf)``) or timers
+    that never fire."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) and abs(value) <= MAX_MAGNITUDE else (where, value)
+    if isinstance(value, msgspec.Struct):
+        items: list[tuple[str, Any]] = [(f"{where}.{f}", getattr(value, f))
+                                        for f in value.__struct_fields__]
+    elif isinstance(value, dict):
+        items = [(f"{where}.{k}", v) for k, v in value.items()]
+    elif isinstance(value, (tuple, list)):
+        items = [(f"{where}[{i}]", v) for i, v in enumerate(value)]
+    else:
+        return None
+    for path, item in items:
+        found = first_unusable_number(item, path)
+        if found is not None:
+            return found
+    return None
 
 
 def load_config(path: str | Path, config_type: type[T]) -> T:

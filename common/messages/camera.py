@@ -6,13 +6,18 @@ from common.messages.header import Header
 
 
 class CompressedFrame(msgspec.Struct, frozen=True):
-    """One JPEG frame. `header.stamp_ns` is the capture time (wall clock)."""
+    """One JPEG frame. `header.stamp_ns` is the capture time (wall clock).
+
+    `crc32` is zlib.crc32 of `jpeg`, set by the camera: a JPEG with a flipped bit often
+    still decodes, into wrong pixels, so every decoder checks it first
+    (common.imaging). None (a publisher that does not set it): not checked."""
 
     header: Header
     camera: str
     width: int
     height: int
     jpeg: bytes
+    crc32: int | None = None
 
 
 class CameraInfo(msgspec.Struct, frozen=True):

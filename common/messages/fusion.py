@@ -95,6 +95,7 @@ class VerifiedTargets(msgspec.Struct, frozen=True):
     frames_undecodable: int = 0    # ... of which could not be decoded (counted, skipped)
     frames_dropped: int = 0        # ... dropped before decoding because the decoder lagged
     frames_skipped: int = 0        # ... not decoded: overtaken before a radar cycle needed them
+    frames_corrupt: int = 0        # ... of the undecodable: JPEG bytes failing their CRC-32
     # Cameras without a usable frame this cycle, and why (the others verified as usual).
     cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)
 

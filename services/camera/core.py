@@ -16,6 +16,7 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.counters import ReasonCounter
+from common.imaging import jpeg_crc32
 from common.messages import CameraInfo, CompressedFrame, Header
 from services.camera.source import Frame
 
@@ -107,7 +108,7 @@ class CameraCore:
         self._seq += 1
         self.stats.published += 1
         return CompressedFrame(header=header, camera=self.camera, width=self.width,
-                               height=self.height, jpeg=jpeg)
+                               height=self.height, jpeg=jpeg, crc32=jpeg_crc32(jpeg))
 
     def _check(self, image: np.ndarray) -> tuple[str, str] | None:
         if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 \

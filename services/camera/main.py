@@ -37,7 +37,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         return config_checked("camera", args)
     try:
-        with Bus.open(cfg.zenoh, cfg.vehicle, f"camera/{settings.name}") as bus:
+        opened = Bus.open_until_stopped(cfg.zenoh, cfg.vehicle, f"camera/{settings.name}",
+                                        stop, log)
+        if opened is None:
+            log.info(kv("camera_stopped", code=0))
+            return 0
+        with opened as bus:
             try:
                 source = build_source(settings, cal, bus)
             except SourceConfigError as exc:

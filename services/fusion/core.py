@@ -208,6 +208,7 @@ class FusionCore:
             frames_undecodable=sum(f.undecodable for f in feeds),
             frames_dropped=sum(f.dropped for f in feeds),
             frames_skipped=sum(f.skipped for f in feeds),
+            frames_corrupt=sum(f.corrupt for f in feeds),
             cameras_unavailable=cycle.cameras_unavailable)
 
     def _kinematics(self, t: RadarTrack) -> Kinematics:

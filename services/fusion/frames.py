@@ -16,7 +16,7 @@ import numpy as np
 
 from common.clock import mono_ns
 from common.config.fusion import DecodePolicy, FrameSettings
-from common.imaging import ImageDecodeError, decode_gray
+from common.imaging import ImageCorruptError, ImageDecodeError, decode_gray
 from common.log import RateLimitedLog
 from common.messages import CompressedFrame, DecodeError, decode
 from services.fusion.rhythm import RadarRhythm
@@ -52,6 +52,7 @@ class FrameFeed:
     last_error: str = ""
     last_error_rx_mono_ns: int | None = None
     skipped: int = 0       # overtaken by a newer frame before a radar cycle needed them
+    corrupt: int = 0       # of `undecodable`: bytes not matching the camera's CRC-32
 
 
 class FrameError(ValueError):
@@ -65,7 +66,7 @@ class FrameError(ValueError):
 def decode_frame(payload: bytes, rx_mono_ns: int, width: int, height: int) -> DecodedFrame:
     """A CompressedFrame payload to a grayscale frame of the calibration's size.
 
-    Raises FrameError (reasons: "message", "jpeg", "size").
+    Raises FrameError (reasons: "message", "corrupt" (CRC-32 mismatch), "jpeg", "size").
     """
     try:
         msg = decode(payload, CompressedFrame)
@@ -75,7 +76,9 @@ def decode_frame(payload: bytes, rx_mono_ns: int, width: int, height: int) -> De
         raise FrameError("size", f"frame is {msg.width}x{msg.height}, calibration "
                                  f"{width}x{height}")
     try:
-        gray = decode_gray(msg.jpeg, width, height)
+        gray = decode_gray(msg.jpeg, width, height, msg.crc32)
+    except ImageCorruptError as exc:
+        raise FrameError("corrupt", f"frame seq {msg.header.seq}: {exc}") from exc
     except ImageDecodeError as exc:
         raise FrameError("jpeg", f"frame seq {msg.header.seq}: {exc}") from exc
     return DecodedFrame(msg.camera, msg.header.seq, msg.header.stamp_ns, rx_mono_ns, gray)
@@ -231,4 +234,4 @@ class FrameDecoder:
         with self._cond:
             return FrameFeed(tuple(self._ring), self._received, self._undecodable,
                              self._dropped, self._last_error, self._last_error_rx,
-                             self._skipped)
+                             self._skipped, self.errors_by_reason.get("corrupt", 0))

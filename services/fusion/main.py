@@ -102,10 +102,14 @@ def main(argv: list[str] | None = None) -> int:
         return config_checked("fusion", args)
     stop = stop_event_on_signals()
     try:
-        bus = Bus.open(cfg.zenoh, cfg.vehicle, core.source)
+        opened = Bus.open_until_stopped(cfg.zenoh, cfg.vehicle, core.source, stop, log)
     except BusError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    if opened is None:
+        log.info(kv("fusion_stopped"))
+        return 0
+    bus = opened
     with bus:
         rhythm = RadarRhythm()
         decoders = [FrameDecoder.for_policy(cal.width, cal.height, s.frames, log, name, rhythm)

@@ -200,6 +200,7 @@ class FusionShell:
                    frames_unusable=sum(f.undecodable for f in feeds),
                    frames_dropped=sum(f.dropped for f in feeds),
                    frames_skipped=sum(f.skipped for f in feeds),
+                   frames_corrupt=sum(f.corrupt for f in feeds),
                    invalid_tracks=self.core.invalid_tracks)
         if len(feeds) > 1:
             for name, f in zip(self.camera_names, feeds, strict=True):

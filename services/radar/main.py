@@ -1,7 +1,7 @@
 """`aeb radar --config FILE`: ARS408 radars on one CAN bus to tracks and status on Zenoh.
 
-Exit codes: 0 stopped by a signal (or a replay ended with exit_at_end), 1 the Zenoh
-session could not be opened, 2 invalid configuration.
+Exit codes: 0 stopped by a signal (also while waiting for the router) or a replay ended
+with exit_at_end, 1 the Zenoh session could not be opened, 2 invalid configuration.
 """
 
 import sys
@@ -64,10 +64,13 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals()
     sensors = [s.name for s in cfg.radar.sensors]
     try:
-        bus = Bus.open(cfg.zenoh, cfg.vehicle, source="radar")
+        opened = Bus.open_until_stopped(cfg.zenoh, cfg.vehicle, "radar", stop, log)
     except BusError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    if opened is None:
+        return 0
+    bus = opened
     with bus:
         raw = cfg.radar.raw_can
         service = RadarShell(cfg.radar, ZenohRadarOutput(bus, sensors), watchdog=Watchdog(),

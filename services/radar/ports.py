@@ -2,19 +2,27 @@
 python-can's readers (candump .log, .asc, .blf, .trc, ...), paced in real time or as fast
 as possible, optionally looping."""
 
+import io
+import logging
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Protocol
 
 import can
+from can.io.canutils import CanutilsLogReader
 
 from common.config.radar import CanSettings, Pace, ReplaySettings
+from common.counters import ReasonCounter
+from common.log import RateLimitedLog
 from services.radar.slcan_bulk import BulkSlcanBus
 
 REPLAY = "replay"
 SLCAN = "slcan"
 _LOOP_GAP_S = 0.075   # time inserted between the end of a log and its restart (one cycle)
+# what python-can's log readers raise on a malformed line or record
+_BAD_RECORD = (ValueError, IndexError, TypeError, OverflowError, UnicodeDecodeError)
+_log = logging.getLogger("radar.replay")
 
 
 class CanPort(Protocol):
@@ -83,7 +91,16 @@ class ReplayPort:
     goes backwards); with `Pace.REALTIME` each frame is returned at its recorded spacing
     from the first one. `ended` turns true when a non-looping log is exhausted. `send`
     drops the frame and counts it in `dropped_sends` (nobody listens on a recording).
+
+    A candump ``.log`` is read line by line through python-can's candump parser: a line
+    it cannot parse (garbled hex or timestamp, no ``#``, binary junk, an extra field) is
+    skipped, counted in `line_errors` (``bad_line``) and logged with its line number
+    (rate-limited). Other formats are read by python-can's reader as a whole, which
+    cannot go on after a bad record: the rest of that pass is skipped and counted
+    (``bad_record``).
     """
+
+    line_error_prefix = REPLAY    # the shell counts `line_errors` as ``replay_<reason>``
 
     def __init__(
         self, path: str, pace: Pace = Pace.REALTIME, loop: bool = False,
@@ -96,6 +113,8 @@ class ReplayPort:
         self.ended = False
         self.loops = 0
         self.dropped_sends = 0
+        self.line_errors = ReasonCounter()
+        self._rl = RateLimitedLog(_log)
         self._clock = clock
         self._sleep = sleep
         self._offset = 0.0
@@ -109,10 +128,36 @@ class ReplayPort:
 
     def _open(self) -> Iterator[can.Message]:
         self._close_reader()
+        if Path(self.path).suffix.lower() == ".log":
+            return self._candump_lines()
         self._reader = can.LogReader(self.path)
-        return iter(self._reader)
+        return self._guarded(iter(self._reader))
+
+    def _candump_lines(self) -> Iterator[can.Message]:
+        with open(self.path, "rb") as f:
+            for number, raw in enumerate(f, 1):
+                try:
+                    frames = list(CanutilsLogReader(io.StringIO(raw.decode("ascii"))))
+                except _BAD_RECORD as exc:
+                    self._bad("bad_line", line=number, text=raw[:80], error=exc)
+                    continue
+                yield from frames
+
+    def _guarded(self, frames: Iterator[can.Message]) -> Iterator[can.Message]:
+        try:
+            yield from frames
+        except _BAD_RECORD as exc:
+            self._bad("bad_record", error=exc)
+
+    def _bad(self, reason: str, **fields: object) -> None:
+        self.line_errors.add(reason)
+        self._rl.warning(reason, f"replay_{reason}", file=self.path,
+                         total=self.line_errors.get(reason), **fields)
 
     def _close_reader(self) -> None:
+        frames = getattr(self, "_frames", None)
+        if frames is not None and hasattr(frames, "close"):
+            frames.close()      # a generator: closes the file it reads
         if self._reader is not None:
             self._reader.stop()
             self._reader = None

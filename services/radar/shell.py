@@ -197,15 +197,17 @@ class RadarShell:
         return False
 
     def _count_port_errors(self, port: CanPort) -> None:
-        """Lines the interface dropped (BulkSlcanBus.line_errors) into `bus_rejected`, as
-        ``slcan_<reason>``: never silent, never a reason to drop the bus."""
+        """Lines the interface dropped (BulkSlcanBus.line_errors, ReplayPort.line_errors)
+        into `bus_rejected`, as ``<port's line_error_prefix>_<reason>`` (``slcan_`` when it
+        names none): never silent, never a reason to drop the bus."""
         errors = getattr(port, "line_errors", None)
         if errors is None:
             return
+        prefix = getattr(port, "line_error_prefix", "slcan")
         seen = self._port_errors.setdefault(id(port), {})
         for reason, n in errors.snapshot().items():
             if n > seen.get(reason, 0):
-                self.bus_rejected.add(f"slcan_{reason}", n - seen.get(reason, 0))
+                self.bus_rejected.add(f"{prefix}_{reason}", n - seen.get(reason, 0))
                 seen[reason] = n
 
     def _after_end(self, stop: threading.Event) -> int:

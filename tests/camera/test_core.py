@@ -1,5 +1,7 @@
 """The pure publishing core: rate, drop-not-queue, stamps, seq, health, backoff, info."""
 
+import zlib
+
 import numpy as np
 import pytest
 
@@ -71,6 +73,8 @@ def test_messages_carry_capture_stamp_and_gapless_seq_from_zero():
     assert msgs[0].header.source == "camera/front"
     assert (msgs[2].camera, msgs[2].width, msgs[2].height, msgs[2].jpeg) == (
         "front", 64, 48, b"jpeg2")
+    # the integrity check every decoder applies (common/imaging.py)
+    assert [m.crc32 for m in msgs] == [zlib.crc32(b"jpeg%d" % i) for i in range(3)]
     assert core.stats.published == 3
 
 

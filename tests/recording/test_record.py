@@ -174,7 +174,7 @@ def test_keys_select_what_is_recorded(router, tmp_path):
 def test_ctrl_c_while_no_router_answers_ends_it_at_once(tmp_path):
     proc, _ = start_recorder(f"tcp/127.0.0.1:{free_port()}", tmp_path)
     try:
-        wait_for(lambda: "waiting for a Zenoh router" in proc.output(), START_TIMEOUT_S, 0.05,
+        wait_for(lambda: "waiting_for_router" in proc.output(), START_TIMEOUT_S, 0.05,
                  "the recorder to say what it waits for")
         proc.signal(signal.SIGINT)
         assert proc.proc.wait(10) == 0

@@ -66,6 +66,15 @@ def test_a_valid_table_passes_and_nothing_is_started(configs, capsys):
      service("camera", "camera", "camera.toml"), "cal.toml"),
     ({"fusion.toml": '[fusion.verifier]\nname = "edge_density"\nparams = { tau = "high" }\n'},
      service("fusion", "fusion", "fusion.toml"), "tau"),
+    # these crashed the service only once it ran (an OverflowError, a refused Zenoh key)
+    ({"brake.toml": "[brake]\ndeadline_ms = inf\n"},
+     service("brake", "brake", "brake.toml"), "deadline_ms"),
+    ({"fusion.toml": "[fusion.frames]\nmax_skew_s = inf\n"},
+     service("fusion", "fusion", "fusion.toml"), "max_skew_s"),
+    ({"brake.toml": "[brake]\ndeadline_ms = 100.0\nmax_age_ms = 150.0\n"},
+     service("brake", "brake", "brake.toml"), "max_age_ms"),
+    ({"radar.toml": '[zenoh.overrides]\n"scoutin/x" = 1\n'},
+     service("radar", "radar", "radar.toml"), "scoutin"),
 ])
 def test_a_config_its_service_rejects_fails_the_check(tmp_path, capsys, files, entry, named):
     for name, text in files.items():

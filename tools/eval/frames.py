@@ -54,9 +54,10 @@ def _load(ref: FrameRef, colour: bool) -> np.ndarray:
         gray, bgr = load_image(ref.path, ref.scale, ref.jpeg_quality)
         return bgr if colour else gray
     if ref.kind == "mcap":
-        jpeg = _frame_message(ref).jpeg
+        msg = _frame_message(ref)
         try:
-            return np.ascontiguousarray(decode_bgr(jpeg)) if colour else decode_gray(jpeg)
+            return (np.ascontiguousarray(decode_bgr(msg.jpeg, msg.crc32)) if colour
+                    else decode_gray(msg.jpeg, crc32=msg.crc32))
         except ImageDecodeError as exc:
             raise FrameLoadError(f"{ref.path}: {exc}") from exc
     raise FrameLoadError(f"no frame for a record of kind {ref.kind!r}")

@@ -282,7 +282,7 @@ class Converter:
     def image(self, frame: CompressedFrame) -> fg.CompressedImage:
         data = frame.jpeg
         if self.scale != 1.0:
-            bgr = decode_bgr(frame.jpeg)
+            bgr = decode_bgr(frame.jpeg, frame.crc32)
             size = (max(1, round(frame.width * self.scale)),
                     max(1, round(frame.height * self.scale)))
             data = encode_jpeg(cv2.resize(bgr, size, interpolation=cv2.INTER_AREA),

@@ -48,7 +48,8 @@ class KeyView:
     rate_hz: float
     nominal_hz: float | None
     alive: bool                  # newest sample within the registry's max age
-    on_rate: bool                # alive and within 30% of the nominal rate
+    on_rate: bool                # alive and within 30% of the nominal rate (not below it
+                                 # by more, for a key whose rate is a minimum)
     last_age_s: float            # since the last receipt
     age_p50_ms: float | None
     age_p99_ms: float | None

@@ -4,10 +4,11 @@ router answers yet.
 
 `zenoh.open` blocks until a router is reachable, and a signal handler only runs once it
 returns; so the session is opened in a helper thread while the main thread waits on the
-stop event.
+stop event (common/bus.py), which logs the wait with the endpoints.
 """
 
 import argparse
+import logging
 import os
 import sys
 import threading
@@ -18,6 +19,8 @@ from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
 from common.log import add_log_level
 from tools.bus_args import add_bus_args, endpoints
+
+_log = logging.getLogger("bus")
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, listen: bool = False) -> None:
@@ -54,34 +57,18 @@ def open_bus(args: argparse.Namespace, source: str, stop: threading.Event) -> Bu
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from exc
-    result: list[Bus | BaseException] = []
-    done = threading.Event()
-
-    def opener() -> None:
-        try:
-            result.append(Bus.open(settings, args.vehicle, source))
-        except BaseException as exc:  # handed to the main thread
-            result.append(exc)
-        done.set()
-
-    threading.Thread(target=opener, name="bus-open", daemon=True).start()
-    if not done.wait(0.5):
-        endpoints = ", ".join(settings.listen or settings.connect)
-        print(f"waiting for a Zenoh router at {endpoints} ...", file=sys.stderr, flush=True)
-    while not done.wait(0.1):
-        if stop.is_set():
-            print("stopped before the bus was reached", file=sys.stderr, flush=True)
-            # The opener is stuck in zenoh.open and would hold the interpreter's exit.
-            sys.stderr.flush()
-            sys.stdout.flush()
-            os._exit(0)
-    outcome = result[0]
-    if isinstance(outcome, BusError):
-        print(f"error: {outcome}", file=sys.stderr)
-        raise SystemExit(2)
-    if isinstance(outcome, BaseException):
-        raise outcome
-    return outcome
+    try:
+        bus = Bus.open_until_stopped(settings, args.vehicle, source, stop, _log)
+    except BusError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from exc
+    if bus is None:
+        print("stopped before the bus was reached", file=sys.stderr, flush=True)
+        # The opener is stuck in zenoh.open and would hold the interpreter's exit.
+        sys.stderr.flush()
+        sys.stdout.flush()
+        os._exit(0)
+    return bus
 
 
 def run_until(stop: threading.Event, duration_s: float | None,

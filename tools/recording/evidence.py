@@ -258,7 +258,7 @@ class EvidenceCollector:
         (folder / "frame.jpg").write_bytes(frame.jpeg)
         files = ["frame.jpg"]
         try:
-            bgr = decode_bgr(frame.jpeg)
+            bgr = decode_bgr(frame.jpeg, frame.crc32)
         except ImageDecodeError:
             return files
         annotated = bgr.copy()

@@ -8,6 +8,7 @@
   all of one message at once, to one numpy row per signal with a per-frame validity mask.
 """
 
+import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple, cast
 
@@ -101,8 +102,9 @@ def decode_frame(arb_id: int, data: bytes | bytearray) -> tuple[MessageSpec, int
 def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> Frame:
     """The frame carrying `record` from/to radar `sensor_id` (ID + 0x10 * sensor_id).
 
-    Raises EncodeError when a value is not representable: out of the raw range, or (with
-    `validate`) outside the signal's valid range, which the decoder would reject; pass
+    Raises EncodeError when a value is not representable: not finite, out of the raw
+    range, or (with `validate`) outside the signal's valid range, which the decoder would
+    reject; pass
     ``validate=False`` to build such a frame on purpose (fault injection). Raises
     ValueError for a sensor ID outside 0..7, KeyError for a type that is not an ARS408
     record.
@@ -112,7 +114,10 @@ def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> Fra
         raise ValueError(f"sensor_id {sensor_id} outside 0..{MAX_SENSORS - 1}")
     word = 0
     for sig, value in zip(spec.signals, record, strict=True):
-        raw = round((value - sig.offset) / sig.scale)
+        scaled = (value - sig.offset) / sig.scale
+        if not math.isfinite(scaled):   # round() would raise ValueError / OverflowError
+            raise EncodeError(f"{sig.dbc_name}={value} is outside the signal's raw range")
+        raw = round(scaled)
         if not 0 <= raw <= sig.mask:
             raise EncodeError(f"{sig.dbc_name}={value} is outside the signal's raw range")
         if validate and sig.valid is not None and not _within(sig.valid, _value(sig, raw)):

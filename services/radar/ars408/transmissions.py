@@ -4,6 +4,7 @@ simulator, or a test) puts on the bus.
 Frame order is the radar's: status, N general, then N quality and N extended when given.
 """
 
+import math
 from collections.abc import Sequence
 
 from services.radar.ars408.codec import EncodeError, Frame, encode
@@ -84,13 +85,14 @@ def ego_motion_frames(speed_mps: float, yaw_rate_dps: float, sensor_id: int = 0)
     """0x300 and 0x301 for an ego speed (negative = reversing) and yaw rate (left positive).
 
     A speed that rounds to zero steps is sent as standstill. Raises EncodeError when a
-    value is outside the radar's range (speed above 163.8 m/s, |yaw| above 327 deg/s).
+    value is outside the radar's range (speed above 163.8 m/s, |yaw| above 327 deg/s, NaN
+    or infinite).
     """
     magnitude = abs(speed_mps)
-    if round(magnitude / SPEED_STEP_MPS) == 0:
-        direction = STANDSTILL
-    else:
-        direction = FORWARD if speed_mps > 0 else REVERSE
+    steps = magnitude / SPEED_STEP_MPS
+    if not math.isfinite(steps):     # round() would raise ValueError / OverflowError
+        raise EncodeError(f"speed {speed_mps} m/s is outside the radar's range")
+    direction = STANDSTILL if round(steps) == 0 else FORWARD if speed_mps > 0 else REVERSE
     return [
         encode(SpeedInformation(direction, magnitude), sensor_id),
         encode(YawRateInformation(yaw_rate_dps), sensor_id),

@@ -1,0 +1,41 @@
+"""Radar, camera and fusion started with no router reachable: each says which endpoint it
+waits for, keeps waiting, and stops cleanly (exit 0) on SIGTERM or SIGINT."""
+
+import signal
+import subprocess
+
+import pytest
+
+from common.net import free_port
+from tests.support import REPO, START_TIMEOUT_S, ServiceProcess, python_module, wait_for
+
+SERVICES = {
+    "radar": ("services.radar", "deploy/radar-replay.toml"),
+    "camera": ("services.camera", "deploy/camera-sim.toml"),
+    "fusion": ("services.fusion", "deploy/fusion.toml"),
+}
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize("service", sorted(SERVICES))
+def test_waits_for_the_router_visibly_and_stops_on_a_signal(tmp_path, service, sig):
+    module, config = SERVICES[service]
+    # nothing listens on a free port
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    proc = ServiceProcess(service, python_module(module, "--config", str(REPO / config),
+                                                 "--connect", endpoint), tmp_path)
+    try:
+        wait_for(lambda: "waiting_for_router" in proc.output() or not proc.alive(),
+                 START_TIMEOUT_S, 0.05, f"{service} to say it waits for the router")
+        assert proc.alive(), proc.output()
+        assert endpoint in proc.output()
+        proc.signal(sig)
+        try:
+            code = proc.proc.wait(START_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"{service} still running {START_TIMEOUT_S} s after {sig.name}:\n"
+                        f"{proc.output()}")
+        assert code == 0, proc.output()
+        assert "Traceback" not in proc.output()
+    finally:
+        proc.stop()
