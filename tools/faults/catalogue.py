@@ -152,15 +152,18 @@ def _wait_failsafe_line(ctx: Context, t0: int, timeout_s: float) -> list[int]:
 
 
 def camera_unavailable_response(ctx: Context, inject: Callable[[], None], bound_ms: float,
-                                timeout_s: float = 5.0) -> Outcome:
-    """Inject, then time fusion's first report of the camera unavailable; the brake
-    must stay armed meanwhile (fusion keeps commanding without a camera)."""
+                                timeout_s: float = 5.0,
+                                because: Callable[[str], bool] = lambda reason: True
+                                ) -> Outcome:
+    """Inject, then time fusion's first report of the camera unavailable `because` of
+    what was injected (its reason); the brake must stay armed meanwhile (fusion keeps
+    commanding without a camera)."""
     obs = ctx.observer
     mark, smark = obs.targets.mark(), obs.status.mark()
     t0 = mono_ns()
     inject()
-    got = obs.targets.wait(lambda t: t.verifier_status is VerifierStatus.UNAVAILABLE, mark,
-                           timeout_s)
+    got = obs.targets.wait(lambda t: t.verifier_status is VerifierStatus.UNAVAILABLE
+                           and because(t.unavailable_reason), mark, timeout_s)
     failsafe = [s for s in obs.status.since(smark) if s.msg.state is BrakeState.FAILSAFE]
     if got is None:
         return Outcome(False, None, "fusion never reported the camera unavailable",
@@ -305,6 +308,18 @@ class CameraImpostorFrames(Fault):
     def available(self, ctx: Context) -> str:
         return "" if ctx.observer.frame_payload else "no camera frame seen yet"
 
+    def reason_fits(self, reason: str) -> bool:
+        """Fusion's reason names what was injected: an unusable frame for corrupt and
+        truncated JPEGs, a frame seconds from the radar cycle for a clock step, and for
+        a frozen picture anything but those and a late frame (the harness's own frames
+        may come late on a loaded machine; that is not the freeze being noticed)."""
+        timing = reason.startswith(("nearest frame", "no camera frame"))
+        if self.kind in ("corrupt", "truncated"):
+            return "unusable" in reason
+        if self.kind == "clock":
+            return timing and _skew_ms(reason) >= 1000.0
+        return not timing and "unusable" not in reason
+
     def inject(self, ctx: Context) -> Outcome:
         payload = ctx.observer.frame_payload
         assert payload is not None
@@ -349,12 +364,22 @@ class CameraImpostorFrames(Fault):
                 start()
                 player.start()
             return camera_unavailable_response(ctx, inject, bound,
-                                               timeout_s=max(5.0, bound / 1e3 + 2))
+                                               timeout_s=max(5.0, bound / 1e3 + 2),
+                                               because=self.reason_fits)
         finally:
             done.set()
             if player.is_alive():
                 player.join(2.0)
             os.kill(pid, signal.SIGCONT)
+
+
+def _skew_ms(reason: str) -> float:
+    """The |skew| in "nearest frame -2012 ms from the radar cycle ...", else 0."""
+    parts = reason.split()
+    try:
+        return abs(float(parts[2])) if len(parts) > 3 and parts[3] == "ms" else 0.0
+    except ValueError:
+        return 0.0
 
 
 def _flip_entropy_bits(rng: random.Random, jpeg: bytes) -> bytes:
