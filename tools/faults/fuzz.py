@@ -40,7 +40,7 @@ from common.config.camera import CameraConfig
 from common.config.fusion import FusionConfig
 from common.config.loader import ConfigError, load_config, parse_config
 from common.config.radar import RadarConfig
-from common.imaging import encode_jpeg
+from common.imaging import encode_jpeg, jpeg_crc32
 from common.keys import CAMERA_JPEG, EGO_MOTION, FUSION_BRAKE_CMD, RADAR_TRACKS
 from common.keys import REGISTRY as KEYS
 from common.messages import BrakeCommand, CompressedFrame, Decision, Header
@@ -297,9 +297,10 @@ def fuzz_payloads(n: int, rng: random.Random, progress: Progress) -> list[Tally]
         RADAR_TRACKS.name: consumers.radar_tracks,
     }
     seeds = key_seeds()
+    jpeg = seed_jpeg(consumers.width, consumers.height)
     seeds[CAMERA_JPEG.name] = encode(CompressedFrame(
         header=Header(1, "camera/front", 0, 0), camera="front", width=consumers.width,
-        height=consumers.height, jpeg=seed_jpeg(consumers.width, consumers.height)))
+        height=consumers.height, jpeg=jpeg, crc32=jpeg_crc32(jpeg)))
     tallies = []
     for name, seed in seeds.items():
         spec = KEYS[name]
@@ -350,28 +351,37 @@ def seed_jpeg(width: int, height: int) -> bytes:
 
 
 def fuzz_jpeg(n: int, rng: random.Random, progress: Progress) -> Tally:
+    """Half the frames carry the CRC-32 the camera computed before the corruption (a
+    frame damaged on its way), half none (a publisher that does not set it: not
+    checked, so only the decoder stands between the bytes and the gate)."""
     from services.fusion.frames import FrameError, decode_frame
     tally = Tally("mutated jpegs -> fusion frame decoder")
     width, height = 848, 480
     seed = seed_jpeg(width, height)
+    seed_crc = jpeg_crc32(seed)
     unchanged = 0
+    accepted = Counter[str]()
     for i in range(n):
         jpeg = mutate_bytes(rng, seed) if rng.random() < 0.7 else _mutate_jpeg_body(rng, seed)
         unchanged += jpeg == seed
+        with_crc = i % 2 == 0
         payload = encode(CompressedFrame(Header(i, "camera/front", 0, 0), "front", width,
-                                         height, jpeg))
+                                         height, jpeg, seed_crc if with_crc else None))
         tally.inputs += 1
         try:
             decode_frame(payload, i, width, height)
             tally.accepted += 1
+            accepted["with_crc" if with_crc else "without_crc"] += jpeg != seed
         except FrameError as exc:
             tally.rejected[f"frame_{exc.reason}"] += 1
         except Exception as exc:
             tally.crash(jpeg[:64], exc)
         if i % 200 == 0:
             progress(tally.target, i, n)
-    tally.notes.append(f"{tally.accepted - unchanged} mutated JPEGs were accepted (decoded to "
-                       f"a frame); {unchanged} mutations left the bytes unchanged")
+    tally.notes.append(
+        f"mutated JPEGs accepted (decoded to a frame): {accepted['with_crc']} of "
+        f"{(n + 1) // 2} sent with the camera's CRC-32, {accepted['without_crc']} of "
+        f"{n // 2} sent without one; {unchanged} mutations left the bytes unchanged")
     return tally
 
 
