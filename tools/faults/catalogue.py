@@ -21,9 +21,10 @@ Required responses (docs/brake.md, docs/fusion.md, DESIGN.md):
 import os
 import random
 import signal
+import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import msgspec
@@ -91,13 +92,9 @@ class Context:
     link: Any | None           # links.NetnsLink | links.RelayLink | None
     link_problem: str
     vehicle: str = "ego"
-    forged_seq: dict[str, int] = field(default_factory=dict)
 
     def pid(self, service: str) -> int:
         return int(self.loop.pid(service))
-
-    def signal(self, service: str, sig: int) -> None:
-        os.kill(self.pid(service), sig)
 
     def publisher(self, spec: KeySpec[Any], **params: str) -> Any:
         return self.loop.bus.publisher(spec, **params)
@@ -297,9 +294,8 @@ class CameraImpostorFrames(Fault):
     whose stamps jumped (the camera host's wall clock stepped; SIMULATED in the frames'
     stamps: the machine's clock is shared and is not touched)."""
 
-    def __init__(self, kind: str, duration_s: float = 1.5) -> None:
+    def __init__(self, kind: str) -> None:
         self.kind = kind
-        self.duration_s = duration_s
         self.name = {"frozen": "frozen camera", "corrupt": "corrupt JPEGs",
                      "truncated": "truncated JPEGs",
                      "clock": "camera clock step (+-2 s)"}[kind]
@@ -326,7 +322,6 @@ class CameraImpostorFrames(Fault):
         last = decode(payload, CompressedFrame)
         pub = ctx.publisher(CAMERA_JPEG, camera=last.camera)
         pid = ctx.pid("camera")
-        stop_at: list[float] = []
         seq = [last.header.seq]
         step_ns = ctx.rng.choice((-2, 2)) * 1_000_000_000
 
@@ -344,10 +339,8 @@ class CameraImpostorFrames(Fault):
 
         def start() -> None:
             os.kill(pid, signal.SIGSTOP)
-            stop_at.append(time.monotonic() + self.duration_s)
 
         bound = ctx.bounds.frozen_ms if self.kind == "frozen" else ctx.bounds.camera_ms
-        import threading
         done = threading.Event()
 
         def play() -> None:

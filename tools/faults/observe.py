@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from common.bus import Bus
-from common.clock import mono_ns
 from common.command_auth import CommandKey, mac_problem
 from common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
 from common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
@@ -129,6 +128,3 @@ class Observer:
 
     def _on_frame(self, payload: bytes, key: str, rx_ns: int) -> None:
         self.frame_payload = payload
-
-    def now(self) -> int:
-        return mono_ns()
