@@ -151,8 +151,8 @@ def build_shell(bus: Bus, cal: Calibration, gate_scope: str
     # stale (that path is cheaper and would flatter the figures).
     settings = parse_config({"fusion": {
         "instance": "bench", "calibration": CALIBRATION, "gate_scope": gate_scope,
-        "frames": {"max_skew_s": 1.0}, "decision": {"radar_max_age_s": 1.0}}},
-        FusionConfig).fusion
+        "frames": {"max_skew_s": 1.0, "frozen_after_s": 0.0},   # one picture repeated
+        "decision": {"radar_max_age_s": 1.0}}}, FusionConfig).fusion
     verifier = CountingVerifier(create("edge_density"))
     core = FusionCore(settings, ColumnProjector(cal, ColumnGeometry()), verifier)
     log = logging.getLogger("bench")
@@ -343,7 +343,8 @@ def camera_settings(names: tuple[str, ...], policy: str, keys: tuple[str, ...]
     return parse_config({"fusion": {
         "instance": "bench", "cameras": [{"name": k, "calibration": f"rig/{n}.toml"}
                                          for n, k in zip(names, keys, strict=True)],
-        "frames": {"max_skew_s": 1.0, "decode": policy},
+        # one rendered picture repeated: the frozen-camera check would rightly refuse it
+        "frames": {"max_skew_s": 1.0, "decode": policy, "frozen_after_s": 0.0},
         "decision": {"radar_max_age_s": 1.0}}}, FusionConfig).fusion
 
 

@@ -61,6 +61,9 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
     align: bool = True
     decode: DecodePolicy = DecodePolicy.EVERY_FRAME
+    # A camera whose picture has not changed for this long while the radar sees the scene
+    # move relative to the ego is frozen: unavailable ("camera frozen"). 0: never.
+    frozen_after_s: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.5
 
 
 class CameraInput(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -62,9 +62,11 @@ def camera_views(cameras: Sequence[Camera], feeds: Sequence[FrameFeed],
     vel = np.array([(t.vx_mps, t.vy_mps) for t in tracks], dtype=np.float64).reshape(-1, 2)
     views = []
     for cam, feed in zip(cameras, feeds, strict=True):
-        frame = select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align)
-        reason = "" if frame is not None else unavailable_reason(feed, radar_stamp_ns,
-                                                                 max_skew_ns)
+        frame = (None if feed.unusable_reason
+                 else select_frame(feed.frames, radar_stamp_ns, max_skew_ns, align))
+        reason = ("" if frame is not None
+                  else feed.unusable_reason or unavailable_reason(feed, radar_stamp_ns,
+                                                                  max_skew_ns))
         dt_s = (frame.stamp_ns - radar_stamp_ns) / 1e9 if frame is not None and align else 0.0
         xy = pos + vel * dt_s
         boxes = cam.projector.boxes(xy) if len(xy) else []

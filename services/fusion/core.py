@@ -18,7 +18,7 @@ too, and with `gate_scope = "all"` every visible track. `process` is both.
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from common.config.fusion import FusionSettings, GateScope
 from common.messages import (
@@ -41,7 +41,7 @@ from services.fusion.decision import (
     decide,
     severity,
 )
-from services.fusion.frames import FrameFeed
+from services.fusion.frames import FROZEN_REASON, MOVING_MIN_SPEED_MPS, FrameFeed, frozen
 from services.fusion.roi import ColumnProjector
 from services.fusion.verifiers import Verifier
 
@@ -107,6 +107,8 @@ class FusionCore:
         self._seq = 0
         self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
+        self._frozen_after_ns = round(settings.frames.frozen_after_s * 1e9)
+        self.frozen_cycles: dict[str, int] = {}   # cycles a camera was judged frozen
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
 
     def process(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
@@ -143,6 +145,7 @@ class FusionCore:
                                     confirmed=confirmed)
             return DecidedCycle(tracks, feeds, confirmed, invalid, VerifierStatus.STALE_RADAR,
                                 "", age_ns, now_mono_ns, command, checked=stale)
+        feeds = self._usable(feeds, confirmed)
         kins = [self._kinematics(t) for t in confirmed]
         threats = [self.rule.threat(k) for k in kins]
         ranks = [_rank(threat, k.ttc_eff_s) for (threat, _), k in zip(threats, kins, strict=True)]
@@ -210,6 +213,20 @@ class FusionCore:
             frames_skipped=sum(f.skipped for f in feeds),
             frames_corrupt=sum(f.corrupt for f in feeds),
             cameras_unavailable=cycle.cameras_unavailable)
+
+    def _usable(self, feeds: tuple[FrameFeed, ...],
+                confirmed: list[RadarTrack]) -> tuple[FrameFeed, ...]:
+        """The feeds with each frozen camera marked unusable (counted in `frozen_cycles`,
+        by camera)."""
+        moving = any(math.hypot(t.vx_mps, t.vy_mps) >= MOVING_MIN_SPEED_MPS
+                     for t in confirmed)
+        out = []
+        for cam, feed in zip(self.cameras, feeds, strict=True):
+            if frozen(feed, moving, self._frozen_after_ns):
+                self.frozen_cycles[cam.name] = self.frozen_cycles.get(cam.name, 0) + 1
+                feed = replace(feed, unusable_reason=FROZEN_REASON)
+            out.append(feed)
+        return tuple(out)
 
     def _kinematics(self, t: RadarTrack) -> Kinematics:
         return self.rule.kinematics(t, t.track_id in self._moving)

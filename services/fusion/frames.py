@@ -30,6 +30,21 @@ QUEUE_SIZE = 2
 # before_radar: the newest waiting frame is decoded this long before the next radar
 # cycle is due: time for one decode and a late thread wake-up.
 DECODE_LEAD_S = 0.012
+# Two pictures are the same when their pixels on a coarse grid (every SAME_STRIDE-th row
+# and column) differ by at most this many grey levels on average: a repeated picture
+# differs by 0 (or JPEG re-encoding noise, well below 1); a live sensor's noise alone
+# is about 1-3 levels, and a moving scene far more.
+SAME_STRIDE = 8
+SAME_MAX_MEAN_DIFF = 0.5
+
+
+def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
+    """Are two grayscale frames (near-)identical? (pure)"""
+    if a.shape != b.shape:
+        return False
+    ga = a[::SAME_STRIDE, ::SAME_STRIDE].astype(np.int16)
+    gb = b[::SAME_STRIDE, ::SAME_STRIDE].astype(np.int16)
+    return float(np.abs(ga - gb).mean()) <= SAME_MAX_MEAN_DIFF
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +68,11 @@ class FrameFeed:
     last_error_rx_mono_ns: int | None = None
     skipped: int = 0       # overtaken by a newer frame before a radar cycle needed them
     corrupt: int = 0       # of `undecodable`: bytes not matching the camera's CRC-32
+    # capture stamp of the first of the newest decoded frames whose pictures are all
+    # (near-)identical to it; None when the newest frame differs from the one before
+    unchanged_since_ns: int | None = None
+    # set by fusion's core: this camera is not to be used this cycle, and why
+    unusable_reason: str = ""
 
 
 class FrameError(ValueError):
@@ -82,6 +102,22 @@ def decode_frame(payload: bytes, rx_mono_ns: int, width: int, height: int) -> De
     except ImageDecodeError as exc:
         raise FrameError("jpeg", f"frame seq {msg.header.seq}: {exc}") from exc
     return DecodedFrame(msg.camera, msg.header.seq, msg.header.stamp_ns, rx_mono_ns, gray)
+
+
+FROZEN_REASON = "camera frozen"
+# The radar sees the scene move relative to the ego when a confirmed track moves at least
+# this fast relative to it: then a live camera's picture must change.
+MOVING_MIN_SPEED_MPS = 1.0
+
+
+def frozen(feed: FrameFeed, scene_moving: bool, frozen_after_ns: int) -> bool:
+    """Has this camera repeated one picture for `frozen_after_ns` (capture time) while the
+    scene moved? (pure; `frozen_after_ns` 0: never)"""
+    if not frozen_after_ns or not scene_moving or feed.unchanged_since_ns is None \
+            or not feed.frames:
+        return False
+    newest = max(f.stamp_ns for f in feed.frames)
+    return newest - feed.unchanged_since_ns >= frozen_after_ns
 
 
 def select_frame(frames: tuple[DecodedFrame, ...], radar_stamp_ns: int, max_skew_ns: int,
@@ -137,6 +173,7 @@ class FrameDecoder:
         self._skipped = 0
         self._last_error = ""
         self._last_error_rx: int | None = None
+        self._unchanged_since: int | None = None
         self.errors_by_reason: dict[str, int] = {}
         self._stop = False
         self._thread = threading.Thread(target=self._run, daemon=True,
@@ -193,6 +230,12 @@ class FrameDecoder:
                              camera=self.camera, error=str(exc))
             return
         with self._cond:
+            previous = self._ring[-1] if self._ring else None
+            if previous is not None and same_picture(previous.gray, frame.gray):
+                if self._unchanged_since is None:
+                    self._unchanged_since = previous.stamp_ns
+            else:
+                self._unchanged_since = None
             self._ring.append(frame)
 
     def _unusable(self, reason: str, error: str, rx_mono_ns: int) -> None:
@@ -234,4 +277,5 @@ class FrameDecoder:
         with self._cond:
             return FrameFeed(tuple(self._ring), self._received, self._undecodable,
                              self._dropped, self._last_error, self._last_error_rx,
-                             self._skipped, self.errors_by_reason.get("corrupt", 0))
+                             self._skipped, self.errors_by_reason.get("corrupt", 0),
+                             self._unchanged_since)

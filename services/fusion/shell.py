@@ -32,7 +32,7 @@ from common.realtime import ThreadRealtime
 from common.systemd import Watchdog
 from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, DecidedCycle, FusionCore
-from services.fusion.frames import FrameDecoder
+from services.fusion.frames import FROZEN_REASON, FrameDecoder
 from services.fusion.rhythm import RadarRhythm
 
 
@@ -184,6 +184,13 @@ class FusionShell:
     def _count(self, result: CycleResult) -> None:
         cmd = result.command
         self.counters.add("cycles")
+        for camera, why in result.targets.cameras_unavailable.items():
+            if why == FROZEN_REASON:
+                self.counters.add("camera_frozen")
+                self._rl.warning(f"frozen:{camera}", "camera_frozen", camera=camera,
+                                 cycles=self.core.frozen_cycles.get(camera, 0),
+                                 detail="the same picture while the radar sees the scene "
+                                        "move: camera unavailable")
         if cmd.decision is not Decision.NONE:
             self.counters.add(cmd.decision.value.lower() + ("_held" if cmd.held else ""))
         if cmd.verifier_status is not VerifierStatus.OK:

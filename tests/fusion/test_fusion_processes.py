@@ -71,6 +71,9 @@ stats_interval_s = 1.0
 # and this test is about the chain, not the bounds (tests/fusion/test_decision.py).
 [fusion.frames]
 max_skew_s = 0.5
+# the folder plays one still picture while the box moves: a frozen camera by that check
+# (tests/fusion/test_frozen_camera.py), which this chain test leaves out
+frozen_after_s = 0.0
 [fusion.decision]
 hold_s = 1.5
 radar_max_age_s = 1.0
@@ -263,6 +266,7 @@ calibration = "{tmp_path / 'left.toml'}"
 [fusion.frames]
 max_skew_s = 0.5
 decode = "before_radar"
+frozen_after_s = 0.0    # still pictures, as above
 [fusion.decision]
 hold_s = 0.0
 radar_max_age_s = 1.0
