@@ -7,8 +7,12 @@ sessions and sequence numbers that build on this).
 
 Wire format: `BrakeCommand.auth = CommandAuth(key_id, session, mac)`, the last field of
 the message, with `mac` the last field of CommandAuth, so the MAC is the payload's last
-MAC_LEN bytes. It is HMAC-SHA256 over everything before them: the whole command
-(instance, decision, level, sequence number, stamps) and the key id and session.
+MAC_LEN bytes. It is keyed BLAKE2b with a 32-byte tag (RFC 7693's MAC mode, hashlib)
+over everything before them: the whole command (instance, decision, level, sequence
+number, stamps) and the key id and session. Keyed BLAKE2b rather than HMAC-SHA256:
+the same strength for this use, and about 1.4 us per command here against 4-11 us for
+`hmac.digest` (OpenSSL 3 sets up a MAC context on every call): the check runs on the
+brake's command path.
 
 Key file (TOML, mode 0600, made by `aeb keygen`):
 
@@ -18,6 +22,7 @@ Key file (TOML, mode 0600, made by `aeb keygen`):
     insecure_example = false     # true: published with the source, for the demo/simulator
 """
 
+import hashlib
 import hmac
 import os
 import secrets
@@ -31,8 +36,7 @@ import msgspec
 from common.messages import BrakeCommand, CommandAuth, encode
 
 MAC_LEN = 32
-SECRET_LEN = 32
-_DIGEST = "sha256"
+SECRET_LEN = 32   # BLAKE2b takes keys of up to 64 bytes
 _ZERO_MAC = bytes(MAC_LEN)
 
 
@@ -101,8 +105,8 @@ def load_key(path: str | Path) -> CommandKey:
         secret = bytes.fromhex(f.secret)
     except ValueError:
         raise KeyFileError(f"{p}: secret must be hex digits") from None
-    if len(secret) < 16:
-        raise KeyFileError(f"{p}: secret has {len(secret)} bytes, at least 16 needed")
+    if not 16 <= len(secret) <= 64:
+        raise KeyFileError(f"{p}: secret has {len(secret)} bytes, 16 to 64 needed")
     if not f.key_id or not f.instance:
         raise KeyFileError(f"{p}: key_id and instance must not be empty")
     return CommandKey(f.key_id, f.instance, secret, f.insecure_example, str(p))
@@ -139,7 +143,12 @@ class CommandSigner:
     def sign(self, cmd: BrakeCommand) -> bytes:
         """The command's payload with its MAC."""
         body = encode(msgspec.structs.replace(cmd, auth=self._blank))[:-MAC_LEN]
-        return body + hmac.digest(self.key.secret, body, _DIGEST)
+        return body + mac(self.key.secret, body)
+
+
+def mac(secret: bytes, body: bytes) -> bytes:
+    """The MAC of `body` under `secret` (keyed BLAKE2b, 32 bytes)."""
+    return hashlib.blake2b(body, key=secret, digest_size=MAC_LEN).digest()
 
 
 def mac_problem(payload: bytes, cmd: BrakeCommand,
@@ -155,5 +164,5 @@ def mac_problem(payload: bytes, cmd: BrakeCommand,
     # the decoded MAC must be the trailing bytes the MAC was computed in front of
     if len(auth.mac) != MAC_LEN or payload[-MAC_LEN:] != auth.mac:
         return "bad_mac"
-    expected = hmac.digest(key.secret, payload[:-MAC_LEN], _DIGEST)
+    expected = mac(key.secret, payload[:-MAC_LEN])
     return None if hmac.compare_digest(expected, auth.mac) else "bad_mac"

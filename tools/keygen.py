@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from common.command_auth import new_key, write_key
+from common.log import add_log_level, setup_logging
 
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -27,7 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True, type=Path, help="key file to write")
     parser.add_argument("--key-id", help="default: the instance and 8 random hex digits")
     parser.add_argument("--force", action="store_true", help="replace an existing file")
+    add_log_level(parser, "WARNING")
     args = parser.parse_args(argv)
+    setup_logging("keygen", args.log_level)
     for what, value in (("instance", args.instance), ("key id", args.key_id or "x")):
         if not _NAME.match(value):
             print(f"error: {what} {value!r} must be letters, digits, '_', '-' or '.'",

@@ -103,10 +103,10 @@ class VerifiedTargets(msgspec.Struct, frozen=True):
 class CommandAuth(msgspec.Struct, frozen=True):
     """Who made a BrakeCommand (common/command_auth.py, docs/security.md).
 
-    `mac` is HMAC-SHA256, with the key `key_id` names, over the encoded command up to
-    the MAC's own 32 bytes, which are the last 32 bytes of the payload: it covers every
-    other field, the sequence number, the stamps and `session` (random per fusion
-    process start) included."""
+    `mac` is keyed BLAKE2b (32 bytes), with the key `key_id` names, over the encoded
+    command up to the MAC's own 32 bytes, which are the last 32 bytes of the payload: it
+    covers every other field, the sequence number, the stamps and `session` (random per
+    fusion process start) included."""
 
     key_id: str
     session: int

@@ -123,11 +123,15 @@ class BrakeRig:
                     timeout_s: float = 30.0, what: str = "") -> tuple[int, BrakeStatus]:
         return self.status.wait(pred, timeout_s, start, what)
 
-    def wait_live(self, start: int, level: float = 0.0, timeout_s: float = 30.0) -> int:
-        """Index of the first status from `start` that follows the stream at `level`."""
+    def wait_live(self, start: int, level: float = 0.0, timeout_s: float = 30.0,
+                  since_ns: int = 0) -> int:
+        """Index of the first status from `start` that follows the stream at `level`, on
+        a command received after `since_ns` (this host's monotonic clock): a stream that
+        just started is not followed while the previous one's session is live."""
         want = BrakeState.BRAKING if level > 0 else BrakeState.ARMED
         i, _ = self.wait_status(
-            lambda s: s.state is want and s.commanded_level_pct == level, start, timeout_s,
+            lambda s: (s.state is want and s.commanded_level_pct == level
+                       and s.last_cmd_rx_mono_ns >= since_ns), start, timeout_s,
             f"{want.value} at {level}%")
         return i
 
@@ -195,6 +199,7 @@ class Stream:
     def __init__(self, bus: Bus, level: float = 0.0, period_ms: float = 20.0) -> None:
         self.pub = bus.publisher(FUSION_BRAKE_CMD, instance="primary")
         self.signer = CommandSigner(TEST_KEY)    # a new session, as a fusion start
+        self.started_ns = 0
         self.level = level
         self.period_s = period_ms / 1000
         self.seq = 0
@@ -205,6 +210,7 @@ class Stream:
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def __enter__(self) -> "Stream":
+        self.started_ns = time.monotonic_ns()
         self._thread.start()
         return self
 

@@ -4,6 +4,8 @@ stream that arming needs."""
 
 import msgspec
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from common.command_auth import CommandKey, CommandSigner, mac_problem, new_key
 from common.messages import BrakeCommand, BrakeState, decode, encode
@@ -199,3 +201,18 @@ def test_the_core_refuses_every_command_without_keys():
     core = BrakeCore(BrakeSettings(), KEY, T0, {})
     core.on_command(SIGNER.sign(command(0, pub_mono_ns=T0)), KEY, T0, WALL0)
     assert core.rejected["unknown_key"] == 1
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(min_size=0, max_size=400), st.integers(0, 400), st.integers(0, 255))
+def test_no_payload_without_the_key_moves_the_brake(junk: bytes, at: int, xor: int) -> None:
+    """Random bytes, and a real signed command with one byte changed: never accepted."""
+    rig = Rig().armed()
+    last, n = rig.seq - 1, len(rig.lines)
+    good = bytearray(SIGNER.sign(command(rig.seq, 100.0, pub_mono_ns=rig.t)))
+    if xor:
+        good[at % len(good)] ^= xor
+        rig.raw(bytes(good))
+    rig.raw(junk)
+    _unmoved(rig, n, last)
+    assert sum(rig.core.rejected.values()) == 1 + (xor != 0)

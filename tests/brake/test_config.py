@@ -13,9 +13,13 @@ from tests.support import REPO
 def test_shipped_example_is_valid_and_documents_the_defaults():
     shipped = load_config(REPO / "deploy/brake.toml", BrakeConfig)
     defaults = parse_config({}, BrakeConfig)
-    # the one deliberate difference: a vehicle runs the brake real-time (docs/deploy.md)
+    # the deliberate differences: a vehicle runs the brake real-time (docs/deploy.md), and
+    # the shipped file names the (insecure example) command key, which has no default
     assert shipped.brake.realtime.priority > 0
-    as_default = msgspec.structs.replace(shipped.brake, realtime=defaults.brake.realtime)
+    assert shipped.brake.command_keys == (str(REPO / "deploy/keys/primary.key"),)
+    assert defaults.brake.command_keys == ()
+    as_default = msgspec.structs.replace(shipped.brake, realtime=defaults.brake.realtime,
+                                         command_keys=())
     assert msgspec.structs.replace(shipped, brake=as_default) == defaults
 
 

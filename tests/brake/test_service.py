@@ -43,7 +43,7 @@ def test_brake_command_puts_brake_bytes_on_the_line(rig):
     """A BRAKE command: its level on the actuator line, mode B."""
     start = len(rig.status)
     with Stream(rig.bus) as stream:
-        rig.wait_live(start)
+        rig.wait_live(start, since_ns=stream.started_ns)
         t_brake = time.monotonic_ns()
         stream.level = 70.0
         found = wait_for(lambda: [r for r in rig.sim.commands_since(t_brake)
@@ -68,7 +68,7 @@ def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
     start = len(rig.status)
     before = None
     with Stream(rig.bus) as stream:
-        rig.wait_live(start)
+        rig.wait_live(start, since_ns=stream.started_ns)
         _, before = rig.wait_status(lambda s: True, len(rig.status))
         t0 = time.monotonic_ns()
         candidate = rig.publisher(level=100.0, instance="candidate", name="candidate")
@@ -110,7 +110,7 @@ def test_pty_closed_and_recreated_reconnects_and_brakes_again(rig):
     behind the configured path; the service reopens it by itself."""
     start = len(rig.status)
     with Stream(rig.bus, level=50.0) as stream:
-        rig.wait_live(start, 50.0)
+        rig.wait_live(start, 50.0, since_ns=stream.started_ns)
         old_name = rig.pair.slave_name
         rig.sim.disconnect()
         i, lost = rig.wait_status(lambda s: not s.actuator_connected, start, 10, "port lost")
@@ -144,7 +144,7 @@ def test_garbage_on_the_line_never_crashes_and_never_acknowledges(rig):
 
     pumper = threading.Thread(target=pump, daemon=True)
     with Stream(rig.bus) as stream:
-        rig.wait_live(start)
+        rig.wait_live(start, since_ns=stream.started_ns)
         rig.sim.set_noise(1.0)
         pumper.start()
         try:
@@ -177,8 +177,8 @@ def test_garbage_on_the_line_never_crashes_and_never_acknowledges(rig):
 
 def test_actuator_fault_line_is_fault_until_it_clears(rig):
     start = len(rig.status)
-    with Stream(rig.bus):
-        rig.wait_live(start)
+    with Stream(rig.bus) as stream:
+        rig.wait_live(start, since_ns=stream.started_ns)
         rig.sim.raise_fault(3, "motor overcurrent")
         i, st = rig.wait_status(lambda s: s.state is BrakeState.FAULT, start, 10)
         assert "3: motor overcurrent" in st.reason
@@ -222,7 +222,7 @@ def test_every_accepted_command_gets_its_own_status_soon_after(rig):
     tick): each sequence of a 75 ms stream (the radar's rhythm), within a few ms."""
     start = len(rig.status)
     with Stream(rig.bus, period_ms=75.0) as stream:
-        rig.wait_live(start)
+        rig.wait_live(start, since_ns=stream.started_ns)
         wait_for(lambda: len(stream.sent) >= 30, 30, what="30 commands")
     statuses = [s for _, s in rig.status.items[start:]]
     sent = {m.header.seq for m in stream.sent}

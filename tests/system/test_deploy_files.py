@@ -188,3 +188,41 @@ def test_the_two_boards_meet_at_ecu_a_and_brake_ages_commands_on_wall_clocks():
     brake = next(s for s in table["service"] if s["name"] == "brake")
     assert load_config(DEPLOY / brake["config"], BrakeConfig).brake.age_clock.value \
         == "wall"
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl is not installed")
+def test_secure_router_refuses_a_client_without_a_certificate_of_its_ca(tmp_path):
+    """A process with a certificate of another CA gets no session at all."""
+    ours, theirs = tmp_path / "ours", tmp_path / "theirs"
+    for folder in (ours, theirs):
+        subprocess.run(["sh", str(DEPLOY / "zenoh/secure/make-certs.sh"), str(folder)],
+                       check=True, capture_output=True, timeout=120)
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    tls = "transport/link/tls/"
+    router = zenoh.open(_conf(DEPLOY / "zenoh/secure/router.json5", **{
+        "listen/endpoints": [endpoint],
+        tls + "root_ca_certificate": str(ours / "ca.pem"),
+        tls + "listen_certificate": str(ours / "router.pem"),
+        tls + "listen_private_key": str(ours / "router-key.pem"),
+    }))
+    try:
+        for name, certs in (("fusion-primary", theirs), ("brake", theirs)):
+            conf = _conf(DEPLOY / "zenoh/secure/client-brake.json5", **{
+                "connect/endpoints": [endpoint], "connect/timeout_ms": 3000,
+                "connect/exit_on_failure": True,
+                tls + "root_ca_certificate": str(ours / "ca.pem"),
+                tls + "connect_certificate": str(certs / f"{name}.pem"),
+                tls + "connect_private_key": str(certs / f"{name}-key.pem"),
+            })
+            with pytest.raises(zenoh.ZError):
+                zenoh.open(conf).close()
+        # the same client with our CA's certificate connects: the refusal was the identity
+        zenoh.open(_conf(DEPLOY / "zenoh/secure/client-brake.json5", **{
+            "connect/endpoints": [endpoint], "connect/timeout_ms": 10000,
+            "connect/exit_on_failure": True,
+            tls + "root_ca_certificate": str(ours / "ca.pem"),
+            tls + "connect_certificate": str(ours / "brake.pem"),
+            tls + "connect_private_key": str(ours / "brake-key.pem"),
+        })).close()
+    finally:
+        router.close()

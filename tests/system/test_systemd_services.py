@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
 from tests.notify_support import NotifyListener
 from tests.support import START_TIMEOUT_S, free_port
 
@@ -75,6 +75,7 @@ def test_the_brake_is_ready_and_watched_without_a_bus(tmp_path):
     # ready once its deadline timer runs: the brake's fail-safe is its service, bus or not
     (tmp_path / "brake.toml").write_text(
         f'[zenoh]\nconnect = ["tcp/127.0.0.1:{free_port()}"]\n'
+        f'[brake]\ncommand_keys = ["{EXAMPLE_KEYS / "primary.key"}"]\n'
         f'[brake.serial]\nport = "{tmp_path / "no-actuator"}"\n')
     with NotifyListener(tmp_path / "notify") as listener:
         proc = start(aeb("brake", "--config", str(tmp_path / "brake.toml")), listener,
@@ -107,7 +108,9 @@ def test_radar_camera_and_fusion_are_ready_once_serving_and_watched(tmp_path, ro
 
 
 def test_up_notifies_for_itself_and_its_children_do_not(tmp_path):
-    (tmp_path / "brake.toml").write_text(f'[brake.serial]\nport = "{tmp_path / "none"}"\n')
+    (tmp_path / "brake.toml").write_text(
+        f'[brake]\ncommand_keys = ["{EXAMPLE_KEYS / "primary.key"}"]\n'
+        f'[brake.serial]\nport = "{tmp_path / "none"}"\n')
     path = table(tmp_path, free_port(),
                  '[[service]]\nname = "brake"\naeb = "brake"\nconfig = "brake.toml"\n')
     with NotifyListener(tmp_path / "notify") as listener:

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
 from tools.launch.main import main as up
 
 TABLE_HEAD = """
@@ -32,7 +32,8 @@ def service(name: str, command: str, config: str, args: str = "") -> str:
 
 @pytest.fixture
 def configs(tmp_path):
-    (tmp_path / "brake.toml").write_text("[brake]\ndeadline_ms = 200.0\n")
+    (tmp_path / "brake.toml").write_text(
+        f'[brake]\ndeadline_ms = 200.0\ncommand_keys = ["{EXAMPLE_KEYS / "primary.key"}"]\n')
     (tmp_path / "fusion.toml").write_text(f'[fusion]\ncalibration = "{EXAMPLE_CALIBRATION}"\n')
     return tmp_path
 
@@ -55,6 +56,7 @@ def test_a_valid_table_passes_and_nothing_is_started(configs, capsys):
      service("fusion", "fusion", "fusion.toml"), "missing.toml"),
     ({"brake.toml": "[brake]\ndeadline_ms = -1.0\n"},
      service("brake", "brake", "brake.toml"), "deadline_ms"),
+    ({"brake.toml": "[brake]\n"}, service("brake", "brake", "brake.toml"), "command_keys"),
     ({"fusion.toml": ""}, service("fusion", "fusion", "fusion.toml", '["--instance", "a/b"]'),
      "instance"),
     ({"radar.toml": '[radar.can]\ninterface = "replay"\n[radar.replay]\nfile = "drive.log"\n'},

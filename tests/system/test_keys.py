@@ -1,0 +1,67 @@
+"""Command keys: `aeb keygen`, the example keys shipped in deploy/, `aeb init` replacing
+them, and the key files the services refuse."""
+
+import stat
+from pathlib import Path
+
+import pytest
+
+from common.command_auth import KeyFileError, load_key, load_keyring
+from common.resources import EXAMPLE_KEYS
+from tools import init, keygen
+
+
+def test_keygen_writes_a_fresh_private_key_and_never_overwrites_silently(tmp_path: Path):
+    out = tmp_path / "keys" / "primary.key"
+    assert keygen.main(["--instance", "primary", "--out", str(out)]) == 0
+    key = load_key(out)
+    assert key.instance == "primary" and not key.insecure_example and len(key.secret) == 32
+    assert stat.S_IMODE(out.stat().st_mode) == 0o600
+    assert keygen.main(["--instance", "primary", "--out", str(out)]) == 2
+    assert load_key(out).secret == key.secret
+    assert keygen.main(["--instance", "primary", "--out", str(out), "--force"]) == 0
+    assert load_key(out).secret != key.secret
+    assert keygen.main(["--instance", "a/b", "--out", str(tmp_path / "x.key")]) == 2
+
+
+def test_the_shipped_keys_are_labelled_insecure_examples():
+    keys = sorted(EXAMPLE_KEYS.glob("*.key"))
+    assert {k.stem for k in keys} >= {"primary", "candidate"}
+    for path in keys:
+        key = load_key(path)
+        assert key.insecure_example and key.instance == path.stem
+        assert "INSECURE EXAMPLE KEY" in path.read_text()
+
+
+def test_init_replaces_every_example_key_in_its_copy(tmp_path: Path):
+    assert init.main([str(tmp_path / "vehicle")]) == 0
+    for path in sorted((tmp_path / "vehicle" / "keys").glob("*.key")):
+        key, shipped = load_key(path), load_key(EXAMPLE_KEYS / path.name)
+        assert not key.insecure_example and key.instance == shipped.instance
+        assert key.secret != shipped.secret
+        assert stat.S_IMODE(path.stat().st_mode) == 0o600
+
+
+@pytest.mark.parametrize("text, error", [
+    ("", "not a command key file"),
+    ('key_id = "k"\ninstance = "primary"\nsecret = "zz"\n', "hex"),
+    ('key_id = "k"\ninstance = "primary"\nsecret = "00"\n', "16 to 64"),
+    ('key_id = "k"\ninstance = "primary"\nsecret = "' + "00" * 32 + '"\nextra = 1\n',
+     "not a command key file"),
+])
+def test_a_bad_key_file_is_named_with_what_is_wrong(tmp_path: Path, text: str, error: str):
+    path = tmp_path / "bad.key"
+    path.write_text(text)
+    with pytest.raises(KeyFileError, match=error):
+        load_key(path)
+
+
+def test_the_brake_accepts_only_keys_of_its_instance(tmp_path: Path):
+    with pytest.raises(KeyFileError, match="instance 'candidate'"):
+        load_keyring([str(EXAMPLE_KEYS / "candidate.key")], "primary")
+    with pytest.raises(KeyFileError, match="given twice"):
+        load_keyring([str(EXAMPLE_KEYS / "primary.key")] * 2, "primary")
+    with pytest.raises(KeyFileError, match="cannot read"):
+        load_keyring([str(tmp_path / "missing.key")], "primary")
+    assert list(load_keyring([str(EXAMPLE_KEYS / "primary.key")], "primary")) == [
+        "primary-insecure-example"]
