@@ -103,8 +103,8 @@ def plot(table: list[dict[str, Any]], records: list[Record], path: Path) -> Path
     ax.set_yticklabels([f"{r['fault']} ({r['within_bound']}/{r['injections']})"
                         for r, _ in shown], fontsize=8)
     ax.set_xscale("log")
-    ax.set_xlabel("response time, ms (log): green within bound, red x outside; "
-                  "black | median, red | bound")
+    ax.set_xlabel("response time, ms (log): green met, red x failed (late, or another "
+                  "requirement broken); black | median, red | bound")
     ax.invert_yaxis()
     ax.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()
