@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "router": ("common.router", "a Zenoh router"),
     "up": ("tools.launch.main", "start the router and services of a process table"),
     "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
+    "faults": ("tools.faults.main", "inject faults into the stack, check responses; fuzz"),
     "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
@@ -43,6 +44,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 # and the modules of those optional dependencies
 COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
                  "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
+                 "faults": "demo",
                  "record": "record", "replay": "record", "rerun": "record",
                  "evidence": "record", "foxglove": "record"}
 OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",

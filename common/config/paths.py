@@ -16,7 +16,9 @@ from typing import Annotated, Any, TypeVar
 import msgspec
 
 _MARK = "aeb_config_path"
-ConfigPath = Annotated[str, msgspec.Meta(extra={_MARK: True})]
+# No path holds a NUL byte: refused as a bad field here, not as a ValueError from the OS
+# call that would meet it first
+ConfigPath = Annotated[str, msgspec.Meta(pattern="^[^\x00]*$", extra={_MARK: True})]
 # A table of free parameters (a verifier's) whose entries under these keys are paths.
 _KEYS_MARK = "aeb_config_path_keys"
 

@@ -42,7 +42,11 @@ class ConfigurationError(ValueError):
 def check_settings(c: CanSettings, r: ReplaySettings) -> None:
     """Fail fast on settings no retry can fix. Raises ConfigurationError."""
     if c.interface == REPLAY:
-        if not Path(r.file).is_file():
+        try:
+            readable = Path(r.file).is_file()
+        except OSError as exc:    # e.g. a name longer than the file system allows
+            raise ConfigurationError(f"radar.replay.file {r.file!r}: {exc.strerror}") from exc
+        if not readable:
             raise ConfigurationError(f"radar.replay.file {r.file!r} is not a readable file")
     elif c.interface not in can.interfaces.VALID_INTERFACES:
         raise ConfigurationError(

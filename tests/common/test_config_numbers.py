@@ -71,7 +71,7 @@ def test_every_config_type_has_numbers_to_try():
 def _use(cfg: msgspec.Struct) -> None:
     """What a start builds from a config before any I/O."""
     if isinstance(cfg, BrakeConfig):
-        BrakeCore(cfg.brake, "aeb/ego/fusion/primary/brake_cmd", 0, {})
+        BrakeCore(cfg.brake, "aeb/ego/fusion/primary/brake_cmd", 0, {})   # keys: not used here
     elif isinstance(cfg, FusionConfig):
         build_core(cfg)
 

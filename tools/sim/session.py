@@ -5,9 +5,10 @@ radar link, camera plugin and actuator, plus the simulator driving them.
 Used by `aeb demo` and by the benchmarks that measure the stack while scenarios run.
 """
 
+import json
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,7 @@ from common.config.base import ZenohMode, ZenohSettings
 from common.net import free_port
 from common.resources import DEPLOY
 from tools.launch.supervisor import LinePrinter, Supervisor
-from tools.launch.table import load_table, resolve_launches
+from tools.launch.table import Launch, load_table, resolve_launches
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.runner import SimActuatorView, Simulator
 from tools.sim.scenario import RadarLook
@@ -41,14 +42,21 @@ class StackStartError(RuntimeError):
 
 
 def write_table(folder: Path, endpoint: str, configs: StackConfigs,
-                candidate: bool = False, realtime_priority: int = 0) -> Path:
-    """The session's process table (the same launcher as `aeb up`)."""
+                candidate: bool = False, realtime_priority: int = 0,
+                restart: str = "never", router_listen: tuple[str, ...] = ()) -> Path:
+    """The session's process table (the same launcher as `aeb up`). `restart` is the
+    table's restart mode; a process restarted is started again after 0.05 s whatever
+    its history (a fault-injection run kills processes on purpose, many times).
+    `router_listen`: more endpoints for the router (e.g. on a network namespace's
+    link)."""
+    listen = json.dumps([endpoint, *router_listen])
     lines = [
         "# Written by the closed-loop session: the stack under simulation.",
         f'workdir = "{folder.resolve()}"', "stop_grace_s = 5.0", "",
-        "[router]", f'listen = ["{endpoint}"]', f"realtime_priority = {realtime_priority}", "",
+        "[router]", f"listen = {listen}", f"realtime_priority = {realtime_priority}", "",
         "[zenoh]", f'connect = ["{endpoint}"]', "",
-        "[restart]", 'mode = "never"', "",
+        "[restart]", f'mode = "{restart}"',
+        "backoff = { initial_s = 0.05, max_s = 0.05, factor = 1.0 }", "",
     ]
     for name in SERVICES:
         lines += ["[[service]]", f'name = "{name}"', f'aeb = "{name}"',
@@ -117,8 +125,13 @@ class ClosedLoop:
 @contextmanager
 def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: bool = False,
                 log: IO[str] | None = None, realtime_priority: int = 0,
-                fusion_config: Path = FUSION_CONFIG, raw_can: bool = False) -> Iterator[ClosedLoop]:
+                fusion_config: Path = FUSION_CONFIG, raw_can: bool = False,
+                restart: str = "never", router_listen: tuple[str, ...] = (),
+                adapt: Callable[[Launch], Launch] | None = None) -> Iterator[ClosedLoop]:
     """Start the stack and the simulator; stop everything on exit.
+
+    `restart`, `router_listen`: see write_table. `adapt` may change each process's
+    launch before it starts (e.g. run one service in another network namespace).
 
     `realtime_priority` > 0: SCHED_FIFO for the router and the radar's and brake's
     latency path (tools/sim/stack.py write_configs); fusion's comes from `fusion_config`.
@@ -148,8 +161,10 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
                                 realtime_priority=realtime_priority, raw_can=raw_can,
                                 fusion_instance=instance)
         table, workdir = load_table(write_table(run_dir, endpoint, configs, candidate,
-                                                realtime_priority))
+                                                realtime_priority, restart, router_listen))
         launches = resolve_launches(table, workdir, "demo")
+        if adapt is not None:
+            launches = [adapt(launch) for launch in launches]
         supervisor = Supervisor(launches, LinePrinter(
             log_file, ["up", *(launch.name for launch in launches)], colour=False))
         supervisor.start()

@@ -1,0 +1,128 @@
+"""The harness's own parts, without a stack: the CAN gate, the loopback relay that
+stands in for a cut link, the mutations, and the fault table."""
+
+import random
+import socket
+import threading
+
+from tools.faults.catalogue import Outcome
+from tools.faults.harness import Record, RunInfo
+from tools.faults.links import CanGate, RelayLink
+from tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
+from tools.faults.report import markdown, rows, write
+
+
+class ListSink:
+    def __init__(self) -> None:
+        self.frames: list[int] = []
+
+    def send(self, frames):
+        self.frames += list(frames)
+
+
+def test_can_gate_passes_then_cuts_a_cycle_after_n_frames_then_restores():
+    sink = ListSink()
+    gate = CanGate(sink)
+    gate.send([1, 2, 3])
+    gate.silence(after_frames=2)
+    gate.send([4, 5, 6])        # a cycle cut after its second frame
+    gate.send([7])
+    assert sink.frames == [1, 2, 3, 4, 5]
+    assert gate.dropped == 2
+    gate.restore()
+    gate.send([8])
+    assert sink.frames[-1] == 8
+
+
+def _echo_server() -> tuple[socket.socket, int]:
+    srv = socket.create_server(("127.0.0.1", 0))
+
+    def serve() -> None:
+        while True:
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                return
+            threading.Thread(target=_echo, args=(conn,), daemon=True).start()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return srv, srv.getsockname()[1]
+
+
+def _echo(conn: socket.socket) -> None:
+    with conn:
+        while data := conn.recv(1024):
+            conn.sendall(data)
+
+
+def test_relay_forwards_until_cut_refuses_while_cut_and_forwards_after_restore():
+    srv, port = _echo_server()
+    relay = RelayLink(port)
+    try:
+        with socket.create_connection(("127.0.0.1", relay.port), timeout=5) as c:
+            c.sendall(b"ping")
+            assert c.recv(16) == b"ping"
+            relay.cut()
+            c.settimeout(5)
+            assert c.recv(16) == b""          # the relayed connection is gone
+        with socket.create_connection(("127.0.0.1", relay.port), timeout=5) as c:
+            c.settimeout(5)
+            assert c.recv(16) == b""          # refused while cut
+        relay.restore()
+        with socket.create_connection(("127.0.0.1", relay.port), timeout=5) as c:
+            c.sendall(b"back")
+            assert c.recv(16) == b"back"
+    finally:
+        relay.remove()
+        srv.close()
+
+
+def test_mutations_are_reproducible_and_bounded():
+    seed = bytes(range(64))
+    a = [mutate_bytes(random.Random(i), seed) for i in range(200)]
+    b = [mutate_bytes(random.Random(i), seed) for i in range(200)]
+    assert a == b
+    assert sum(x != seed for x in a) > 150
+    assert max(len(x) for x in a) <= 2 * len(seed) + 64
+    tree = {"a": {"b": 1.0, "c": [1, 2]}, "d": "x"}
+    assert sum(mutate_tree(random.Random(i), tree) != tree for i in range(100)) > 80
+    assert tree == {"a": {"b": 1.0, "c": [1, 2]}, "d": "x"}     # the original untouched
+    payload = b"\x82\xa1a\x01\xa1b\xa1x"
+    assert any(mutate_msgpack(random.Random(i), payload) != payload for i in range(20))
+
+
+def test_table_counts_injections_bounds_and_losses(tmp_path):
+    rec = Record("SIGKILL fusion", "brake FAILSAFE")
+    rec.outcomes = [Outcome(True, 200.5), Outcome(True, 201.5), Outcome(False, 300.0, "late"),
+                    Outcome(False, None, "no FAILSAFE line", lost=1)]
+    rec.recover_s = [1.0, 2.0, 3.0]
+    rec.unrecovered = 1
+    skipped = Record("link cut", "brake FAILSAFE", skipped="no netns")
+    info = RunInfo("quick", 1, 1, 12.0, "loopback relay")
+    table = rows([rec, skipped])
+    assert table[0]["injections"] == 4 and table[0]["within_bound"] == 2
+    assert table[0]["p50_ms"] == 201.5 and table[0]["max_ms"] == 300.0
+    assert table[0]["lost"] == 1 and table[0]["recover_p50_s"] == 2.0
+    text = markdown(table, info)
+    assert "| SIGKILL fusion | brake FAILSAFE | 4 | 2 | - | 201.5 | 300.0 |" in text
+    assert "skipped: no netns" in text and "late" in text
+    md, js, png = write(tmp_path, [rec, skipped], info)
+    assert md.is_file() and js.is_file() and png is not None and png.stat().st_size > 1000
+
+
+def test_tables_of_two_runs_combine_into_one(tmp_path):
+    from tools.faults.report import combine
+    a, b = Record("SIGKILL radar", "FAILSAFE"), Record("frozen camera", "unavailable")
+    a.outcomes, a.recover_s = [Outcome(True, 200.0, bound_ms=260.0)] * 3, [1.0] * 3
+    b.skipped = "not in this run"
+    write(tmp_path / "one", [a, b], RunInfo("soak", 3, 3, 60.0, "netns"))
+    a2, b2 = Record("SIGKILL radar", "FAILSAFE"), Record("frozen camera", "unavailable")
+    a2.skipped = "not in this run"
+    b2.outcomes = [Outcome(True, 900.0, bound_ms=2000.0), Outcome(False, None, "none")]
+    write(tmp_path / "two", [a2, b2], RunInfo("soak", 2, 2, 30.0, "netns"))
+    records, info = combine([tmp_path / "one" / "faults.json", tmp_path / "two" / "faults.json"])
+    by = {r.fault: r for r in records}
+    assert len(by["SIGKILL radar"].outcomes) == 3 and not by["SIGKILL radar"].skipped
+    assert [o.ok for o in by["frozen camera"].outcomes] == [True, False]
+    assert info.seconds == 90.0 and len(info.runs) == 2
+    assert "2 runs" in markdown(rows(records), info)

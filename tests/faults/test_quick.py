@@ -1,0 +1,42 @@
+"""`aeb faults` quick mode (one injection of each fault into one running stack), as CI
+runs it: every fault is injected, each gets its required response within its bound,
+the stack recovers after each, and the table is written as Markdown, JSON and PNG.
+About a minute on a 2-core machine."""
+
+import io
+import json
+
+import pytest
+
+from tools.faults import harness, report
+from tools.faults.catalogue import catalogue
+
+pytestmark = pytest.mark.slow
+
+
+def test_quick_mode_every_fault_answered_within_bound(tmp_path):
+    log = io.StringIO()
+    records, info = harness.run(tmp_path, 1, "quick", log)
+    md, js, png = report.write(tmp_path, records, info)
+    context = f"\n{md.read_text()}\n{log.getvalue()[-3000:]}"
+    assert not info.stopped_early, context
+    assert [r.fault for r in records] == [f.name for f in catalogue()]
+    for rec in records:
+        # the link cut runs everywhere: over a veth pair, or over the loopback relay
+        assert not rec.skipped, context
+        assert len(rec.outcomes) == 1, context
+        assert rec.outcomes[0].ok, f"{rec.fault}: {rec.outcomes[0].detail}{context}"
+        assert rec.unrecovered == 0, context
+    assert not info.unexpected_exits, context
+    data = json.loads(js.read_text())
+    assert len(data["faults"]) == len(records) and png is not None and png.is_file()
+
+
+def test_link_cut_over_the_loopback_relay_fails_safe(tmp_path):
+    """The fallback where network namespaces cannot be made (not root, no netns)."""
+    records, info = harness.run(tmp_path, 1, "relay", io.StringIO(), only=["link cut"],
+                                link_kind="relay")
+    assert info.link.startswith("loopback relay")
+    (rec,) = records
+    assert len(rec.outcomes) == 1 and rec.outcomes[0].ok, rec.outcomes[0].detail
+    assert "loopback relay" in rec.outcomes[0].detail

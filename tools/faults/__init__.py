@@ -1,0 +1,1 @@
+"""Fault injection (`aeb faults`) and fuzzing (`aeb faults fuzz`) of the stack."""

@@ -1,0 +1,130 @@
+"""What the harness watches while it injects faults: the brake's status, fusion's
+targets and commands, the camera's newest frame (from the bus, each with its receipt
+time on this host's monotonic clock) and the simulated actuator's events."""
+
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+from common.bus import Bus
+from common.command_auth import CommandKey, mac_problem
+from common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
+from common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
+from common.messages.codec import DecodeError, decode
+
+T = TypeVar("T")
+HISTORY = 4000
+
+
+@dataclass(frozen=True)
+class Seen(Generic[T]):
+    rx_ns: int
+    msg: T
+
+
+class Stream(Generic[T]):
+    """A bounded history of received messages, with a wait on a predicate."""
+
+    def __init__(self, cond: threading.Condition) -> None:
+        self._cond = cond
+        self.items: list[Seen[T]] = []
+        self.total = 0
+
+    def add(self, item: Seen[T]) -> None:
+        with self._cond:
+            self.items.append(item)
+            self.total += 1
+            if len(self.items) > HISTORY:
+                del self.items[:HISTORY // 2]
+            self._cond.notify_all()
+
+    def mark(self) -> int:
+        """A position: `wait` looks only at what arrives after it."""
+        with self._cond:
+            return self.total
+
+    def since(self, mark: int) -> list[Seen[T]]:
+        with self._cond:
+            start = len(self.items) - (self.total - mark)
+            return list(self.items[max(start, 0):])
+
+    def wait(self, pred: Callable[[T], bool], mark: int, timeout_s: float) -> Seen[T] | None:
+        """The first message after `mark` for which `pred` holds, or None at the timeout."""
+        deadline = time.monotonic() + timeout_s
+        checked = mark
+        with self._cond:
+            while True:
+                start = len(self.items) - (self.total - checked)
+                for item in self.items[max(start, 0):]:
+                    if pred(item.msg):
+                        return item
+                checked = self.total
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self._cond.wait(min(left, 0.1))
+
+    def last(self) -> Seen[T] | None:
+        with self._cond:
+            return self.items[-1] if self.items else None
+
+
+class Observer:
+    """Subscribes on the harness's own bus session. Status and targets that do not
+    come from the stack's own processes (the harness's floods) are not recorded, nor
+    commands that do not authenticate with `keys` (fusion's command keys)."""
+
+    def __init__(self, bus: Bus, actuator: Any, keys: Mapping[str, CommandKey],
+                 brake_source: str = "brake/main", fusion_instance: str = "primary") -> None:
+        cond = threading.Condition()
+        self.status: Stream[BrakeStatus] = Stream(cond)
+        self.targets: Stream[VerifiedTargets] = Stream(cond)
+        self.commands: Stream[BrakeCommand] = Stream(cond)
+        self.actuator_events: Stream[Any] = Stream(cond)
+        self.frame_payload: bytes | None = None
+        self._brake_source = brake_source
+        self._fusion_source = f"fusion/{fusion_instance}"
+        self._keys = keys
+        self._subs = [
+            bus.subscribe_raw(BRAKE_STATUS, self._on_status),
+            bus.subscribe_raw(FUSION_TARGETS, self._on_targets, instance=fusion_instance),
+            bus.subscribe_raw(FUSION_BRAKE_CMD, self._on_command, instance=fusion_instance),
+            bus.subscribe_raw(CAMERA_JPEG, self._on_frame, camera="front"),
+        ]
+        actuator.add_listener(lambda e: self.actuator_events.add(Seen(e.t_ns, e)))
+        self.forged_seen = 0      # harness's own publications that came back (ignored)
+
+    def _on_status(self, payload: bytes, key: str, rx_ns: int) -> None:
+        try:
+            msg = decode(payload, BrakeStatus)
+        except DecodeError:
+            return
+        if msg.header.source != self._brake_source:
+            self.forged_seen += 1
+            return
+        self.status.add(Seen(rx_ns, msg))
+
+    def _on_targets(self, payload: bytes, key: str, rx_ns: int) -> None:
+        try:
+            msg = decode(payload, VerifiedTargets)
+        except DecodeError:
+            return
+        if msg.header.source != self._fusion_source:
+            self.forged_seen += 1
+            return
+        self.targets.add(Seen(rx_ns, msg))
+
+    def _on_command(self, payload: bytes, key: str, rx_ns: int) -> None:
+        try:
+            msg = decode(payload, BrakeCommand)
+        except DecodeError:
+            return
+        if msg.header.source != self._fusion_source or mac_problem(payload, msg, self._keys):
+            self.forged_seen += 1
+            return
+        self.commands.add(Seen(rx_ns, msg))
+
+    def _on_frame(self, payload: bytes, key: str, rx_ns: int) -> None:
+        self.frame_payload = payload
