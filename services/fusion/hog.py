@@ -12,6 +12,8 @@ block the same way, then the bins; for a 64x128 window that is 3780 numbers, the
 of OpenCV's `compute` (tests/fusion/test_hog.py holds reference values from it).
 """
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
@@ -42,48 +44,55 @@ def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(w[:, :CELL]), np.ascontiguousarray(w[:, CELL:])
 
 
-_FIRST, _SECOND = _cell_weights()
-_BIN_IDS = np.arange(BINS)
+_WEIGHTS = np.concatenate(_cell_weights(), axis=1)     # (2 cells, BLOCK)
+
+
+@lru_cache(maxsize=16)
+def _block_matrix(n: int) -> np.ndarray:
+    """(n, 2 * blocks) float32: column 2 * i + c weighs each of `n` pixels along one axis
+    for cell c of block i (zero outside the block), so that one matrix product sums every
+    block's cells along that axis. Pixels past the last whole cell weigh nothing."""
+    blocks = n // CELL - 1
+    m = np.zeros((n, 2 * blocks), np.float32)
+    for i in range(blocks):
+        m[i * STRIDE:i * STRIDE + BLOCK, 2 * i:2 * i + 2] = _WEIGHTS.T
+    m.setflags(write=False)
+    return m
+
+
+@lru_cache(maxsize=16)
+def _vote_base(h: int, w: int) -> np.ndarray:
+    """(h, w) intp: where pixel (y, x)'s bins start in a flat (w, h, BINS) vote array."""
+    base = (np.arange(w)[None, :] * h + np.arange(h)[:, None]) * BINS
+    base.setflags(write=False)
+    return base
 
 
 def orientation_votes(gray: np.ndarray) -> np.ndarray:
-    """(BINS, H, W) float32: each pixel's gradient magnitude split between its two
-    nearest orientation bins. Raises ValueError for an image that is not 2-D uint8."""
+    """(W, H, BINS) float32, column-major: each pixel's gradient magnitude split between
+    its two nearest orientation bins. Raises ValueError for an image that is not 2-D
+    uint8."""
     if gray.ndim != 2 or gray.dtype != np.uint8:
         raise ValueError(f"HOG needs a 2-D uint8 image, got {gray.dtype} {gray.shape}")
-    img = _GAMMA[gray]
-    pad = cv2.copyMakeBorder(img, 1, 1, 1, 1, cv2.BORDER_REFLECT_101)
-    dx = pad[1:-1, 2:] - pad[1:-1, :-2]
-    dy = pad[2:, 1:-1] - pad[:-2, 1:-1]
+    img = cv2.LUT(gray, _GAMMA)
+    # [-1, 0, 1] derivatives, reflected at the border (BORDER_REFLECT_101) as OpenCV's.
+    dx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=1, borderType=cv2.BORDER_REFLECT_101)
+    dy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=1, borderType=cv2.BORDER_REFLECT_101)
     mag, ang = cv2.cartToPolar(dx, dy, angleInDegrees=False)
     a = ang * np.float32(BINS / np.pi) - np.float32(0.5)
     lo = np.floor(a)
     upper = mag * (a - lo)
     lower = mag - upper
     # Angles lie in [0, 2 pi): a in [-0.5, 18), its floor -1..17, the bin that mod 9.
-    b0 = lo.astype(np.int8)
-    b0[b0 < 0] += BINS
-    b0[b0 >= BINS] -= BINS
-    votes = np.empty((BINS, *gray.shape), np.float32)
-    prev = b0 == BINS - 1                       # b1 = b0 + 1 wraps from the last bin
-    spare = np.empty_like(lower)
-    for k in range(BINS):
-        here = b0 == k
-        np.multiply(lower, here, out=votes[k])
-        votes[k] += np.multiply(upper, prev, out=spare)
-        prev = here
-    return votes
-
-
-def _blocks_along(v: np.ndarray, axis: int) -> np.ndarray:
-    """Weighted sums over each block's pixels along `axis` (cut to whole cells): that
-    axis becomes (blocks, 2 cells), appended last."""
-    v = np.moveaxis(v, axis, -1)
-    n = v.shape[-1] // CELL
-    cells = v[..., :n * CELL].reshape(*v.shape[:-1], n, CELL)
-    first = np.tensordot(cells[..., :-1, :], _FIRST, axes=([-1], [1]))  # (..., blocks, 2)
-    second = np.tensordot(cells[..., 1:, :], _SECOND, axes=([-1], [1]))
-    return first + second
+    b0 = lo.astype(np.intp) % BINS
+    b1 = b0 + 1
+    b1[b1 == BINS] = 0
+    h, w = gray.shape
+    base = _vote_base(h, w)
+    votes = np.zeros(h * w * BINS, np.float32)
+    votes[base + b0] = lower
+    votes[base + b1] = upper
+    return votes.reshape(w, h, BINS)
 
 
 def block_grid(gray: np.ndarray) -> np.ndarray:
@@ -93,11 +102,13 @@ def block_grid(gray: np.ndarray) -> np.ndarray:
     h, w = gray.shape[:2]
     if h < BLOCK or w < BLOCK:
         raise ValueError(f"HOG needs at least {BLOCK}x{BLOCK} pixels, got {w}x{h}")
-    votes = orientation_votes(gray)             # (BINS, H, W)
-    across = _blocks_along(votes, 2)            # (BINS, H, nbx, cx)
-    both = _blocks_along(across, 1)             # (BINS, nbx, cx, nby, cy)
-    hist = np.ascontiguousarray(both.transpose(1, 3, 2, 4, 0))  # (nbx, nby, cx, cy, BINS)
-    nbx, nby = hist.shape[:2]
+    votes = orientation_votes(gray)             # (W, H, BINS)
+    mx, my = _block_matrix(w), _block_matrix(h)
+    nbx, nby = mx.shape[1] // 2, my.shape[1] // 2
+    # Two small products (x then y), not per-cell loops: every block's four cells at once.
+    across = (mx.T @ votes.reshape(w, h * BINS)).reshape(2 * nbx, h, BINS)
+    both = my.T @ np.ascontiguousarray(across.transpose(1, 0, 2)).reshape(h, -1)
+    hist = np.ascontiguousarray(both.reshape(nby, 2, nbx, 2, BINS).transpose(2, 0, 3, 1, 4))
     hist = hist.reshape(nbx, nby, 4 * BINS)
     size = 4 * BINS
     scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + size * 0.1)
