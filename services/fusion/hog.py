@@ -44,20 +44,14 @@ def _cell_weights() -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(w[:, :CELL]), np.ascontiguousarray(w[:, CELL:])
 
 
-_WEIGHTS = np.concatenate(_cell_weights(), axis=1)     # (2 cells, BLOCK)
+# A cell's pixels weighed for each cell of the block it starts (rows 0, 1) and of the
+# block it ends (rows 2, 3): (4, CELL).
+_CELL_WEIGHTS = np.concatenate(_cell_weights(), axis=0)
 
 
-@lru_cache(maxsize=16)
-def _block_matrix(n: int) -> np.ndarray:
-    """(n, 2 * blocks) float32: column 2 * i + c weighs each of `n` pixels along one axis
-    for cell c of block i (zero outside the block), so that one matrix product sums every
-    block's cells along that axis. Pixels past the last whole cell weigh nothing."""
-    blocks = n // CELL - 1
-    m = np.zeros((n, 2 * blocks), np.float32)
-    for i in range(blocks):
-        m[i * STRIDE:i * STRIDE + BLOCK, 2 * i:2 * i + 2] = _WEIGHTS.T
-    m.setflags(write=False)
-    return m
+# The two bins a pixel votes for, indexed by floor(a) + 1 for floor(a) in -1..18.
+_LOWER_BIN = np.arange(-1, 19) % BINS
+_UPPER_BIN = np.arange(0, 20) % BINS
 
 
 @lru_cache(maxsize=16)
@@ -75,23 +69,24 @@ def orientation_votes(gray: np.ndarray) -> np.ndarray:
     if gray.ndim != 2 or gray.dtype != np.uint8:
         raise ValueError(f"HOG needs a 2-D uint8 image, got {gray.dtype} {gray.shape}")
     img = cv2.LUT(gray, _GAMMA)
-    # [-1, 0, 1] derivatives, reflected at the border (BORDER_REFLECT_101) as OpenCV's.
-    dx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=1, borderType=cv2.BORDER_REFLECT_101)
-    dy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=1, borderType=cv2.BORDER_REFLECT_101)
+    # Centred [-1, 0, 1] derivatives, reflected at the border as OpenCV's.
+    pad = cv2.copyMakeBorder(img, 1, 1, 1, 1, cv2.BORDER_REFLECT_101)
+    dx = pad[1:-1, 2:] - pad[1:-1, :-2]
+    dy = pad[2:, 1:-1] - pad[:-2, 1:-1]
     mag, ang = cv2.cartToPolar(dx, dy, angleInDegrees=False)
-    a = ang * np.float32(BINS / np.pi) - np.float32(0.5)
+    a = np.multiply(ang, np.float32(BINS / np.pi), out=ang)
+    a -= np.float32(0.5)
     lo = np.floor(a)
-    upper = mag * (a - lo)
-    lower = mag - upper
-    # Angles lie in [0, 2 pi): a in [-0.5, 18), its floor -1..17, the bin that mod 9.
-    b0 = lo.astype(np.intp) % BINS
-    b1 = b0 + 1
-    b1[b1 == BINS] = 0
+    upper = np.multiply(mag, np.subtract(a, lo, out=a), out=a)
+    lower = np.subtract(mag, upper, out=mag)
+    # Angles lie in [0, 2 pi): a in [-0.5, 18), its floor -1..17; the two bins, mod 9.
+    step = lo.astype(np.intp)
+    step += 1
     h, w = gray.shape
     base = _vote_base(h, w)
     votes = np.zeros(h * w * BINS, np.float32)
-    votes[base + b0] = lower
-    votes[base + b1] = upper
+    votes[base + _LOWER_BIN[step]] = lower
+    votes[base + _UPPER_BIN[step]] = upper
     return votes.reshape(w, h, BINS)
 
 
@@ -103,12 +98,19 @@ def block_grid(gray: np.ndarray) -> np.ndarray:
     if h < BLOCK or w < BLOCK:
         raise ValueError(f"HOG needs at least {BLOCK}x{BLOCK} pixels, got {w}x{h}")
     votes = orientation_votes(gray)             # (W, H, BINS)
-    mx, my = _block_matrix(w), _block_matrix(h)
-    nbx, nby = mx.shape[1] // 2, my.shape[1] // 2
-    # Two small products (x then y), not per-cell loops: every block's four cells at once.
-    across = (mx.T @ votes.reshape(w, h * BINS)).reshape(2 * nbx, h, BINS)
-    both = my.T @ np.ascontiguousarray(across.transpose(1, 0, 2)).reshape(h, -1)
-    hist = np.ascontiguousarray(both.reshape(nby, 2, nbx, 2, BINS).transpose(2, 0, 3, 1, 4))
+    ncx, ncy = w // CELL, h // CELL
+    nbx, nby = ncx - 1, ncy - 1
+    # Each cell's weighed sums along x for the two blocks it belongs to, as one small
+    # product per cell column; a block adds its first cell's and its second's.
+    cells = votes.reshape(w, h * BINS)[:ncx * CELL].reshape(ncx, CELL, h * BINS)
+    sums = _CELL_WEIGHTS @ cells                # (ncx, 4, H * BINS)
+    across = sums[:-1, :2] + sums[1:, 2:]       # (nbx, 2 cx, H * BINS)
+    # The same along y, y brought first.
+    rows = across.reshape(nbx * 2, h, BINS).transpose(1, 0, 2)[:ncy * CELL]
+    cells = np.ascontiguousarray(rows).reshape(ncy, CELL, nbx * 2 * BINS)
+    sums = _CELL_WEIGHTS @ cells                # (ncy, 4, nbx * 2 * BINS)
+    both = (sums[:-1, :2] + sums[1:, 2:]).reshape(nby, 2, nbx, 2, BINS)
+    hist = np.ascontiguousarray(both.transpose(2, 0, 3, 1, 4))  # (nbx, nby, cx, cy, BINS)
     hist = hist.reshape(nbx, nby, 4 * BINS)
     size = 4 * BINS
     scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + size * 0.1)
