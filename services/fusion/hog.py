@@ -135,13 +135,9 @@ def window_scores(grid: np.ndarray, weights: np.ndarray, bias: float,
     nbx, nby, size = grid.shape
     if nbx < wx or nby < wy:
         raise ValueError(f"a {nbx}x{nby}-block grid holds no {wx}x{wy}-block window")
-    w = np.asarray(weights, np.float32).reshape(wx * wy, size)
-    # Every block against every weight block at once, then each window sums its own.
+    w = np.asarray(weights, np.float32).reshape(wx, wy, size)
+    # Each window position dotted with the weights on a view of the grid (no copies).
     # einsum, not a BLAS product: BLAS threads on a loaded machine cost more than this.
-    parts = np.einsum("ps,ks->pk", grid.reshape(nbx * nby, size), w).reshape(nbx, nby, wx, wy)
-    px, py = nbx - wx + 1, nby - wy + 1
-    scores = np.zeros((px, py), np.float32)
-    for i in range(wx):
-        for j in range(wy):
-            scores += parts[i:i + px, j:j + py, i, j]
+    windows = np.lib.stride_tricks.sliding_window_view(grid, (wx, wy), axis=(0, 1))
+    scores = np.einsum("xysij,ijs->xy", windows, w)
     return scores.T + np.float32(bias)
