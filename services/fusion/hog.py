@@ -111,12 +111,22 @@ def block_grid(gray: np.ndarray) -> np.ndarray:
     sums = _CELL_WEIGHTS @ cells                # (ncy, 4, nbx * 2 * BINS)
     both = (sums[:-1, :2] + sums[1:, 2:]).reshape(nby, 2, nbx, 2, BINS)
     hist = np.ascontiguousarray(both.transpose(2, 0, 3, 1, 4))  # (nbx, nby, cx, cy, BINS)
-    hist = hist.reshape(nbx, nby, 4 * BINS)
-    size = 4 * BINS
-    scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + size * 0.1)
-    hist = np.minimum(hist * scale, CLIP)
-    scale = 1.0 / (np.sqrt(np.sum(hist * hist, axis=2, keepdims=True)) + 1e-3)
-    return (hist * scale).astype(np.float32)
+    return _l2_hys(hist.reshape(nbx, nby, 4 * BINS))
+
+
+def _l2_hys(hist: np.ndarray) -> np.ndarray:
+    """Each block (last axis) L2-normalised, clipped at CLIP, L2-normalised again, with
+    OpenCV's constants; in place, float32."""
+    flat = hist.reshape(-1, hist.shape[-1])
+    for eps, clip in ((np.float32(flat.shape[1] * 0.1), True), (np.float32(1e-3), False)):
+        scale = np.einsum("ij,ij->i", flat, flat)
+        np.sqrt(scale, out=scale)
+        scale += eps
+        np.reciprocal(scale, out=scale)
+        flat *= scale[:, None]
+        if clip:
+            np.minimum(flat, np.float32(CLIP), out=flat)
+    return hist
 
 
 def descriptor(gray: np.ndarray) -> np.ndarray:
