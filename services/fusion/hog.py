@@ -9,7 +9,12 @@ at the image's border), votes split between the two nearest bins and the four ne
 cells, a Gaussian window over each block (sigma 4), L2-Hys normalisation (clipped at
 0.2). A descriptor orders its blocks column by column (x outer, y inner), the cells of a
 block the same way, then the bins; for a 64x128 window that is 3780 numbers, the order
-of OpenCV's `compute` (tests/fusion/test_hog.py holds reference values from it).
+of OpenCV's `compute` (tests/data/hog_reference.json holds reference values from it).
+
+Cost: no Python loop over cells or bins. Each pixel's two votes go into one array by
+index; the Gaussian and bilinear weights of every block are then two small matrix
+products (along x, then y) of a (4, 8) weight matrix with the cells; a 32x64 window
+costs about 80 us on one core.
 """
 
 from functools import lru_cache
