@@ -29,7 +29,7 @@ def test_bad_configuration_exits_2_naming_the_problem(tmp_path, toml, named):
 
 
 @pytest.mark.parametrize("path", ["deploy/fusion.toml", "deploy/fusion-candidate.toml",
-                                  "deploy/fusion-paper.toml", "deploy/fusion-combined.toml"])
+                                  "deploy/fusion-paper.toml"])
 def test_shipped_configs_build(path):
     core, _ = build_core(load_config(path, FusionConfig))
     assert core.source == f"fusion/{core.s.instance}"
