@@ -153,4 +153,4 @@ def test_rate_fast_window_loop_and_another_vehicle(router, tmp_path):
         seqs = [m.header.seq for m in msgs[:40]]
         assert seqs == sorted(seqs) and len(set(seqs)) == 40   # numbered on across passes
     assert span_s > 5
-    assert Path(SIM).stat().st_size < 2_000_000
+    assert Path(SIM).stat().st_size < 5_000_000     # a kept fixture stays small

@@ -28,8 +28,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import msgspec
+import numpy as np
 
 from common.clock import mono_ns, wall_ns
+from common.imaging import decode_bgr, encode_jpeg, jpeg_crc32
 from common.keys import (
     BRAKE_STATUS,
     CAMERA_INFO,
@@ -324,18 +326,27 @@ class CameraImpostorFrames(Fault):
         pid = ctx.pid("camera")
         seq = [last.header.seq]
         step_ns = ctx.rng.choice((-2, 2)) * 1_000_000_000
+        # A stepped clock on a live camera: the picture goes on changing (two pictures
+        # taken in turn, each with its own CRC), so that only the stamps are wrong; the
+        # same picture again would be a frozen camera, which fusion reports as such.
+        live = [last.jpeg, encode_jpeg(np.clip(decode_bgr(last.jpeg).astype(np.int16) + 12,
+                                               0, 255).astype(np.uint8))]
 
         def frame() -> bytes:
             seq[0] += 1
-            jpeg = last.jpeg
+            jpeg, crc32 = last.jpeg, last.crc32
             if self.kind == "corrupt":
                 jpeg = _flip_entropy_bits(ctx.rng, jpeg)
             elif self.kind == "truncated":
                 jpeg = jpeg[:ctx.rng.randrange(len(jpeg) // 4, len(jpeg) - 2)]
+            elif self.kind == "clock":
+                jpeg = live[seq[0] % 2]
+                crc32 = jpeg_crc32(jpeg) if last.crc32 is not None else None
             stamp = wall_ns() + (step_ns if self.kind == "clock" else 0)
             header = msgspec.structs.replace(last.header, seq=seq[0], stamp_ns=stamp,
                                              pub_mono_ns=mono_ns())
-            return encode(msgspec.structs.replace(last, header=header, jpeg=jpeg))
+            return encode(msgspec.structs.replace(last, header=header, jpeg=jpeg,
+                                                  crc32=crc32))
 
         def start() -> None:
             os.kill(pid, signal.SIGSTOP)

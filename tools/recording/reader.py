@@ -178,8 +178,9 @@ class Recording:
                     yield Record(channel.topic, msg.log_time, msg.publish_time, msg.sequence,
                                  msg.data, schema.name if schema is not None else "",
                                  channel.message_encoding)
-            except McapError:
-                # The cut-off record at the end: what was written before is all there is.
+            except (McapError, struct.error):
+                # The cut-off record at the end (mcap raises struct.error when the cut falls
+                # inside a record's fields): what was written before is all there is.
                 return
 
 

@@ -34,7 +34,7 @@ import msgspec
 import numpy as np
 
 from common.config.fusion import FusionConfig
-from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from common.keys import CAMERA_DEPTH, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import (
     BrakeCommand,
     DecodeError,
@@ -49,6 +49,7 @@ from services.fusion.frames import (
     DecodedFrame,
     FrameError,
     FrameFeed,
+    decode_depth_frame,
     decode_frame,
     select_frame,
 )
@@ -145,11 +146,15 @@ class FusionRerun:
         self._cmd_topic = FUSION_BRAKE_CMD.key(vehicle, instance=self.instance)
         self._targets_topic = FUSION_TARGETS.key(vehicle, instance=self.instance)
         self._frame_topics = {CAMERA_JPEG.key(vehicle, camera=c): c for c in self.cameras}
+        self._depth_topics = {CAMERA_DEPTH.key(vehicle, camera=c): c for c in self.cameras}
+        # recorded DepthFrames by (camera, capture stamp), raw until a cycle uses them
+        self._depth: OrderedDict[tuple[str, int], bytes] = OrderedDict()
+        self._depth_decoded: OrderedDict[tuple[str, int], np.ndarray | None] = OrderedDict()
 
     @property
     def topics(self) -> list[str]:
         return [self._tracks_topic, self._cmd_topic, self._targets_topic,
-                *self._frame_topics]
+                *self._frame_topics, *self._depth_topics]
 
     def run(self, recording: Recording, start_ns: int | None = None,
             end_ns: int | None = None) -> Iterator[Cycle]:
@@ -171,7 +176,12 @@ class FusionRerun:
         topic = rec.topic
         camera = self._frame_topics.get(topic)
         try:
-            if camera is not None:
+            if topic in self._depth_topics:
+                head = _frame_head(rec.data)
+                self._depth[(self._depth_topics[topic], head.stamp_ns)] = rec.data
+                if len(self._depth) > 2 * WINDOW_FRAMES * len(self.cameras):
+                    self._depth.popitem(last=False)
+            elif camera is not None:
                 self.stats.frames_in_recording += 1
                 head = _frame_head(rec.data)
                 self._frames[camera].append(FrameRef(head.seq, head.stamp_ns,
@@ -259,7 +269,7 @@ class FusionRerun:
             ring = [f for f in frames if f.log_ns <= cycle.log_ns]
         ring = [f for f in ring if (camera, f.seq) not in self._bad][-RING_SIZE:]
         received = sum(1 for f in frames if f.log_ns <= cycle.log_ns)
-        lazy = [LazyFrame(camera, f, self._decode) for f in ring]
+        lazy = [LazyFrame(camera, f, self._decode, self._decode_depth) for f in ring]
         recorded = cycle.recorded
         if pinned is None and recorded is not None:
             lazy = self._as_recorded(camera, lazy, frames, cycle, recorded)
@@ -280,7 +290,8 @@ class FusionRerun:
                 lazy = [f for f in lazy if f is not late]
         elif recorded.verifier_status is VerifierStatus.OK and usable(lazy) is None:
             for ref in (f for f in frames if f.log_ns > cycle.log_ns):
-                lazy = [*lazy, LazyFrame(camera, ref, self._decode)][-RING_SIZE:]
+                lazy = [*lazy, LazyFrame(camera, ref, self._decode,
+                                         self._decode_depth)][-RING_SIZE:]
                 if usable(lazy) is not None:
                     break
         return lazy
@@ -308,24 +319,52 @@ class FusionRerun:
         return gray
 
 
+    def _decode_depth(self, camera: str, stamp_ns: int) -> np.ndarray | None:
+        """The recorded depth of the frame captured at `stamp_ns` (decoded once), None
+        when none was recorded or it does not decode (counted)."""
+        key = (camera, stamp_ns)
+        if key in self._depth_decoded:
+            return self._depth_decoded[key]
+        payload = self._depth.get(key)
+        if payload is None:
+            return None
+        width, height = self.sizes[camera]
+        depth: np.ndarray | None
+        try:
+            depth = decode_depth_frame(payload, width, height)[1]
+        except FrameError as exc:
+            self.stats.undecodable[exc.reason] = self.stats.undecodable.get(exc.reason, 0) + 1
+            depth = None
+        self._depth_decoded[key] = depth
+        if len(self._depth_decoded) > _DECODED_KEPT:
+            self._depth_decoded.popitem(last=False)
+        return depth
+
+
 class LazyFrame(DecodedFrame):
     """A recorded frame the core sees as decoded: times at once, pixels decoded when the
-    core first reads `gray` (a cycle that gates nothing in this camera decodes nothing).
-    The receive time is the recorder's (`rx_mono_ns` orders frames for the paper's
-    "newest frame" policy). It carries no depth: a re-run with a verifier that needs depth
-    finds the camera unavailable, saying so."""
+    core first reads `gray` (a cycle that gates nothing in this camera decodes nothing),
+    depth (the recorded DepthFrame with the frame's capture stamp, if any) when it first
+    reads `depth_m`. The receive time is the recorder's (`rx_mono_ns` orders frames for
+    the paper's "newest frame" policy)."""
 
-    __slots__ = ("_load", "_pixels", "_ref")
+    __slots__ = ("_load", "_load_depth", "_pixels", "_ref")
     _load: Callable[[str, FrameRef], np.ndarray]
+    _load_depth: Callable[[str, int], np.ndarray | None]
     _pixels: np.ndarray | None
     _ref: FrameRef
 
     def __init__(self, camera: str, ref: FrameRef,
-                 load: Callable[[str, FrameRef], np.ndarray]) -> None:
+                 load: Callable[[str, FrameRef], np.ndarray],
+                 load_depth: Callable[[str, int], np.ndarray | None]) -> None:
         for name, value in (("camera", camera), ("seq", ref.seq), ("stamp_ns", ref.stamp_ns),
                             ("rx_mono_ns", ref.log_ns), ("_ref", ref), ("_load", load),
-                            ("_pixels", None), ("depth_m", None)):
+                            ("_load_depth", load_depth), ("_pixels", None)):
             object.__setattr__(self, name, value)
+
+    @property
+    def depth_m(self) -> np.ndarray | None:
+        return self._load_depth(self.camera, self.stamp_ns)
 
     @property
     def gray(self) -> np.ndarray:
