@@ -18,18 +18,16 @@ Writes bench_depth.json and bench_depth.png under --out; `run(quick, out_dir)` r
 the suite's figures (`python -m benchmarks --only depth`).
 """
 
-import argparse
 import json
 import math
-import time
-from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import Figure
+from benchmarks.bench_gate import stats, timed
+from benchmarks.figures import Figure, section_main
 from common.calibration import Calibration
 from common.depth_error import D435Noise
 from common.depth_image import CODECS, encode_depth, to_units
@@ -60,21 +58,6 @@ def scenes(cal: Calibration, n: int, seed: int
                                                    for x, y in cars), seed=seed + i))
         out.append((colour, depth, cars))
     return out
-
-
-def timed(fn: Callable[[], object], reps: int) -> list[float]:
-    out = []
-    for _ in range(reps):
-        t = time.perf_counter_ns()
-        fn()
-        out.append((time.perf_counter_ns() - t) / 1e3)
-    return out
-
-
-def stats(samples: list[float]) -> dict[str, float]:
-    a = np.asarray(samples)
-    return {"mean_us": float(a.mean()), "p50_us": float(np.median(a)),
-            "p95_us": float(np.percentile(a, 95)), "n": len(a)}
 
 
 def decimate_and_encode(units: np.ndarray, k: int, codec: str) -> bytes:
@@ -250,13 +233,7 @@ def run(quick: bool, out_dir: Path) -> list[Figure]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench_depth", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="few frames and repetitions")
-    parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
-    args = parser.parse_args(argv)
-    run(args.quick, Path(args.out))
-    return 0
+    return section_main("bench_depth", __doc__, run, argv, "few frames and repetitions")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ The projection divides the paper's frames by the single-process rate times 2 cor
 Writes bench_eval.json under --out; `run(quick, out_dir)` returns the suite's figures.
 """
 
-import argparse
 import json
 import os
 import time
@@ -28,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import Figure
+from benchmarks.figures import Figure, section_main
 from common.calibration import Calibration
 from common.imaging import decode_gray, encode_jpeg
 from common.keys import CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
@@ -180,17 +179,7 @@ def run(quick: bool, out_dir: Path) -> list[Figure]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench_eval", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="a 15 s recording")
-    parser.add_argument("--out", default="out/bench", help="directory for the JSON")
-    args = parser.parse_args(argv)
-    try:
-        run(args.quick, Path(args.out))
-    except RuntimeError as exc:
-        print(f"error: {exc}")
-        return 1
-    return 0
+    return section_main("bench_eval", __doc__, run, argv, "a 15 s recording")
 
 
 if __name__ == "__main__":

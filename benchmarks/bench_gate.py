@@ -22,7 +22,6 @@ Writes bench_gate.json and bench_gate.png under --out; `run(quick, out_dir)` ret
 figures for the suite (`python -m benchmarks`) and raises if any density differs.
 """
 
-import argparse
 import json
 import math
 import time
@@ -34,7 +33,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.figures import Figure
+from benchmarks.figures import Figure, section_main
 from common.calibration import Calibration
 from common.imaging import decode_bgr, decode_gray, encode_jpeg
 from common.resources import EXAMPLE_CALIBRATION
@@ -324,17 +323,7 @@ def run(quick: bool, out_dir: Path) -> list[Figure]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench_gate", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="few frames and repetitions")
-    parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
-    args = parser.parse_args(argv)
-    try:
-        run(args.quick, Path(args.out))
-    except RuntimeError as exc:
-        print(f"error: {exc}")
-        return 1
-    return 0
+    return section_main("bench_gate", __doc__, run, argv, "few frames and repetitions")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ Writes bench_verifiers.json and bench_verifiers.png under --out; `run(quick, out
 returns the figures for the suite (`python -m benchmarks`).
 """
 
-import argparse
 import json
 import tempfile
 from functools import partial
@@ -30,7 +29,7 @@ import cv2
 import numpy as np
 
 from benchmarks.bench_gate import CALIBRATION, scenes, stats, timed
-from benchmarks.figures import Figure
+from benchmarks.figures import Figure, section_main
 from common.calibration import Calibration
 from common.imaging import decode_gray
 from services.fusion import hog
@@ -162,13 +161,7 @@ def run(quick: bool, out_dir: Path) -> list[Figure]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="bench_verifiers", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="few frames and repetitions")
-    parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
-    args = parser.parse_args(argv)
-    run(args.quick, Path(args.out))
-    return 0
+    return section_main("bench_verifiers", __doc__, run, argv, "few frames and repetitions")
 
 
 if __name__ == "__main__":

@@ -5,10 +5,13 @@ A figure is always measured beside its baseline in the same run (absolute times 
 shared machine drift by 20% or more between runs); `ratio` is value / baseline.
 """
 
+import argparse
 import os
 import platform
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 
@@ -65,3 +68,21 @@ def machine_info() -> dict[str, Any]:
         "load_avg_1_5_15": [round(x, 2) for x in load],
         "versions": versions,
     }
+
+
+def section_main(prog: str, doc: str | None, run: Callable[[bool, Path], object],
+                 argv: list[str] | None, quick_help: str = "few frames and repetitions"
+                 ) -> int:
+    """`python -m benchmarks.<prog> [--quick] [--out DIR]` for a section that needs no
+    other option: 0 once measured, 1 when the benchmark could not run (RuntimeError)."""
+    parser = argparse.ArgumentParser(prog=prog, description=doc,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help=quick_help)
+    parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
+    args = parser.parse_args(argv)
+    try:
+        run(args.quick, Path(args.out))
+    except RuntimeError as exc:
+        print(f"error: {exc}")
+        return 1
+    return 0
