@@ -2,16 +2,12 @@
 
 import threading
 from collections import Counter
-from collections.abc import Mapping, MutableMapping
+from collections.abc import Mapping
 
-# Counters saturate here: every message encodes them as msgpack int64, and a counter that
-# passed it would make every later message fail to encode.
+# Counters are published saturated here: every message encodes them as msgpack int64, and
+# a counter past it would make every later message fail to encode (Python's own ints do
+# not overflow, so only the published copy is clamped).
 MAX_COUNT = 2**63 - 1
-
-
-def saturating_add(counts: MutableMapping[str, int], key: str, n: int = 1) -> None:
-    """`counts[key] += n`, stopping at MAX_COUNT (a saturated counter stays there)."""
-    counts[key] = min(MAX_COUNT, counts.get(key, 0) + n)
 
 
 def saturated(counts: Mapping[str, int]) -> dict[str, int]:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from common.command_auth import CommandKey
 from common.config.brake import BrakeSettings
-from common.counters import saturated, saturating_add
+from common.counters import saturated
 from common.messages import BrakeCommand, BrakeState, Decision, FailsafePolicy
 from services.brake.commands import Accepted, CommandValidator, Rejection
 from services.brake.protocol import (
@@ -267,7 +267,7 @@ class BrakeCore:
         cmd = acc.cmd
         self.counters["commands"] += 1
         if acc.gap:
-            saturating_add(self.counters, "seq_gaps", acc.gap)
+            self.counters["seq_gaps"] += acc.gap
         if acc.restart:
             self.counters["stream_restarts"] += 1
         # evidence of a healthy stream (for arming): consecutive commands built from
