@@ -130,6 +130,8 @@ def frozen(feed: FrameFeed, scene_moving: bool, frozen_after_ns: int) -> bool:
         return False
     newest = max(f.stamp_ns for f in feed.frames)
     return newest - feed.unchanged_since_ns >= frozen_after_ns
+
+
 def decode_depth_frame(payload: bytes, width: int, height: int) -> tuple[int, np.ndarray]:
     """A DepthFrame payload to (capture stamp, float32 metres at width x height).
 
