@@ -43,7 +43,6 @@ from services.fusion.frames import (
     DecodedFrame,
     FrameError,
     FrameFeed,
-    decode_depth_frame,
     decode_frame,
 )
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
@@ -52,6 +51,7 @@ from tools.eval import sim_truth
 from tools.eval.adapters.paper_rois import free_rois
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
+from tools.recording.depth import RecordedDepth
 from tools.recording.reader import ChannelSummary, Recording, RecordingError
 from tools.sim.messages import SimWorld
 
@@ -140,37 +140,20 @@ class _Cameras:
         self.cameras = [Camera(n, ColumnProjector(cals[n], geometry)) for n in self.names]
         self.frames: dict[str, deque[_Stub]] = {n: deque(maxlen=_BUFFER) for n in self.names}
         self.by_topic = {self.topics[n]: n for n in self.names}
-        # Depth payloads by capture stamp, per camera (only cameras with a depth topic).
-        self.depth: dict[str, dict[int, bytes]] = {n: {} for n in self.names
-                                                   if n in depth_topics}
-        self.by_depth_topic = {depth_topics[n]: n for n in self.depth}
+        # Only cameras with a depth topic; raw payloads kept as long as their frames.
+        self.by_depth_topic = {depth_topics[n]: n for n in self.names if n in depth_topics}
+        self.depth = RecordedDepth({n: (cals[n].width, cals[n].height)
+                                    for n in self.by_depth_topic.values()}, _BUFFER, counters)
 
-    def add_depth(self, name: str, payload: bytes, counters: dict[str, int]) -> None:
-        try:
-            stamp = decode(payload, DepthFrame).header.stamp_ns
-        except DecodeError:
-            _bump(counters, "depth_message")
-            return
-        held = self.depth[name]
-        held[stamp] = payload
-        while len(held) > _BUFFER:
-            del held[min(held)]
-
-    def depth_at(self, name: str, stamp_ns: int, cal: Calibration,
-                 counters: dict[str, int]) -> np.ndarray | None:
+    def depth_at(self, name: str, stamp_ns: int, counters: dict[str, int]) -> np.ndarray | None:
         """The camera's depth for the frame captured at `stamp_ns` (metres at the
         frame's size), or None (no depth recorded for it, or unusable: counted)."""
-        if name not in self.depth:
+        if name not in self.by_depth_topic.values():
             return None
-        payload = self.depth[name].get(stamp_ns)
-        if payload is None:
+        if not self.depth.has(name, stamp_ns):
             _bump(counters, "frame_without_depth")
             return None
-        try:
-            return decode_depth_frame(payload, cal.width, cal.height)[1]
-        except FrameError as exc:
-            _bump(counters, exc.reason)
-            return None
+        return self.depth.at(name, stamp_ns)
 
     def _calibration(self, recording: Recording, name: str, s: RecordingSettings, config_file: str,
                      info_topic: str | None) -> Calibration:
@@ -238,10 +221,9 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
     out: list[RoiRecord] = []
     timed_frames: set[tuple[str, int]] = set()
     topics = tracks_topics + list(cams.by_topic) + list(cams.by_depth_topic) + world_topics
-    depth_cache: dict[tuple[str, int], np.ndarray | None] = {}
     for m in recording.records(topics):
         if m.topic in cams.by_depth_topic:
-            cams.add_depth(cams.by_depth_topic[m.topic], m.data, counters)
+            cams.depth.add(cams.by_depth_topic[m.topic], m.data)
             continue
         if m.topic in cams.by_topic:
             name = cams.by_topic[m.topic]
@@ -287,11 +269,7 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
             if view.frame is None or gray is None or stub is None:
                 _bump(counters, "cycle_without_frame")
                 continue
-            key = (name, stub.stamp_ns)
-            if key not in depth_cache:
-                depth_cache.clear()       # cycles move forward, like the frame cache
-                depth_cache[key] = cams.depth_at(name, stub.stamp_ns, cal, counters)
-            depth = depth_cache[key]
+            depth = cams.depth_at(name, stub.stamp_ns, counters)
             if depth is not None:
                 scorer.prepare(cal)
             light, median = lighting(gray)

@@ -49,11 +49,11 @@ from services.fusion.frames import (
     DecodedFrame,
     FrameError,
     FrameFeed,
-    decode_depth_frame,
     decode_frame,
     select_frame,
 )
 from services.fusion.main import build_core
+from tools.recording.depth import RecordedDepth, message_head
 from tools.recording.reader import Record, Recording
 
 # A cycle is re-run once the recording is this far past it: its frames and recorded
@@ -63,26 +63,6 @@ LOOKAHEAD_NS = 1_000_000_000
 WINDOW_FRAMES = 64
 _DECODED_KEPT = 8
 _EARLY_KEPT = 64
-
-
-class _Head(msgspec.Struct):
-    seq: int
-    stamp_ns: int
-
-
-class _Frame(msgspec.Struct):
-    header: _Head      # the rest of the frame (the JPEG) is skipped, not copied
-
-
-_frame_decoder = msgspec.msgpack.Decoder(_Frame)
-
-
-def _frame_head(payload: bytes) -> _Head:
-    """A CompressedFrame's sequence number and stamp. Raises DecodeError."""
-    try:
-        return _frame_decoder.decode(payload).header
-    except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-        raise DecodeError(f"CompressedFrame: {exc}") from exc
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,9 +127,7 @@ class FusionRerun:
         self._targets_topic = FUSION_TARGETS.key(vehicle, instance=self.instance)
         self._frame_topics = {CAMERA_JPEG.key(vehicle, camera=c): c for c in self.cameras}
         self._depth_topics = {CAMERA_DEPTH.key(vehicle, camera=c): c for c in self.cameras}
-        # recorded DepthFrames by (camera, capture stamp), raw until a cycle uses them
-        self._depth: OrderedDict[tuple[str, int], bytes] = OrderedDict()
-        self._depth_decoded: OrderedDict[tuple[str, int], np.ndarray | None] = OrderedDict()
+        self._depth = RecordedDepth(self.sizes, 2 * WINDOW_FRAMES, self.stats.undecodable)
 
     @property
     def topics(self) -> list[str]:
@@ -177,13 +155,10 @@ class FusionRerun:
         camera = self._frame_topics.get(topic)
         try:
             if topic in self._depth_topics:
-                head = _frame_head(rec.data)
-                self._depth[(self._depth_topics[topic], head.stamp_ns)] = rec.data
-                if len(self._depth) > 2 * WINDOW_FRAMES * len(self.cameras):
-                    self._depth.popitem(last=False)
+                self._depth.add(self._depth_topics[topic], rec.data)
             elif camera is not None:
                 self.stats.frames_in_recording += 1
-                head = _frame_head(rec.data)
+                head = message_head(rec.data)
                 self._frames[camera].append(FrameRef(head.seq, head.stamp_ns,
                                                      rec.log_time_ns, rec.data))
             elif topic == self._tracks_topic:
@@ -269,7 +244,7 @@ class FusionRerun:
             ring = [f for f in frames if f.log_ns <= cycle.log_ns]
         ring = [f for f in ring if (camera, f.seq) not in self._bad][-RING_SIZE:]
         received = sum(1 for f in frames if f.log_ns <= cycle.log_ns)
-        lazy = [LazyFrame(camera, f, self._decode, self._decode_depth) for f in ring]
+        lazy = [LazyFrame(camera, f, self._decode, self._depth.at) for f in ring]
         recorded = cycle.recorded
         if pinned is None and recorded is not None:
             lazy = self._as_recorded(camera, lazy, frames, cycle, recorded)
@@ -291,7 +266,7 @@ class FusionRerun:
         elif recorded.verifier_status is VerifierStatus.OK and usable(lazy) is None:
             for ref in (f for f in frames if f.log_ns > cycle.log_ns):
                 lazy = [*lazy, LazyFrame(camera, ref, self._decode,
-                                         self._decode_depth)][-RING_SIZE:]
+                                         self._depth.at)][-RING_SIZE:]
                 if usable(lazy) is not None:
                     break
         return lazy
@@ -318,27 +293,6 @@ class FusionRerun:
             self._decoded.popitem(last=False)
         return gray
 
-
-    def _decode_depth(self, camera: str, stamp_ns: int) -> np.ndarray | None:
-        """The recorded depth of the frame captured at `stamp_ns` (decoded once), None
-        when none was recorded or it does not decode (counted)."""
-        key = (camera, stamp_ns)
-        if key in self._depth_decoded:
-            return self._depth_decoded[key]
-        payload = self._depth.get(key)
-        if payload is None:
-            return None
-        width, height = self.sizes[camera]
-        depth: np.ndarray | None
-        try:
-            depth = decode_depth_frame(payload, width, height)[1]
-        except FrameError as exc:
-            self.stats.undecodable[exc.reason] = self.stats.undecodable.get(exc.reason, 0) + 1
-            depth = None
-        self._depth_decoded[key] = depth
-        if len(self._depth_decoded) > _DECODED_KEPT:
-            self._depth_decoded.popitem(last=False)
-        return depth
 
 
 class LazyFrame(DecodedFrame):
