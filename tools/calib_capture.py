@@ -28,10 +28,10 @@ from pathlib import Path
 import msgspec
 
 from common.keys import CAMERA_JPEG, RADAR_TRACKS
-from common.log import add_log_level, setup_logging
+from common.log import setup_logging
 from common.messages import CompressedFrame, RadarTracks, encode
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, open_or_say
+from tools.bus import add_bus_args, open_bus
 
 _KEEP_CYCLES = 64       # about 5 s of radar cycles to choose from
 
@@ -114,7 +114,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=30.0,
                         help="give up after this many seconds without a pair")
     add_bus_args(parser)
-    add_log_level(parser, "WARNING")
     args = parser.parse_args(argv)
     setup_logging("calib-capture", args.log_level)
     if args.max_skew_s <= 0 or args.timeout <= 0:
@@ -138,9 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         with lock:
             offer(pairing.add_cycle(tracks))
 
-    bus = open_or_say(args, "calib-capture")
-    if bus is None:
-        return 2
+    bus = open_bus(args, "calib-capture", done)
     with bus:
         camera_key = bus.key(CAMERA_JPEG, camera=args.camera)
         radar_key = bus.key(RADAR_TRACKS, sensor=args.radar)

@@ -1,5 +1,6 @@
-"""Radar, camera and fusion started with no router reachable: each says which endpoint it
-waits for, keeps waiting, and stops cleanly (exit 0) on SIGTERM or SIGINT."""
+"""Radar, camera and fusion, and the bus tools, started with no router reachable: each
+says which endpoint it waits for, keeps waiting, and stops cleanly (exit 0) on SIGTERM or
+SIGINT."""
 
 import signal
 import subprocess
@@ -34,6 +35,39 @@ def test_waits_for_the_router_visibly_and_stops_on_a_signal(tmp_path, service, s
             code = proc.proc.wait(START_TIMEOUT_S)
         except subprocess.TimeoutExpired:
             pytest.fail(f"{service} still running {START_TIMEOUT_S} s after {sig.name}:\n"
+                        f"{proc.output()}")
+        assert code == 0, proc.output()
+        assert "Traceback" not in proc.output()
+    finally:
+        proc.stop()
+
+
+BUS_TOOLS = {
+    "monitor": ("monitor", "--once"),
+    "echo": ("echo", "radar_tracks"),
+    "hz": ("hz", "radar_tracks"),
+    "ab-report": ("ab-report",),
+    "calib-capture": ("calib-capture", "--out", "{tmp}/capture"),
+}
+
+
+@pytest.mark.parametrize("tool", sorted(BUS_TOOLS))
+def test_a_bus_tool_waiting_for_the_router_stops_on_a_signal(tmp_path, tool):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    # No give-up time: only the signal can end the wait.
+    args = [a.format(tmp=tmp_path) for a in BUS_TOOLS[tool]]
+    proc = ServiceProcess(tool, python_module("tools.cli", *args, "--connect", endpoint,
+                                              "--connect-timeout", "0"), tmp_path)
+    try:
+        wait_for(lambda: "waiting_for_router" in proc.output() or not proc.alive(),
+                 START_TIMEOUT_S, 0.05, f"aeb {tool} to say it waits for the router")
+        assert proc.alive(), proc.output()
+        assert endpoint in proc.output()
+        proc.signal(signal.SIGTERM)
+        try:
+            code = proc.proc.wait(START_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"aeb {tool} still running {START_TIMEOUT_S} s after SIGTERM:\n"
                         f"{proc.output()}")
         assert code == 0, proc.output()
         assert "Traceback" not in proc.output()

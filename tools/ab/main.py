@@ -21,14 +21,13 @@ import threading
 from dataclasses import asdict
 from typing import Any
 
-from common.bus import Bus, BusError
 from common.clock import wall_ns
-from common.config.base import ZenohMode, ZenohSettings
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, KeySpec
-from common.log import add_log_level, setup_logging
+from common.log import setup_logging
 from common.service import stop_event_on_signals
 from tools.ab.compare import Comparator, Report, render
 from tools.ab.feeder import Feeder
+from tools.bus import add_bus_args, open_bus
 from tools.recording.format import channel_of_topic, publish_time
 from tools.recording.reader import Recording, RecordingError
 from tools.recording.writer import RecordingWriter
@@ -39,9 +38,7 @@ SPECS: dict[str, KeySpec[Any]] = {s.name: s for s in (FUSION_TARGETS, FUSION_BRA
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb ab-report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT")
-    parser.add_argument("--vehicle", default="ego")
-    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
+    add_bus_args(parser)
     parser.add_argument("--primary", default="primary")
     parser.add_argument("--candidate", default="candidate")
     parser.add_argument("--duration", type=float, default=None,
@@ -51,7 +48,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="report on a recording (MCAP file(s) or a folder)")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--episodes", type=int, default=20, help="episodes to list")
-    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -63,17 +59,10 @@ def report_json(report: Report, undecodable: int) -> str:
     return json.dumps(data)
 
 
-def listen(args: argparse.Namespace, feeder: Feeder) -> int:
-    connect = tuple(args.connect or ["tcp/127.0.0.1:7447"])
-    try:
-        settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=connect,
-                                 config_file=args.zenoh_config,
-                                 overrides={"connect/timeout_ms": 10000})
-        bus = Bus.open(settings, args.vehicle, "ab-report")
-    except (BusError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+def listen(args: argparse.Namespace, feeder: Feeder) -> None:
+    """Raises SystemExit(2) when the bus cannot be opened."""
     stop = stop_event_on_signals()
+    bus = open_bus(args, "ab-report", stop)
     record = RecordingWriter(args.record, metadata={"vehicle": args.vehicle,
                                                     "recorder": "aeb ab-report"}) \
         if args.record else None
@@ -98,7 +87,6 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> int:
     finally:
         if record is not None:
             record.close()
-    return 0
 
 
 def read_recording(args: argparse.Namespace, feeder: Feeder) -> None:
@@ -140,9 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 2
     else:
-        code = listen(args, feeder)
-        if code:
-            return code
+        listen(args, feeder)
     report = comparator.report()
     if args.json:
         print(report_json(report, feeder.undecodable))

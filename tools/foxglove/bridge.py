@@ -33,8 +33,8 @@ from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.messages.schema import schema_name
 from common.service import stop_event_on_signals
+from tools.bus import add_bus_args, open_bus, run_until
 from tools.foxglove.convert import Converter, object_schema
-from tools.recording.connect import add_bus_arguments, open_bus, run_until
 from tools.recording.format import ChannelType, parse_topic
 from tools.recording.record import Recorder, decision_settings, selection
 from tools.recording.writer import TopicCount, WriterStats
@@ -117,7 +117,7 @@ class FrameLimit:
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb foxglove", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_bus_arguments(parser)
+    add_bus_args(parser, connect_timeout_s=0.0)
     parser.add_argument("--host", default="127.0.0.1",
                         help="address the WebSocket server binds (0.0.0.0: every interface)")
     parser.add_argument("--port", type=int, default=8765, help="WebSocket port (0: any free)")

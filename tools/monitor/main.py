@@ -23,9 +23,9 @@ from typing import Any
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.keys import REGISTRY, KeySpec
-from common.log import add_log_level, setup_logging
+from common.log import setup_logging
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, endpoints, on_this_host, open_or_say
+from tools.bus import add_bus_args, endpoints, on_this_host, open_bus
 from tools.monitor.state import MonitorState
 from tools.monitor.view import render_text, snapshot
 from tools.sim.messages import SIM_WORLD
@@ -49,7 +49,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     where.add_argument("--same-host", dest="same_host", action="store_true", default=None,
                        help="publishers share this host's monotonic clock (hop latency)")
     where.add_argument("--remote", dest="same_host", action="store_false")
-    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -77,15 +76,14 @@ def subscribe_all(bus: Bus, state: MonitorState, lock: threading.Lock) -> list[A
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Returns 0, or 2 when the bus cannot be opened (bad endpoint, no router in time)."""
+    """Returns 0; raises SystemExit(2) when the bus cannot be opened (bad endpoint, no
+    router in time)."""
     args = parse_args(argv)
     setup_logging("monitor", args.log_level)
     connect = endpoints(args)
     same_host = on_this_host(args) if args.same_host is None else args.same_host
-    bus = open_or_say(args, "monitor")
-    if bus is None:
-        return 2
     stop = stop_event_on_signals()
+    bus = open_bus(args, "monitor", stop)
     state = MonitorState(same_host)
     lock = threading.Lock()
     endpoint = ",".join(connect)

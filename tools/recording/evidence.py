@@ -62,6 +62,7 @@ from common.messages import (
 )
 from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
 from common.service import stop_event_on_signals
+from tools.bus import add_bus_args, open_bus, run_until
 from tools.foxglove.convert import DECISION_LEVEL, frame_stamp_ns, state_colour, target_label
 
 HISTORY_S = 3.0
@@ -447,14 +448,12 @@ def _readme(s: dict[str, Any]) -> str:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    from tools.recording.connect import add_bus_arguments
-
     parser = argparse.ArgumentParser(prog="aeb evidence", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="evidence", help="folders go here")
     parser.add_argument("--from", dest="source", nargs="+", default=None,
                         help="a recording instead of the live bus")
-    add_bus_arguments(parser)
+    add_bus_args(parser, connect_timeout_s=0.0)
     parser.add_argument("--fusion-config", default="",
                         help="the thresholds and corridor the README cites")
     parser.add_argument("--duration", type=float, default=None)
@@ -492,7 +491,6 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         collector.close()
     else:
-        from tools.recording.connect import open_bus, run_until
         from tools.recording.record import Recorder, selection
 
         stop = stop_event_on_signals()

@@ -42,8 +42,8 @@ from common.keys import KeySpec, QoS
 from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
+from tools.bus import add_bus_args, open_bus, run_until
 from tools.foxglove.convert import Converter, encode_derived
-from tools.recording.connect import add_bus_arguments, open_bus, run_until
 from tools.recording.format import (
     KNOWN_SPECS,
     ChannelType,
@@ -320,7 +320,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb record", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-o", "--out", default="recording.mcap", help="the MCAP file")
-    add_bus_arguments(parser)
+    add_bus_args(parser, connect_timeout_s=0.0)
     parser.add_argument("--keys", default="",
                         help="comma-separated key names or expressions (default: every key)")
     parser.add_argument("--split-size", type=float, default=None, metavar="MB",

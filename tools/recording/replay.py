@@ -51,7 +51,7 @@ from common.messages import (
 )
 from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
 from common.service import stop_event_on_signals
-from tools.recording.connect import add_bus_arguments, open_bus
+from tools.bus import add_bus_args, open_bus
 from tools.recording.format import DERIVED_PREFIX, KNOWN_SPECS, parse_topic
 from tools.recording.reader import Record, Recording, RecordingError
 
@@ -315,7 +315,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb replay", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("recording", nargs="+", help="MCAP file(s) or a folder of them")
-    add_bus_arguments(parser, listen=True)
+    add_bus_args(parser, connect_timeout_s=0.0, listen=True)
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="time factor (2: twice as fast)")
     speed.add_argument("--fast", action="store_true",

@@ -25,10 +25,10 @@ from typing import Any
 import msgspec
 
 from common.clock import wall_ns
-from common.log import add_log_level, setup_logging
+from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, open_or_say
+from tools.bus import add_bus_args, open_bus
 from tools.topics.catalog import Catalog
 
 Sample = tuple[bytes, str, str, int]       # payload, key, encoding, receipt wall ns
@@ -46,7 +46,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--bytes", action="store_true",
                         help="print byte fields in full (base64) instead of their length")
     add_bus_args(parser)
-    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -142,10 +141,8 @@ def main(argv: list[str] | None = None) -> int:
             with lock:
                 dropped[0] += 1
 
-    bus = open_or_say(args, "echo")
-    if bus is None:
-        return 2
     stop = stop_event_on_signals()
+    bus = open_bus(args, "echo", stop)
     shown = undecodable = 0
     start = time.monotonic()
     # a table row fits the terminal; piped, it is whole

@@ -24,10 +24,10 @@ from dataclasses import asdict
 import msgspec
 
 from common.clock import mono_ns
-from common.log import add_log_level, setup_logging
+from common.log import setup_logging
 from common.messages import Header
 from common.service import stop_event_on_signals
-from tools.bus_args import add_bus_args, open_or_say
+from tools.bus import add_bus_args, open_bus
 from tools.topics.catalog import Catalog
 from tools.topics.rates import PeriodStats, RateReport
 
@@ -53,7 +53,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="exit after S seconds, with one last report")
     parser.add_argument("--json", action="store_true", help="JSON lines instead of a table")
     add_bus_args(parser)
-    add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
 
@@ -111,10 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     catalog = Catalog(args.vehicle)
     expr = catalog.expression(args.key)
     rates = Rates(args.window, args.clock == "stamp")
-    bus = open_or_say(args, "hz")
-    if bus is None:
-        return 2
     stop = stop_event_on_signals()
+    bus = open_bus(args, "hz", stop)
     end = None if args.duration is None else time.monotonic() + args.duration
     with bus:
         bus.subscribe_expr(expr, rates.on_sample)

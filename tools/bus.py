@@ -1,6 +1,8 @@
-"""Joining the bus from a recording tool (`aeb record`, `replay`, `evidence`,
-`foxglove`): the bus tools' options, and a session opened so that Ctrl-C works while no
-router answers yet.
+"""Joining the bus from a tool (`aeb monitor`, `echo`, `hz`, `calib-capture`,
+`ab-report`, `record`, `replay`, `evidence`, `foxglove`): the options every bus tool
+shares (where the router is, which vehicle, an optional Zenoh config, how long to wait
+for the router, the log level), and a session opened so that Ctrl-C and SIGTERM work
+while no router answers yet.
 
 `zenoh.open` blocks until a router is reachable, and a signal handler only runs once it
 returns; so the session is opened in a helper thread while the main thread waits on the
@@ -18,22 +20,39 @@ from collections.abc import Callable
 from common.bus import Bus, BusError
 from common.config.base import ZenohMode, ZenohSettings
 from common.log import add_log_level
-from tools.bus_args import add_bus_args, endpoints
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+_LOOPBACK = ("127.", "localhost", "[::1]")
 
 _log = logging.getLogger("bus")
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser, listen: bool = False) -> None:
-    """The bus tools' options (tools/bus_args.py), waiting for the router as long as it
-    takes unless `--connect-timeout` says otherwise (a recorder is started before the
-    stack); `listen`: also `--listen`, to be the router."""
-    add_bus_args(parser)
-    parser.set_defaults(connect_timeout=0.0)
+def add_bus_args(parser: argparse.ArgumentParser, connect_timeout_s: float = 10.0,
+                 listen: bool = False) -> None:
+    """`--connect`, `--vehicle`, `--zenoh-config`, `--connect-timeout` (default
+    `connect_timeout_s`; 0: wait as long as it takes, for a recorder started before the
+    stack) and `--log-level`; `listen`: also `--listen`, to be the router."""
+    parser.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                        help=f"router endpoint (repeatable), default {DEFAULT_ENDPOINT}")
+    parser.add_argument("--vehicle", default="ego")
+    parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
+    parser.add_argument("--connect-timeout", type=float, default=connect_timeout_s,
+                        help="give up when no router answers within this many seconds "
+                             f"(0: wait as long as it takes; default {connect_timeout_s:g})")
     if listen:
         parser.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
                             help="run as a Zenoh router listening here instead (a replay "
                                  "with a stack connecting to it)")
     add_log_level(parser, "WARNING")
+
+
+def endpoints(args: argparse.Namespace) -> tuple[str, ...]:
+    return tuple(args.connect or [DEFAULT_ENDPOINT])
+
+
+def on_this_host(args: argparse.Namespace) -> bool:
+    """Every endpoint is loopback: publishers share this host's monotonic clock."""
+    return all(ep.split("/", 1)[-1].startswith(_LOOPBACK) for ep in endpoints(args))
 
 
 def bus_settings(args: argparse.Namespace) -> ZenohSettings:
@@ -50,8 +69,8 @@ def bus_settings(args: argparse.Namespace) -> ZenohSettings:
 
 def open_bus(args: argparse.Namespace, source: str, stop: threading.Event) -> Bus:
     """The bus. Prints and raises SystemExit(2) when the settings are invalid or the
-    session cannot be opened; exits the process (code 0) when `stop` is set before a
-    router answered (nothing was done yet)."""
+    session cannot be opened (no router within `--connect-timeout`); exits the process
+    (code 0) when `stop` is set before a router answered (nothing was done yet)."""
     try:
         settings = bus_settings(args)
     except ValueError as exc:
