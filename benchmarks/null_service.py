@@ -10,9 +10,8 @@ import sys
 
 from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
-from common.keys import REGISTRY
 from common.service import stop_event_on_signals
-from tools.sim.messages import SIM_WORLD
+from tools.keys import MESSAGE_KEYS
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,8 +27,7 @@ def main(argv: list[str] | None = None) -> int:
 
     settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(args.connect,))
     with Bus.open(settings, args.vehicle, "bench/null") as bus:
-        subs = [bus.subscribe_raw(spec, on_raw) for spec in (*REGISTRY.values(), SIM_WORLD)
-                if spec.msg_type is not None]
+        subs = [bus.subscribe_raw(spec, on_raw) for spec in MESSAGE_KEYS]
         token = bus.declare_health("bench", "null")
         stop.wait()
         token.undeclare()

@@ -23,14 +23,13 @@ import msgspec
 from common.log import add_log_level, setup_logging
 from common.messages import SCHEMA_VERSION
 from common.messages.schema import json_schema, schema_name
-from tools.sim.messages import SIM_WORLD
-from tools.topics.catalog import message_keys
+from tools.keys import MESSAGE_KEYS, SIM_WORLD
 
 
 def document() -> dict[str, Any]:
     types: dict[str, type[msgspec.Struct]] = {}
     keys = {}
-    for spec in message_keys():
+    for spec in MESSAGE_KEYS:
         assert spec.msg_type is not None
         name = schema_name(spec.msg_type)
         types.setdefault(name, spec.msg_type)

@@ -22,8 +22,9 @@ from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
 from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
 from tests.fusion.helpers import CAL, T0, cycle, track
 from tools.eval.depth import box_scene_depth
+from tools.keys import SIM_WORLD
+from tools.messages import SimObject, SimWorld
 from tools.recording.writer import RecordingWriter
-from tools.sim.messages import SIM_WORLD, SimObject, SimWorld
 from tools.sim.scenario import DEFAULT_SIZE, ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
 

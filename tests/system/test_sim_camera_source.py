@@ -11,8 +11,8 @@ from common.calibration import Calibration
 from common.messages import Header
 from services.camera.plugin import PluginContext, make_plugin_source
 from services.camera.source import FrameSource, SourceConfigError, SourceError
+from tools.messages import SimObject, SimWorld
 from tools.sim.camera_source import SimCameraSource, bodies_at
-from tools.sim.messages import SimObject, SimWorld
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
 S = 1_000_000_000

@@ -205,7 +205,7 @@ def test_plain_test_scenes_keep_a_sparse_background(cal):
 def test_the_evaluation_labels_a_false_target_track_as_a_negative():
     from common.messages import Header
     from tools.eval.sim_truth import label_track
-    from tools.sim.messages import SimObject, SimWorld
+    from tools.messages import SimObject, SimWorld
 
     objects = (SimObject(0, "plate", 20.0, 0.0, 0.0, 0.8, 0.8, 0.02, 0.0, 0.0),
                SimObject(1, "box", 30.3, 0.0, 0.0, 0.6, 0.6, 0.6, 0.0, 0.0),

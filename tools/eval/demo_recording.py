@@ -22,9 +22,9 @@ from common.keys import (
     KeySpec,
 )
 from common.service import stop_event_on_signals
+from tools.keys import SIM_WORLD
 from tools.recording.record import Recorder
 from tools.recording.writer import RecordingWriter
-from tools.sim.messages import SIM_WORLD
 
 SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,
                                    FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, SIM_WORLD)

@@ -51,9 +51,9 @@ from tools.eval import sim_truth
 from tools.eval.adapters.paper_rois import free_rois
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
+from tools.messages import SimWorld
 from tools.recording.depth import RecordedDepth
 from tools.recording.reader import ChannelSummary, Recording, RecordingError
-from tools.sim.messages import SimWorld
 
 _FRAME = schema_name(CompressedFrame)
 _INFO = schema_name(CameraInfo)

@@ -9,17 +9,16 @@ from typing import Any
 
 import msgspec
 
-from common.keys import REGISTRY
 from common.messages import SCHEMA_VERSION
-from tools.sim.messages import SIM_WORLD
+from tools.keys import MESSAGE_KEYS
 
 
 def message_types() -> list[type[msgspec.Struct]]:
     """The message type of every key (the registry's and the simulator's), once each."""
     seen: dict[str, type[msgspec.Struct]] = {}
-    for spec in (*REGISTRY.values(), SIM_WORLD):
-        if spec.msg_type is not None:
-            seen.setdefault(spec.msg_type.__name__, spec.msg_type)
+    for spec in MESSAGE_KEYS:
+        assert spec.msg_type is not None
+        seen.setdefault(spec.msg_type.__name__, spec.msg_type)
     return list(seen.values())
 
 

@@ -22,13 +22,13 @@ from typing import Any
 
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
-from common.keys import REGISTRY, KeySpec
+from common.keys import KeySpec
 from common.log import setup_logging
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, endpoints, on_this_host, open_bus
+from tools.keys import MESSAGE_KEYS
 from tools.monitor.state import MonitorState
 from tools.monitor.view import render_text, snapshot
-from tools.sim.messages import SIM_WORLD
 
 _CLEAR = "\x1b[H\x1b[2J"
 
@@ -56,10 +56,7 @@ def subscribe_all(bus: Bus, state: MonitorState, lock: threading.Lock) -> list[A
     """One subscription per message key of the registry and the simulator's ground truth
     (every parameter a wildcard)."""
     subs = []
-    for spec in (*REGISTRY.values(), SIM_WORLD):
-        if spec.msg_type is None:
-            continue
-
+    for spec in MESSAGE_KEYS:
         def on_msg(msg: Any, key: str, spec: KeySpec[Any] = spec) -> None:
             rx_mono, rx_wall = mono_ns(), wall_ns()
             with lock:

@@ -13,8 +13,8 @@ from common.keys import (
     RADAR_TRACKS,
     KeySpec,
 )
+from tools.keys import SIM_WORLD
 from tools.monitor.state import MonitorState
-from tools.sim.messages import SIM_WORLD
 
 _NS = 1_000_000_000
 MAX_ROWS = 12

@@ -22,20 +22,15 @@ from typing import Any
 
 import msgspec
 
-from common.keys import REGISTRY, KeySpec
+from common.keys import KeySpec
 from common.messages.schema import json_schema, schema_name
-from tools.sim.messages import SIM_WORLD
+from tools.keys import MESSAGE_KEYS
 
 MESSAGE_ENCODING = "msgpack"
 SCHEMA_ENCODING = "jsonschema"
 DERIVED_PREFIX = "/foxglove/"
 # Metadata record written at the start of every file of a recording.
 METADATA_NAME = "aeb.recording"
-
-# Every key a recorder can decode: the registry's message keys, and the simulator's
-# ground truth (a SIMULATION key: nothing on a vehicle publishes it).
-KNOWN_SPECS: tuple[KeySpec[Any], ...] = (
-    *(s for s in REGISTRY.values() if s.msg_type is not None), SIM_WORLD)
 
 _TOPIC = re.compile(r"^aeb/(?P<vehicle>[^/]+)/(?P<rest>.+)$")
 
@@ -85,7 +80,7 @@ def parse_topic(topic: str) -> TopicInfo | None:
     if m is None:
         return None
     vehicle = m.group("vehicle")
-    for spec in KNOWN_SPECS:
+    for spec in MESSAGE_KEYS:
         params = spec.match(topic, vehicle)
         if params is not None:
             return TopicInfo(vehicle, spec, params)

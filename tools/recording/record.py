@@ -44,8 +44,8 @@ from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
 from tools.foxglove.convert import Converter, encode_derived
+from tools.keys import MESSAGE_KEYS
 from tools.recording.format import (
-    KNOWN_SPECS,
     ChannelType,
     channel_of_topic,
     parse_topic,
@@ -115,7 +115,7 @@ def selection(keys: str, vehicle: str) -> list[str]:
     Raises ValueError for an empty item."""
     if not keys:
         return [ALL_KEYS.wildcard(vehicle)]
-    by_name = {s.name: s for s in KNOWN_SPECS}
+    by_name = {s.name: s for s in MESSAGE_KEYS}
     out = []
     for item in (k.strip() for k in keys.split(",")):
         if not item:

@@ -52,7 +52,8 @@ from common.messages import (
 from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus
-from tools.recording.format import DERIVED_PREFIX, KNOWN_SPECS, parse_topic
+from tools.keys import MESSAGE_KEYS
+from tools.recording.format import DERIVED_PREFIX, parse_topic
 from tools.recording.reader import Record, Recording, RecordingError
 
 GENERIC: KeySpec[Any] = KeySpec("replayed", "**", None, None, None, QoS())
@@ -64,7 +65,7 @@ def select_topics(topics: list[str], keys: str, skip: str) -> list[str]:
     stack = [t for t in topics if not t.startswith(DERIVED_PREFIX)]
 
     def matcher(spec: str) -> Callable[[str], bool]:
-        names = {s.name for s in KNOWN_SPECS}
+        names = {s.name for s in MESSAGE_KEYS}
         items = [k.strip() for k in spec.split(",") if k.strip()]
         for item in items:
             if item not in names and "/" not in item:

@@ -33,7 +33,8 @@ from common.depth_error import D435Noise
 from common.depth_image import to_units
 from services.camera.plugin import PluginContext
 from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError, SourceError
-from tools.sim.messages import SIM_WORLD, SimWorld
+from tools.keys import SIM_WORLD
+from tools.messages import SimWorld
 from tools.sim.render import Renderer
 from tools.sim.scenario import CameraLook, ObjectKind
 from tools.sim.world import Body

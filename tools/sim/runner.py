@@ -23,7 +23,8 @@ from common.bus import Bus
 from common.clock import mono_ns, wall_ns
 from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, EgoMotion, Header
-from tools.sim.messages import SIM_WORLD, SimObject, SimWorld
+from tools.keys import SIM_WORLD
+from tools.messages import SimObject, SimWorld
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.scenario import Scenario, ScenarioKind
 from tools.sim.verdict import Sample, Verdict, judge

@@ -6,20 +6,15 @@ from typing import Any
 
 import msgspec
 
-from common.keys import REGISTRY, ROOT, KeySpec
+from common.keys import ROOT, KeySpec
 from common.messages.schema import MESSAGE_ENCODING, schema_name
-from tools.sim.messages import SIM_WORLD
-
-
-def message_keys() -> list[KeySpec[Any]]:
-    """Every key that carries a message: the registry's, then the simulator's."""
-    return [s for s in (*REGISTRY.values(), SIM_WORLD) if s.msg_type is not None]
+from tools.keys import MESSAGE_KEYS
 
 
 class Catalog:
     def __init__(self, vehicle: str) -> None:
         self.vehicle = vehicle
-        self.keys = message_keys()
+        self.keys = MESSAGE_KEYS
         self.by_schema: dict[str, type[msgspec.Struct]] = {}
         for spec in self.keys:
             assert spec.msg_type is not None

@@ -1,7 +1,7 @@
-"""Ground truth published by the closed-loop scenario simulator, and its key.
+"""Ground truth published by the closed-loop scenario simulator (tools/sim/).
 
-A SIMULATION: nothing on a vehicle publishes this, so neither the message nor the key is
-in the product's registry (common/keys.py); `common.bus.Bus` takes any `KeySpec`. The
+A SIMULATION: nothing on a vehicle publishes it, so it is not among the product's messages
+(common/messages/); its key, `SIM_WORLD`, is in the tools' key table (tools/keys.py). The
 simulator's camera source (the camera service's synthetic-source plugin,
 tools/sim/camera_source.py) renders frames from it; `aeb monitor` and `aeb demo` show it
 beside what the stack perceived.
@@ -9,7 +9,6 @@ beside what the stack perceived.
 
 import msgspec
 
-from common.keys import Congestion, KeySpec, Priority, QoS
 from common.messages.header import Header
 
 
@@ -53,8 +52,3 @@ class SimWorld(msgspec.Struct, frozen=True):
     brightness: float          # camera look: 1 day, lower at dusk
     noise: float               # camera sensor noise, grey levels
 
-
-SIM_WORLD: KeySpec[SimWorld] = KeySpec(
-    "sim_world", "sim/world", SimWorld,
-    rate_hz=50.0, max_age_s=1.0, qos=QoS(Priority.DATA_HIGH, Congestion.DROP, express=True),
-)
