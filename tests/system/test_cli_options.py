@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-from tools.cli import COMMANDS, main
+from tools.cli import main
+from tools.commands import COMMANDS
 from tools.launch.table import load_table, resolve_launches
 
 

@@ -17,6 +17,7 @@ from typing import Annotated
 import msgspec
 
 from common.config.loader import ConfigError, parse_config
+from tools.commands import COMMANDS
 from tools.launch.restart import Backoff, RestartMode
 
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]*$")
@@ -161,8 +162,6 @@ def resolve_launches(
     Raises ConfigError naming an unknown service in `only`, an unknown `aeb` command or a
     missing config/program file.
     """
-    from tools.cli import COMMANDS
-
     names = {s.name for s in table.service}
     if only is not None and only - names:
         raise ConfigError(f"{origin}: --only names unknown services {sorted(only - names)}; "

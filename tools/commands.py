@@ -1,0 +1,49 @@
+"""The command table: every `aeb <command>`, the module whose `main(argv)` runs it, and
+the extra (pyproject.toml) that installs what it needs beyond the base install.
+
+Modules are named, not imported: `aeb` (tools/cli.py) imports the one it runs, and
+`aeb up` (tools/launch/) checks a process table's `aeb` commands against the names.
+"""
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    "radar": ("services.radar.main", "radar service: ARS408 on CAN to tracks on Zenoh"),
+    "camera": ("services.camera.main", "camera service: frames to JPEG on Zenoh"),
+    "fusion": ("services.fusion.main", "fusion service: verify tracks in the image, decide"),
+    "brake": ("services.brake.main", "brake service: commands to the actuator, fail-safe"),
+    "sim-actuator": ("tools.sim.actuator", "simulated brake actuator on a serial port"),
+    "calib-check": ("tools.calib_check", "draw projected radar tracks over a frame (PNG)"),
+    "calib-capture": ("tools.calib_capture", "save a frame and its nearest radar cycle"),
+    "router": ("common.router", "a Zenoh router"),
+    "up": ("tools.launch.main", "start the router and services of a process table"),
+    "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
+    "faults": ("tools.faults.main", "inject faults into the stack, check responses; fuzz"),
+    "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
+    "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
+    "bench": ("benchmarks.suite", "the benchmark suite"),
+    "record": ("tools.recording.record", "record the bus into MCAP (opens in Foxglove)"),
+    "replay": ("tools.recording.replay", "publish a recording back on the bus"),
+    "rerun": ("tools.recording.rerun", "re-run fusion or radar on a recording, offline"),
+    "evidence": ("tools.recording.evidence", "a folder of evidence per WARNING and BRAKE"),
+    "foxglove": ("tools.foxglove.bridge", "live view of the bus in Foxglove (WebSocket)"),
+    "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
+    "keygen": ("tools.keygen", "make the BrakeCommand key of a fusion instance"),
+    "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
+    "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
+    "hz": ("tools.topics.hz", "publish rate of a key: mean, min, max and std of the period"),
+    "can-export": ("tools.can_export", "a CAN log decoded to CSV with the shipped DBC"),
+    "eval": ("tools.eval.cli", "evaluate verifiers on labelled ROIs (the paper's tables)"),
+    "label": ("tools.eval.labelweb", "label ROIs YES / NO in a local web page"),
+    "train-verifier": ("tools.train_verifier", "train the hog_linear verifier on labelled ROIs"),
+}
+
+
+# The extra (pyproject.toml) that installs what a command needs beyond the base install,
+# and the modules of those optional dependencies
+COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
+                 "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
+                 "faults": "demo",
+                 "record": "record", "replay": "record", "rerun": "record",
+                 "evidence": "record", "foxglove": "record"}
+OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
+                    "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense",
+                    "mcap": "record", "foxglove": "record"}
