@@ -15,9 +15,10 @@ import threading
 import time
 from pathlib import Path
 
-from benchmarks.figures import Figure, machine_info
+from benchmarks.figures import Figure
 from benchmarks.proc_sampler import ProcSampler, Usage
 from benchmarks.processes import stop_processes
+from tools.machine import machine_info
 from tools.sim.scenario import find_scenario, load_scenario
 from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 

@@ -50,7 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.bench_brake import LineTimes
-from benchmarks.figures import Figure, machine_info
+from benchmarks.figures import Figure
 from benchmarks.floor_relay import VEHICLE as FLOOR_VEHICLE
 from benchmarks.latency_chain import (
     STAGE_TITLES,
@@ -74,6 +74,7 @@ from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TR
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
 from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
 from services.radar.ars408 import Frame
+from tools.machine import machine_info
 from tools.sim.can_links import SlcanPtyLink
 from tools.sim.pty_pair import PtyPair
 from tools.sim.radar_feed import CycleSent, RadarFeed

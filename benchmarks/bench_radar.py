@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.figures import Figure, machine_info
+from benchmarks.figures import Figure
 from common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
 from common.messages.radar import OutputMode, RadarStatus, RadarTracks
 from common.resources import ARS408_RECORDING
@@ -67,6 +67,7 @@ from services.radar.assembly import CycleAssembler, ListRole
 from services.radar.core import RadarCore
 from services.radar.detections import decode_cycle
 from services.radar.shell import RadarShell
+from tools.machine import machine_info
 
 RECORDING = ARS408_RECORDING
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import Figure, machine_info
+from benchmarks.figures import Figure
 from benchmarks.proc_sampler import ProcSampler
 from benchmarks.processes import stop_processes
 from common.bus import Bus
@@ -70,6 +70,7 @@ from common.messages import (
     VerifierStatus,
 )
 from common.net import free_port
+from tools.machine import machine_info
 
 RADAR_HZ = 13.5
 CAMERA_FPS = 30.0

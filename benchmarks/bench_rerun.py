@@ -23,12 +23,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.figures import Figure, machine_info
+from benchmarks.figures import Figure
 from benchmarks.processes import stop_processes
 from common.config.fusion import FusionConfig
 from common.config.loader import load_config
 from common.imaging import decode_gray
 from common.messages import CompressedFrame, decode
+from tools.machine import machine_info
 from tools.recording.reader import Recording, decode_record
 from tools.recording.rerun_fusion import FusionRerun
 

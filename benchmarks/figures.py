@@ -6,11 +6,8 @@ shared machine drift by 20% or more between runs); `ratio` is value / baseline.
 """
 
 import argparse
-import os
-import platform
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -39,35 +36,6 @@ class Figure:
         d = asdict(self)
         d["ratio"] = self.ratio
         return d
-
-
-def machine_info() -> dict[str, Any]:
-    """What the figures were measured on."""
-    cpu = ""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    versions = {}
-    for dist in ("eclipse-zenoh", "python-can", "opencv-python-headless", "numpy", "msgspec",
-                 "pyserial", "simplejpeg"):
-        try:
-            versions[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            versions[dist] = "not installed"
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (0.0, 0.0, 0.0)
-    return {
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "kernel": platform.release(),
-        "load_avg_1_5_15": [round(x, 2) for x in load],
-        "versions": versions,
-    }
 
 
 def section_main(prog: str, doc: str | None, run: Callable[[bool, Path], object],

@@ -24,9 +24,10 @@ import time
 import traceback
 from pathlib import Path
 
-from benchmarks.figures import Figure, machine_info
+from benchmarks.figures import Figure
 from benchmarks.report import plot, print_table, write_json
 from common.log import add_log_level, setup_logging
+from tools.machine import machine_info
 
 SECTIONS: dict[str, str] = {
     "gate": "benchmarks.bench_gate",

@@ -56,6 +56,7 @@ from tools.eval.records import (
 from tools.eval.report import PAPER_SWEEP, ReportSettings, evaluate_all
 from tools.eval.runner import FRAMES_PER_TASK, Progress, SourceError, execute, plan
 from tools.eval.scoring import VerifierSpec, default_specs, parse_spec
+from tools.machine import machine_info
 
 
 def _add_extract(p: argparse.ArgumentParser) -> None:
@@ -196,8 +197,6 @@ def _extract(args: argparse.Namespace) -> tuple[list[RoiRecord], RunInfo, int]:
             counters[k] = counters.get(k, 0) + v
         errors += res.errors
         params.update(res.params)
-    from benchmarks.figures import machine_info
-
     info = RunInfo(sources=list(args.sources), verifiers=params or {
         s.label: dict(s.params) for s in specs},
         settings={"fusion_config": args.fusion_config or "(defaults)",
