@@ -10,7 +10,7 @@ from common.messages import Decision, Verification
 from tests.foxglove.protobuf import decode
 from tests.recording.publish import textured_jpeg
 from tests.system.messages import brake_status, target, verified_targets
-from tools.foxglove.convert import (
+from tools.recording.foxglove_views import (
     Converter,
     encode_derived,
     frame_stamp_ns,

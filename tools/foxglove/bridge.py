@@ -5,7 +5,7 @@
     aeb foxglove --max-fps 5 --scale 0.5               # a remote viewer on a slow link
 
 Open Foxglove, "Open connection", Foxglove WebSocket, `ws://HOST:8765`. The channels are
-those of a recording (tools/foxglove/convert.py, docs/monitoring.md lists them): the
+those of a recording (tools/recording/foxglove_views.py, docs/monitoring.md lists them): the
 camera (`/foxglove/<vehicle>/camera/<camera>/image`) with each fusion instance's ROIs
 (`.../fusion/<instance>/annotations/<camera>`), the tracks from above with the corridor
 (`.../fusion/<instance>/scene`, `.../radar/<sensor>/scene`), JSON views for plots (TTC,
@@ -34,8 +34,8 @@ from common.messages import DecodeError, decode
 from common.messages.schema import schema_name
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
-from tools.foxglove.convert import Converter, object_schema
 from tools.recording.format import ChannelType, parse_topic
+from tools.recording.foxglove_views import Converter, object_schema
 from tools.recording.record import Recorder, decision_settings, selection
 from tools.recording.writer import TopicCount, WriterStats
 

@@ -63,7 +63,12 @@ from common.messages import (
 from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
-from tools.foxglove.convert import DECISION_LEVEL, frame_stamp_ns, state_colour, target_label
+from tools.recording.foxglove_views import (
+    DECISION_LEVEL,
+    frame_stamp_ns,
+    state_colour,
+    target_label,
+)
 
 HISTORY_S = 3.0
 # An event is written once the stream is this far past its cycle: its targets, raw CAN

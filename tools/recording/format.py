@@ -10,7 +10,7 @@ MCAP files (mcap.dev). One channel per Zenoh key:
 - log_time = the recorder's wall-clock receive time (ns); publish_time = the message's
   `header.stamp_ns` (when the data was measured), the log time when it has no header.
 
-Beside them, channels derived for viewing (tools/foxglove/convert.py), under
+Beside them, channels derived for viewing (tools/recording/foxglove_views.py), under
 ``/foxglove/<vehicle>/...``: Foxglove schemas in protobuf (CompressedImage,
 ImageAnnotations, SceneUpdate) and small JSON channels (plots, health). Readers of the
 stack's own data use the msgpack channels only.

@@ -43,13 +43,13 @@ from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
-from tools.foxglove.convert import Converter, encode_derived
 from tools.keys import MESSAGE_KEYS
 from tools.recording.format import (
     ChannelType,
     channel_of_topic,
     parse_topic,
 )
+from tools.recording.foxglove_views import Converter, encode_derived
 from tools.recording.writer import RecordingWriter, WriterStats
 
 QUEUE_CAPACITY = 8192        # samples per subscription Zenoh may hold for its reader

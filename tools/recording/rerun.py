@@ -39,9 +39,9 @@ from common.log import add_log_level, setup_logging
 from common.messages import encode
 from common.resources import DEPLOY
 from services.fusion.verifiers import VerifierConfigError
-from tools.foxglove.convert import Converter, encode_derived
 from tools.recording.compare import Comparison, Difference, check_declared, summary_table
 from tools.recording.format import stack_channel
+from tools.recording.foxglove_views import Converter, encode_derived
 from tools.recording.reader import Recording, RecordingError
 from tools.recording.writer import RecordingWriter
 
