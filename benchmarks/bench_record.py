@@ -202,7 +202,7 @@ class Counter:
 
 def measure(minutes: float, out_dir: Path) -> dict[str, Any]:
     from tools.recording.reader import Recording
-    from tools.recording.record import RECORDER_STATUS
+    from tools.recording.recorder import RECORDER_STATUS
 
     work = out_dir / "record-bench"
     work.mkdir(parents=True, exist_ok=True)

@@ -20,7 +20,7 @@ from tests.support import (
     wait_for,
 )
 from tools.recording.reader import Recording, decode_record
-from tools.recording.record import RECORDER_STATUS
+from tools.recording.recorder import RECORDER_STATUS
 
 pytestmark = pytest.mark.slow
 

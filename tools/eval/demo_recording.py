@@ -23,7 +23,7 @@ from common.keys import (
 )
 from common.service import stop_event_on_signals
 from tools.keys import SIM_WORLD
-from tools.recording.record import Recorder
+from tools.recording.recorder import Recorder
 from tools.recording.writer import RecordingWriter
 
 SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,

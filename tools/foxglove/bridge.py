@@ -36,7 +36,7 @@ from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
 from tools.recording.format import ChannelType, parse_topic
 from tools.recording.foxglove_views import Converter, object_schema
-from tools.recording.record import Recorder, decision_settings, selection
+from tools.recording.recorder import Recorder, decision_settings, selection
 from tools.recording.writer import TopicCount, WriterStats
 
 

@@ -69,6 +69,7 @@ from tools.recording.foxglove_views import (
     state_colour,
     target_label,
 )
+from tools.recording.recorder import Recorder, decision_settings, selection
 
 HISTORY_S = 3.0
 # An event is written once the stream is this far past its cycle: its targets, raw CAN
@@ -468,7 +469,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     from common.config.loader import ConfigError
     from tools.recording.reader import Recording, RecordingError, decode_record
-    from tools.recording.record import decision_settings
 
     args = parse_args(argv)
     setup_logging("evidence", args.log_level)
@@ -496,8 +496,6 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         collector.close()
     else:
-        from tools.recording.record import Recorder, selection
-
         stop = stop_event_on_signals()
         collector = EvidenceCollector(out, args.vehicle, decision)
         bus = open_bus(args, "evidence", stop)
