@@ -37,28 +37,16 @@ from tools.sim.latency import chain_latencies_ns
 from tools.sim.plot import plot_timeline
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.runner import RunResult
-from tools.sim.scenario import Scenario, all_scenarios, find_scenario, load_scenario
+from tools.sim.scenario import (
+    DEMO_SCENARIOS,
+    Scenario,
+    all_scenarios,
+    load_scenario,
+    pick_scenarios,
+)
 from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
 from tools.sim.stack import FUSION_CONFIG
 from tools.sim.verdict import SUMMARY_HEADER, Sample, summary_line
-
-DEMO_SCENARIOS = (
-    "stationary_car_30kph",
-    "cardboard_box_30kph",
-    "pedestrian_standing_20kph",
-    "pedestrian_crossing_20kph",
-    "bicycle_crossing_20kph",
-    "pedestrian_behind_parked_car_20kph",
-    "bicycle_ahead_slow_20kph",
-    "multi_object_25kph",
-    "no_threat_parked_cars_30kph",
-    "no_threat_pedestrian_walking_beside_20kph",
-    "no_threat_pedestrian_crossed_20kph",
-    "no_threat_manhole_30kph",
-    "no_threat_overhead_sign_30kph",
-    "no_threat_guard_rail_bend_20kph",
-    "no_threat_multipath_ghost_20kph",
-)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -85,15 +73,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
     add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
-
-
-def pick_scenarios(spec: str) -> list[Scenario]:
-    """Raises ConfigError naming an unknown or invalid scenario."""
-    paths = all_scenarios() if spec == "all" else [
-        find_scenario(name.strip()) for name in spec.split(",") if name.strip()]
-    if not paths:
-        raise ConfigError("no scenario selected")
-    return [load_scenario(p) for p in paths]
 
 
 class Progress:

@@ -108,7 +108,7 @@ def test_the_timeline_plot_shows_the_false_target(tmp_path):
 
 @pytest.mark.parametrize("name", FALSE_TARGET_SCENARIOS)
 def test_false_target_scenarios_load_as_no_threat_and_are_in_the_demo(name):
-    from tools.demo import DEMO_SCENARIOS
+    from tools.sim.scenario import DEMO_SCENARIOS
 
     sc = load_scenario(find_scenario(name))
     assert sc.kind is ScenarioKind.NO_THREAT and sc.name == name

@@ -34,7 +34,7 @@ def record_demo(out: Path, scenarios: str, camera_fps: float,
                 fusion_config: Path | None = None) -> int:
     """Run and record the scenarios, fusion configured by `fusion_config` (default: the
     demo's); 0 when recorded (whatever the verdicts), 2 when the stack could not start."""
-    from tools.demo import DEMO_SCENARIOS, pick_scenarios
+    from tools.sim.scenario import DEMO_SCENARIOS, pick_scenarios
     from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
     from tools.sim.stack import FUSION_CONFIG
 

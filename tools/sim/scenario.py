@@ -178,3 +178,33 @@ def find_scenario(name_or_path: str) -> Path:
 
 def all_scenarios() -> list[Path]:
     return sorted(SCENARIO_DIR.glob("*.toml"))
+
+
+# `aeb demo`'s default set (and the recordings `aeb eval` makes of it).
+DEMO_SCENARIOS = (
+    "stationary_car_30kph",
+    "cardboard_box_30kph",
+    "pedestrian_standing_20kph",
+    "pedestrian_crossing_20kph",
+    "bicycle_crossing_20kph",
+    "pedestrian_behind_parked_car_20kph",
+    "bicycle_ahead_slow_20kph",
+    "multi_object_25kph",
+    "no_threat_parked_cars_30kph",
+    "no_threat_pedestrian_walking_beside_20kph",
+    "no_threat_pedestrian_crossed_20kph",
+    "no_threat_manhole_30kph",
+    "no_threat_overhead_sign_30kph",
+    "no_threat_guard_rail_bend_20kph",
+    "no_threat_multipath_ghost_20kph",
+)
+
+
+def pick_scenarios(spec: str) -> list[Scenario]:
+    """Scenarios by comma-separated names or files, or "all". Raises ConfigError naming an
+    unknown or invalid scenario."""
+    paths = all_scenarios() if spec == "all" else [
+        find_scenario(name.strip()) for name in spec.split(",") if name.strip()]
+    if not paths:
+        raise ConfigError("no scenario selected")
+    return [load_scenario(p) for p in paths]

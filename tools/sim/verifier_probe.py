@@ -28,7 +28,7 @@ from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.verifiers import Observation, available, create
 from tools.sim.radar_model import RadarModel
 from tools.sim.render import Renderer
-from tools.sim.scenario import Scenario
+from tools.sim.scenario import DEMO_SCENARIOS, Scenario, pick_scenarios
 from tools.sim.world import World
 
 LATERAL_M = 4.0             # the path's 1.2 m and crossing targets on their way in
@@ -78,8 +78,6 @@ def probe(scenario: Scenario, renderer: Renderer, verifiers: list[str],
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tools.demo import DEMO_SCENARIOS, pick_scenarios
-
     parser = argparse.ArgumentParser(prog="python -m tools.sim.verifier_probe",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
