@@ -1,6 +1,6 @@
 """An intruder on the vehicle network, default profile (plain TCP, no access control):
 the brake service and a fusion-like publisher holding the instance's key, as their own
-processes on loopback; the SIMULATED attacker (tools/sim/intruder.py) publishes unsigned
+processes on loopback; the SIMULATED attacker (tools/faults/intruder.py) publishes unsigned
 commands with sequence numbers ahead, 2**62, forged MACs, replays of the real commands
 and a flood. Every one is refused and counted, the brake never moves, and the real
 fusion stays in command."""
@@ -28,7 +28,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BrakeRig]:
 
 def intruder(rig: BrakeRig, *args: str, name: str = "intruder") -> ServiceProcess:
     return ServiceProcess(name, python_module(
-        "tools.sim.intruder", "--connect", rig.endpoint, *args), rig.log_dir)
+        "tools.faults.intruder", "--connect", rig.endpoint, *args), rig.log_dir)
 
 
 def finished(proc: ServiceProcess, timeout_s: float = 60.0) -> dict[str, int]:

@@ -428,7 +428,7 @@ class SerialUnplug(Fault):
 
 
 class Intruder(Fault):
-    """The SIMULATED attacker of tools/sim/intruder.py on the harness's session."""
+    """The SIMULATED attacker of tools/faults/intruder.py on the harness's session."""
 
     name = "intruder publishes commands"
     required = "refused and counted, brake unmoved, fusion still in command"
@@ -438,7 +438,7 @@ class Intruder(Fault):
         self.flood_s = flood_s
 
     def inject(self, ctx: Context) -> Outcome:
-        from tools.sim.intruder import run as attack
+        from tools.faults.intruder import run as attack
         obs = ctx.observer
         last = obs.status.last()
         rejected0 = sum(last.msg.rejected.values()) if last else 0

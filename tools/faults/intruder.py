@@ -1,7 +1,7 @@
 """A SIMULATED attacker on the vehicle network: publishes BrakeCommands on the brake's
 key as a process without the fusion instance's command key would (docs/security.md).
 
-    python -m tools.sim.intruder --connect tcp/127.0.0.1:7447 [--instance primary]
+    python -m tools.faults.intruder --connect tcp/127.0.0.1:7447 [--instance primary]
         [--attacks ahead,jump,forged,replay,flood] [--flood-s 1.0] [--flood-hz 1000]
         [--zenoh-config FILE]
 
@@ -142,7 +142,7 @@ def run(bus: Bus, instance: str, attacks: tuple[str, ...], record_s: float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.sim.intruder", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m tools.faults.intruder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--connect", action="append", default=[])
     parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 (e.g. a TLS client)")
