@@ -11,8 +11,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fusion": ("services.fusion.main", "fusion service: verify tracks in the image, decide"),
     "brake": ("services.brake.main", "brake service: commands to the actuator, fail-safe"),
     "sim-actuator": ("tools.sim.actuator", "simulated brake actuator on a serial port"),
-    "calib-check": ("tools.calib_check", "draw projected radar tracks over a frame (PNG)"),
-    "calib-capture": ("tools.calib_capture", "save a frame and its nearest radar cycle"),
+    "calib-check": ("tools.calib.check", "draw projected radar tracks over a frame (PNG)"),
+    "calib-capture": ("tools.calib.capture", "save a frame and its nearest radar cycle"),
     "router": ("common.router", "a Zenoh router"),
     "up": ("tools.launch.main", "start the router and services of a process table"),
     "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
@@ -33,7 +33,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "can-export": ("tools.can_export", "a CAN log decoded to CSV with the shipped DBC"),
     "eval": ("tools.eval.cli", "evaluate verifiers on labelled ROIs (the paper's tables)"),
     "label": ("tools.eval.labelweb", "label ROIs YES / NO in a local web page"),
-    "train-verifier": ("tools.train_verifier", "train the hog_linear verifier on labelled ROIs"),
+    "train-verifier": ("tools.eval.train_verifier",
+                       "train the hog_linear verifier on labelled ROIs"),
 }
 
 

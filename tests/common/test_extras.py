@@ -56,7 +56,7 @@ def test_the_base_install_runs(command):
 @pytest.mark.parametrize(("extra", "modules"), [
     ("radar", ["services.radar.main"]),
     ("camera", ["services.camera.main", "tools.sim.moving_box"]),
-    ("fusion", ["services.fusion.main", "tools.calib_check"]),
+    ("fusion", ["services.fusion.main", "tools.calib.check"]),
     ("monitor", ["tools.monitor.main"]),
     ("demo", ["tools.demo", "benchmarks.suite", "tools.sim.camera_source"]),
 ])

@@ -15,7 +15,7 @@ from tools.eval import cli as eval_cli
 from tools.eval import labels as labelfile
 from tools.eval.frames import load_gray
 from tools.eval.records import FrameRef, RoiRecord, read_records, write_records
-from tools.train_verifier import fold_of, main, tau_for_recall
+from tools.eval.train_verifier import fold_of, main, tau_for_recall
 
 
 def roi_set(tmp: Path, frames: int = 24) -> Path:

@@ -31,7 +31,7 @@ from services.fusion.verifiers import (
 from tests.fusion.helpers import CAL
 from tests.fusion.test_depth_check import WIDE, observe, render_depth
 from tools.eval.scoring import default_specs
-from tools.train_verifier import fit_logistic
+from tools.eval.train_verifier import fit_logistic
 
 REFERENCE = Path(__file__).parent.parent / "data" / "hog_reference.json"
 

@@ -9,7 +9,7 @@ from common.messages import encode
 from services.fusion.roi import Roi
 from services.fusion.verifiers import create
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, observe, track
-from tools import calib_check
+from tools.calib import check as calib_check
 from tools.sim.scenes import Obstacle, Scene, render
 
 

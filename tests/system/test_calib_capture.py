@@ -14,8 +14,8 @@ from common.keys import CAMERA_JPEG, RADAR_TRACKS
 from common.messages import CompressedFrame, RadarTracks
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tests.support import open_bus
-from tools import calib_check
-from tools.calib_capture import Pairing
+from tools.calib import check as calib_check
+from tools.calib.capture import Pairing
 from tools.sim.scenes import Obstacle, Scene, render
 
 MS = 1_000_000
