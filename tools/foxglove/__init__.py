@@ -1,1 +1,2 @@
-"""Foxglove: the views of the stack's messages, shared by recordings and the live bridge."""
+"""`aeb foxglove`: the live bus in Foxglove, with the views a recording derives
+(tools/recording/foxglove_views.py)."""
