@@ -25,16 +25,22 @@ def test_waits_for_the_router_visibly_and_stops_on_a_signal(tmp_path, service, s
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     proc = ServiceProcess(service, python_module(module, "--config", str(REPO / config),
                                                  "--connect", endpoint), tmp_path)
+    waits_then_stops_on(proc, endpoint, sig, service)
+
+
+def waits_then_stops_on(proc: ServiceProcess, endpoint: str, sig: signal.Signals,
+                        what: str) -> None:
+    """`proc` says it waits for the router at `endpoint`, and exits 0 on `sig`."""
     try:
         wait_for(lambda: "waiting_for_router" in proc.output() or not proc.alive(),
-                 START_TIMEOUT_S, 0.05, f"{service} to say it waits for the router")
+                 START_TIMEOUT_S, 0.05, f"{what} to say it waits for the router")
         assert proc.alive(), proc.output()
         assert endpoint in proc.output()
         proc.signal(sig)
         try:
             code = proc.proc.wait(START_TIMEOUT_S)
         except subprocess.TimeoutExpired:
-            pytest.fail(f"{service} still running {START_TIMEOUT_S} s after {sig.name}:\n"
+            pytest.fail(f"{what} still running {START_TIMEOUT_S} s after {sig.name}:\n"
                         f"{proc.output()}")
         assert code == 0, proc.output()
         assert "Traceback" not in proc.output()
@@ -58,18 +64,4 @@ def test_a_bus_tool_waiting_for_the_router_stops_on_a_signal(tmp_path, tool):
     args = [a.format(tmp=tmp_path) for a in BUS_TOOLS[tool]]
     proc = ServiceProcess(tool, python_module("tools.cli", *args, "--connect", endpoint,
                                               "--connect-timeout", "0"), tmp_path)
-    try:
-        wait_for(lambda: "waiting_for_router" in proc.output() or not proc.alive(),
-                 START_TIMEOUT_S, 0.05, f"aeb {tool} to say it waits for the router")
-        assert proc.alive(), proc.output()
-        assert endpoint in proc.output()
-        proc.signal(signal.SIGTERM)
-        try:
-            code = proc.proc.wait(START_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"aeb {tool} still running {START_TIMEOUT_S} s after SIGTERM:\n"
-                        f"{proc.output()}")
-        assert code == 0, proc.output()
-        assert "Traceback" not in proc.output()
-    finally:
-        proc.stop()
+    waits_then_stops_on(proc, endpoint, signal.SIGTERM, f"aeb {tool}")
