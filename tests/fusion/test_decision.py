@@ -1,4 +1,5 @@
-"""Issue 3, must show 2: every branch of the decision, on the pure core."""
+"""Every branch of the decision (radar threat, stale radar, camera verdict, unverifiable
+policy, hold, gate scope), on the pure core."""
 
 import pytest
 

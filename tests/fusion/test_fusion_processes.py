@@ -1,4 +1,4 @@
-"""Issue 3, must show 4: camera and fusion as separate processes with a Zenoh router.
+"""Camera and fusion as separate processes with a Zenoh router.
 
 The camera service plays an image folder (a rendered road scene with a box 8 m ahead);
 this test plays the radar (RadarTracks) and, for the corrupt-frame case, publishes a

@@ -1,5 +1,5 @@
-"""Issue 3, must show 1: the gate's densities equal a direct OpenCV computation on the
-same pixels; the second verifier; the registry."""
+"""The gate's densities equal a direct OpenCV computation on the same pixels; the
+adaptive verifier; the registry."""
 
 import functools
 

@@ -1,5 +1,5 @@
 """`aeb ab-report`: pairing two fusion instances by radar cycle, the report, MCAP
-recordings (and what is not one: defect 9 of issue 19), and the command live on a bus."""
+recordings (and a file that is not one), and the command live on a bus."""
 
 import json
 import subprocess
@@ -94,7 +94,8 @@ def test_the_report_of_an_mcap_recording(tmp_path):
 
 
 def test_a_file_that_is_not_a_recording_is_said_so_and_fails(tmp_path):
-    """Issue 19, defect 9: it printed "no disagreement" and exited 0."""
+    """A file that is not a recording fails with a message naming it, never "no
+    disagreement" and exit 0."""
     notes = tmp_path / "notes.txt"
     notes.write_text("primary and candidate agreed on everything, I think\n")
     proc = ab_report("--from", str(notes))
