@@ -190,8 +190,8 @@ def refresh_frame(decoder: FrameDecoder, jpeg: bytes, seq: int,
     if depth is not None:
         units = to_units(depth)
         decoder.decode_depth_now(encode(DepthFrame(
-            Header(seq, "camera/front", stamp, 0), "front", units.shape[1], units.shape[0],
-            "zstd", encode_depth(units, "zstd"))))
+            header=Header(seq, "camera/front", stamp, 0), camera="front", width=units.shape[1],
+            height=units.shape[0], codec="zstd", data=encode_depth(units, "zstd"))))
 
 
 def naive_sum_us(bgr: np.ndarray, rois: list[Roi]) -> float:

@@ -39,7 +39,7 @@ class CameraCheck(msgspec.Struct, frozen=True):
     density: float | None = None
 
 
-class VerifiedTarget(msgspec.Struct, frozen=True):
+class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
     """One confirmed radar track after verification and decision.
 
     `x_m`, `y_m` are the track predicted to the frame's capture time (what was projected;
@@ -78,7 +78,7 @@ class VerifiedTarget(msgspec.Struct, frozen=True):
     cameras: tuple[CameraCheck, ...] = ()
 
 
-class VerifiedTargets(msgspec.Struct, frozen=True):
+class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
     header: Header
     instance: str
     radar_sensor: str
@@ -113,7 +113,7 @@ class CommandAuth(msgspec.Struct, frozen=True):
     mac: bytes
 
 
-class BrakeCommand(msgspec.Struct, frozen=True):
+class BrakeCommand(msgspec.Struct, frozen=True, kw_only=True):
     """Exactly one per radar cycle per fusion instance: the most severe decision, or a
     plain heartbeat (decision NONE, level 0).
 
