@@ -94,7 +94,9 @@ class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
     frames_received: int = 0       # camera frames seen by this instance since start
     frames_undecodable: int = 0    # ... of which could not be decoded (counted, skipped)
     frames_dropped: int = 0        # ... dropped before decoding because the decoder lagged
-    frames_skipped: int = 0        # ... not decoded: overtaken before a radar cycle needed them
+    # Always 0: fusion decodes every frame it receives. Kept on the wire: removing a field
+    # is a breaking change (common/messages/schema.py).
+    frames_skipped: int = 0
     frames_corrupt: int = 0        # ... of the undecodable: JPEG bytes failing their CRC-32
     # Cameras without a usable frame this cycle, and why (the others verified as usual).
     cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)

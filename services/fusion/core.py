@@ -218,7 +218,6 @@ class FusionCore:
             frames_received=sum(f.received for f in feeds),
             frames_undecodable=sum(f.undecodable for f in feeds),
             frames_dropped=sum(f.dropped for f in feeds),
-            frames_skipped=sum(f.skipped for f in feeds),
             frames_corrupt=sum(f.corrupt for f in feeds),
             cameras_unavailable=cycle.cameras_unavailable)
 

@@ -29,7 +29,6 @@ from common.service import (
 from common.systemd import Watchdog
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
-from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.shell import FusionShell, run_until
 from services.fusion.verifiers import VerifierConfigError, create
@@ -111,16 +110,14 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     bus = opened
     with bus:
-        rhythm = RadarRhythm()
-        decoders = [FrameDecoder.for_policy(cal.width, cal.height, s.frames, log, name, rhythm)
-                    for name, cal in cals.items()]
-        shell = FusionShell(bus, s, core, decoders, log, cals, rhythm, signer)
+        decoders = [FrameDecoder(cal.width, cal.height, log, name) for name, cal in cals.items()]
+        shell = FusionShell(bus, s, core, decoders, log, cals, signer)
         shell.start()
         apply_process(s.realtime, log)
         token = bus.declare_health("fusion", s.instance)
         log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,
                     params=core.verifier_params, radar=s.radar_sensor,
-                    cameras=core.camera_names, decode=s.frames.decode.value,
+                    cameras=core.camera_names,
                     calibration=",".join(c.calibration for c in s.camera_inputs)))
         systemd.ready(f"serving fusion {s.instance}")
         try:

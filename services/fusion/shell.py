@@ -40,20 +40,17 @@ from common.systemd import Watchdog
 from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FROZEN_REASON, FrameDecoder
-from services.fusion.rhythm import RadarRhythm
 from services.fusion.verifiers import wants_depth
 
 
 class FusionShell:
     """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
     single camera). `calibrations`: what each camera's CameraInfo is checked against.
-    `rhythm`: told every radar cycle's arrival (decoders with decode = before_radar
-    share it). `signer`: signs every BrakeCommand (None: published unsigned)."""
+    `signer`: signs every BrakeCommand (None: published unsigned)."""
 
     def __init__(self, bus: Bus, settings: FusionSettings, core: FusionCore,
                  decoders: FrameDecoder | Sequence[FrameDecoder], log: logging.Logger,
                  calibrations: Calibration | Mapping[str, Calibration] | None = None,
-                 rhythm: RadarRhythm | None = None,
                  signer: CommandSigner | None = None) -> None:
         self.bus = bus
         self.s = settings
@@ -62,7 +59,6 @@ class FusionShell:
         if len(self.decoders) != len(core.cameras):
             raise ValueError(f"{len(self.decoders)} decoders for {len(core.cameras)} cameras")
         self.camera_names = [c.name for c in core.cameras]
-        self.rhythm = rhythm
         self.signer = signer
         self.log = log
         self.counters = ReasonCounter()
@@ -134,7 +130,7 @@ class FusionShell:
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
         """Process one cycle: its BrakeCommand is published as soon as it is decided, then
-        its VerifiedTargets; the radar's rhythm (for the frame decoders) is updated last."""
+        its VerifiedTargets."""
         with self._lock:
             self._check_order(tracks)
             feeds = [d.snapshot() for d in self.decoders]
@@ -172,8 +168,6 @@ class FusionShell:
             result = CycleResult(targets, command)
             self._count(result)
             self._proc_us.append(processing_ns / 1e3)
-        if self.rhythm is not None:
-            self.rhythm.on_cycle(rx_mono_ns)
         return result
 
     def _count_failure(self, tracks: RadarTracks, exc: Exception) -> None:
@@ -217,14 +211,13 @@ class FusionShell:
         out.update(frames=sum(f.received for f in feeds),
                    frames_unusable=sum(f.undecodable for f in feeds),
                    frames_dropped=sum(f.dropped for f in feeds),
-                   frames_skipped=sum(f.skipped for f in feeds),
                    frames_corrupt=sum(f.corrupt for f in feeds),
                    depth_received=sum(f.depth_received for f in feeds),
                    depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
                    invalid_tracks=self.core.invalid_tracks)
         if len(feeds) > 1:
             for name, f in zip(self.camera_names, feeds, strict=True):
-                out[f"frames_{name}"] = f"{f.received}/{f.skipped}/{f.undecodable}/{f.dropped}"
+                out[f"frames_{name}"] = f"{f.received}/{f.undecodable}/{f.dropped}"
         if proc:
             out.update(proc_p50_us=proc[len(proc) // 2], proc_max_us=proc[-1])
         return out
