@@ -2,15 +2,13 @@
 
     aeb fusion --config deploy/fusion.toml
     aeb fusion --config deploy/fusion-candidate.toml     # a shadow A/B instance
+    aeb fusion --config deploy/fusion.toml --set fusion.verifier.params.tau=0.03
 
 Exit codes: 0 after SIGINT/SIGTERM, 2 for an invalid configuration or calibration
 (named on stderr), 1 when the bus cannot be opened.
 """
 
-import argparse
 import sys
-
-import msgspec
 
 from common import systemd
 from common.bus import Bus, BusError
@@ -33,6 +31,9 @@ from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.shell import FusionShell, run_until
 from services.fusion.verifiers import VerifierConfigError, create
 
+SHORTCUTS = {"--instance": ("fusion.instance", "instance name"),
+             "--calibration": ("fusion.calibration", "calibration TOML of the one camera")}
+
 
 def build_core(cfg: FusionConfig) -> tuple[FusionCore, dict[str, Calibration]]:
     """The core of a configured instance and each camera's calibration, by camera name.
@@ -47,27 +48,8 @@ def build_core(cfg: FusionConfig) -> tuple[FusionCore, dict[str, Calibration]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = service_argparser("fusion", __doc__ or "")
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.add_argument("--instance", help="instance name, overrides fusion.instance")
-    parser.add_argument("--calibration", help="calibration TOML, overrides fusion.calibration")
-    args = parser.parse_args(argv)
+    args = service_argparser("fusion", __doc__ or "", SHORTCUTS).parse_args(argv)
     cfg = load_service_config(args, FusionConfig)
-    overrides = {k: v for k, v in (("instance", args.instance),
-                                   ("calibration", args.calibration)) if v}
-    if args.calibration and cfg.fusion.cameras:
-        print("error: --calibration applies to a single camera; this config has "
-              "[[fusion.cameras]], each with its own calibration", file=sys.stderr)
-        return 2
-    if overrides:
-        try:
-            cfg = msgspec.convert(
-                msgspec.to_builtins(msgspec.structs.replace(
-                    cfg, fusion=msgspec.structs.replace(cfg.fusion, **overrides))),
-                FusionConfig)
-        except msgspec.ValidationError as exc:
-            print(f"error: invalid command-line override: {exc}", file=sys.stderr)
-            return 2
     s = cfg.fusion
     log = setup_logging(f"fusion.{s.instance}", cfg.log.level.value)
     try:

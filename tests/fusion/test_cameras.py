@@ -267,7 +267,9 @@ def test_calibration_override_is_refused_for_several_cameras(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
                            str(multicam_config(tmp_path)), "--calibration", "x.toml"],
                           capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2 and "--calibration applies to a single camera" in proc.stderr
+    assert proc.returncode == 2 and "with --calibration x.toml" in proc.stderr
+    assert "give either frames.camera and calibration (one camera) or [[fusion.cameras]]" \
+        in proc.stderr
 
 
 def test_each_camera_predicts_the_tracks_to_its_own_frame_time():
