@@ -12,6 +12,7 @@ from typing import Any
 import msgspec
 import zenoh
 
+from common import systemd
 from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
@@ -225,12 +226,21 @@ class FusionShell:
     def log_stats(self) -> None:
         self.log.info(kv("fusion_stats", **self.stats()))
 
-
-def run_until(stop: threading.Event, shell: FusionShell, interval_s: float,
-              watchdog: Watchdog | None = None) -> None:
-    """Log statistics every interval until `stop` is set; feed systemd's watchdog."""
-    wait = (watchdog or Watchdog(env={})).wait
-    next_log = time.monotonic() + interval_s
-    while not wait(stop, max(0.0, next_log - time.monotonic())):
-        shell.log_stats()
-        next_log += interval_s
+    def run(self, stop: threading.Event, watchdog: Watchdog | None = None) -> int:
+        """Serve until `stop` is set, after `start`: the health token and systemd's ready,
+        then statistics every `stats_interval_s` (feeding systemd's watchdog); on the way
+        out the token is withdrawn, the subscriptions and decoders stopped and the last
+        statistics logged."""
+        wait = (watchdog or Watchdog(env={})).wait
+        token = self.bus.declare_health("fusion", self.s.instance)
+        try:
+            systemd.ready(f"serving fusion {self.s.instance}")
+            next_log = time.monotonic() + self.s.stats_interval_s
+            while not wait(stop, max(0.0, next_log - time.monotonic())):
+                self.log_stats()
+                next_log += self.s.stats_interval_s
+        finally:
+            token.undeclare()
+            self.stop()
+            self.log_stats()
+        return 0

@@ -28,6 +28,14 @@ def test_bad_configuration_exits_2_naming_the_problem(tmp_path, toml, named):
     assert named in proc.stderr
 
 
+def test_another_instances_key_exits_2_naming_both_instances():
+    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c", "deploy/fusion.toml",
+                           "--instance", "shadow", "--check"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert "primary.key: key of instance 'primary', this is 'shadow'" in proc.stderr
+
+
 @pytest.mark.parametrize("path", ["deploy/fusion.toml", "deploy/fusion-candidate.toml",
                                   "deploy/fusion-paper.toml"])
 def test_shipped_configs_build(path):
