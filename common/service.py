@@ -13,17 +13,10 @@ from typing import Any, TypeVar
 from common.bus import BusError, zenoh_config
 from common.config.base import ServiceConfig
 from common.config.loader import load_config_or_exit
-from common.config.overrides import Override, OverrideError, parse_set
+from common.config.overrides import Override, add_set_argument
 from common.log import add_log_level
 
 C = TypeVar("C", bound=ServiceConfig)
-
-
-def _set_argument(text: str) -> Override:
-    try:
-        return parse_set(text)
-    except OverrideError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
 class _Shortcut(argparse.Action):
@@ -53,10 +46,7 @@ def service_argparser(name: str, description: str,
     parser.add_argument("--check", action="store_true",
                         help="validate the configuration and every file it names as at start, "
                              "then exit (0 valid, 2 invalid) without opening the bus or devices")
-    parser.add_argument("--set", action="append", dest="overrides", default=[],
-                        type=_set_argument, metavar="SECTION.KEY=VALUE",
-                        help="override one setting of the config (repeatable), e.g. "
-                             "log.level=DEBUG; VALUE is a TOML value or text")
+    add_set_argument(parser)
     for option, (setting, text) in (shortcuts or {}).items():
         parser.add_argument(option, action=_Shortcut, const=setting, metavar="VALUE",
                             help=f"{text}: the same as --set {setting}=VALUE")

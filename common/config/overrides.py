@@ -8,6 +8,7 @@ as written. A path given on the command line is relative to the current director
 any command's paths are (common/config/paths.py).
 """
 
+import argparse
 import tomllib
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -35,6 +36,11 @@ class Override:
     option: str
     value: Any = None
 
+    @property
+    def assignment(self) -> str:
+        """``key=text``, as `--set` takes it."""
+        return f"{self.key}={self.text}"
+
 
 def parse_set(item: str) -> Override:
     """`NAME=VALUE` (a `--set` argument) as an override. Raises OverrideError."""
@@ -43,6 +49,22 @@ def parse_set(item: str) -> Override:
     if not sep or not name or any(not part for part in name.split(".")):
         raise OverrideError(f"--set {item!r}: expected SECTION.KEY=VALUE")
     return Override(name, text, f"--set {item}")
+
+
+def _set_argument(text: str) -> Override:
+    try:
+        return parse_set(text)
+    except OverrideError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    """`--set SECTION.KEY=VALUE` (repeatable) into `args.overrides`, a list of Override;
+    a malformed one is a usage error (exit 2)."""
+    parser.add_argument("--set", action="append", dest="overrides", default=[],
+                        type=_set_argument, metavar="SECTION.KEY=VALUE",
+                        help="override one setting of the config (repeatable), e.g. "
+                             "fusion.verifier.params.tau=0.05; VALUE is a TOML value or text")
 
 
 def _toml_value(text: str) -> Any:
