@@ -220,7 +220,7 @@ class KalmanTracker:
         st = self.state
         a, b, v = st[VAR_P] + self._r_p, st[COV_PV], st[VAR_V] + self._r_v
         det = a * v - b * b
-        self._s_inv = np.stack([v / det, -b / det, a / det])
+        self._s_inv = np.array([v, -b, a]) / det
 
     def _candidates(self, det: Detections) -> tuple[I, I]:
         """Track x detection pairs that may lie inside the gate: every pair when there
