@@ -146,13 +146,13 @@ def _set(data: dict[str, Any], o: Override, root: mi.StructType) -> None:
         elif isinstance(base, mi.DictType):
             child = base.value_type
         else:
-            raise OverrideError(f"{o.option}: {where} is a value, not a table of settings")
+            raise OverrideError(f"{o.option}: {where} is not a table of settings")
         if depth == len(parts) - 1:
             break
         table = node.setdefault(part, {})
         if not isinstance(table, dict):
-            raise OverrideError(f"{o.option}: {'.'.join(parts[:depth + 1])} is a value, not "
-                                f"a table of settings")
+            raise OverrideError(f"{o.option}: {'.'.join(parts[:depth + 1])} is not a table "
+                                f"of settings")
         path_keys = tuple(_unwrap(child)[1].get(PATH_KEYS_MARK, ()))
         node, info = table, child
     base, extra = _unwrap(child)

@@ -75,7 +75,8 @@ def test_a_tagged_table_takes_the_settings_of_its_kind(tmp_path):
     ("fusoin.instance=x", "the configuration has no setting 'fusoin'"),
     ("fusion.decision.hold_s=-1", "$.fusion.decision.hold_s"),
     ("fusion.decision.hold_s=soon", "$.fusion.decision.hold_s"),
-    ("fusion.frames.align.x=1", "fusion.frames.align is a value"),
+    ("fusion.frames.align.x=1", "fusion.frames.align is not a table of settings"),
+    ("fusion.cameras.name=x", "fusion.cameras is not a table of settings"),
     ("fusion.instance=a/b", "instance 'a/b'"),
 ])
 def test_a_bad_override_is_an_error_naming_the_key(tmp_path, item, named):
