@@ -20,14 +20,12 @@ class BusState(enum.Enum):
     ENDED = "ended"            # a finite replay reached its end
 
 
+# Unlike the other messages of many fields not keyword-only: the tracker builds hundreds
+# per cycle positionally, and 16 keyword arguments cost CPython about five times as much.
 class RadarTrack(msgspec.Struct, frozen=True):
     """One Kalman track in the radar frame (x forward, y left, z up; origin at the radar).
 
     `range_rate_mps` is the time derivative of range: negative means closing.
-
-    Unlike the other messages of many fields it is not keyword-only: the tracker builds
-    hundreds per cycle positionally, and 16 keyword arguments cost CPython about five
-    times as much.
     """
 
     track_id: int
