@@ -66,8 +66,9 @@ def decimate_and_encode(units: np.ndarray, k: int, codec: str) -> bytes:
 
 
 def depth_message(units: np.ndarray, codec: str) -> bytes:
-    return encode(DepthFrame(Header(0, "camera/front", 0, 0), "front", units.shape[1],
-                             units.shape[0], codec, encode_depth(units, codec)))
+    return encode(DepthFrame(header=Header(0, "camera/front", 0, 0), camera="front",
+                             width=units.shape[1], height=units.shape[0], codec=codec,
+                             data=encode_depth(units, codec)))
 
 
 def time_encodings(cal: Calibration, frames: list[Any], reps: int,

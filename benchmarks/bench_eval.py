@@ -86,8 +86,9 @@ def write_recording(path: Path, n_frames: int) -> dict[str, int]:
         w.write_message(CAMERA_INFO.key("ego", camera="front"), info, T0)
         for i in range(n_frames):
             t = T0 + i * FRAME_NS
-            msg = CompressedFrame(Header(i, "camera/front", t, 0), "front", cal.width,
-                                  cal.height, jpegs[(i // per_scene) % len(jpegs)])
+            msg = CompressedFrame(header=Header(i, "camera/front", t, 0), camera="front",
+                                  width=cal.width, height=cal.height,
+                                  jpeg=jpegs[(i // per_scene) % len(jpegs)])
             w.write_message(CAMERA_JPEG.key("ego", camera="front"), msg, t + 4_000_000)
         end = T0 + n_frames * FRAME_NS
         t = T0 + 20_000_000
@@ -97,9 +98,10 @@ def write_recording(path: Path, n_frames: int) -> dict[str, int]:
             if cycles % EXTRA_TRACK_EVERY == 0:
                 tracks.append(_track(2, x + 3.0, y - 2.0))
             w.write_message(RADAR_TRACKS.key("ego", sensor="front"),
-                    RadarTracks(Header(cycles, "radar/front", t, 0), "front",
-                                OutputMode.OBJECTS, cycles, True, len(tracks), len(tracks),
-                                0, 0, tuple(tracks)),
+                    RadarTracks(header=Header(cycles, "radar/front", t, 0), sensor="front",
+                                mode=OutputMode.OBJECTS, meas_counter=cycles, complete=True,
+                                n_detections=len(tracks), n_prefiltered=len(tracks),
+                                last_frame_mono_ns=0, processing_ns=0, tracks=tuple(tracks)),
                     t + 2_000_000)
             cycles += 1
             t += RADAR_NS

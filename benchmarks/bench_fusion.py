@@ -22,8 +22,8 @@ one full-frame gate (how fast this machine is right now). Target: < 3 ms for 64 
 
 Cameras: fusion with 1, 2 or 4 cameras (a SIMULATED rig: front, left, right, narrow)
 behind a Zenoh router, a separate process publishing each camera's 848x480 JPEG at
-30 fps with fresh stamps, and a radar cycle of 8 threat tracks every 74 ms, with
-both decode policies (`every_frame`, `before_radar`). Per run: tracks received ->
+30 fps with fresh stamps, and a radar cycle of 8 threat tracks every 74 ms. Per run:
+tracks received ->
 BrakeCommand (mean, p95), the decoder threads' CPU time and the whole process's, as a
 share of one core, and frames decoded per second. Baselines from the same run: the same
 cycles with no camera traffic (frames decoded between cycles, off the clock), and for
@@ -71,7 +71,6 @@ from common.net import free_endpoint
 from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
-from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.shell import FusionShell
 from services.fusion.verifiers import (
@@ -94,7 +93,6 @@ RIG_ORDER = ("front", "left", "right", "narrow")
 CAMERA_FPS = 30.0
 RADAR_PERIOD_S = 0.074
 CAMERA_TRACKS = 8
-POLICIES = ("every_frame", "before_radar")
 # scenario: (its tracks, gate scope)
 SCENARIOS = {"threats": ("threats", "candidates"), "traffic": ("traffic", "candidates"),
              "gate all": ("threats", "all")}
@@ -190,8 +188,8 @@ def refresh_frame(decoder: FrameDecoder, jpeg: bytes, seq: int,
     if depth is not None:
         units = to_units(depth)
         decoder.decode_depth_now(encode(DepthFrame(
-            Header(seq, "camera/front", stamp, 0), "front", units.shape[1], units.shape[0],
-            "zstd", encode_depth(units, "zstd"))))
+            header=Header(seq, "camera/front", stamp, 0), camera="front", width=units.shape[1],
+            height=units.shape[0], codec="zstd", data=encode_depth(units, "zstd"))))
 
 
 def naive_sum_us(bgr: np.ndarray, rois: list[Roi]) -> float:
@@ -367,14 +365,13 @@ def publish_cameras(endpoint: str, names: tuple[str, ...], seconds: float) -> in
     return 0
 
 
-def camera_settings(names: tuple[str, ...], policy: str, keys: tuple[str, ...]
-                    ) -> FusionSettings:
+def camera_settings(names: tuple[str, ...], keys: tuple[str, ...]) -> FusionSettings:
     """Cameras `names` (the rig's calibrations) subscribed to as `keys`."""
     return parse_config({"fusion": {
         "instance": "bench", "cameras": [{"name": k, "calibration": f"rig/{n}.toml"}
                                          for n, k in zip(names, keys, strict=True)],
         # one rendered picture repeated: the frozen-camera check would rightly refuse it
-        "frames": {"max_skew_s": 1.0, "decode": policy, "frozen_after_s": 0.0},
+        "frames": {"max_skew_s": 1.0, "frozen_after_s": 0.0},
         "decision": {"radar_max_age_s": 1.0}}}, FusionConfig).fusion
 
 
@@ -382,7 +379,7 @@ def thread_cpu_s(ident: int | None) -> float:
     return 0.0 if ident is None else time.clock_gettime(time.pthread_getcpuclockid(ident))
 
 
-def camera_case(bus: Bus, names: tuple[str, ...], policy: str, seconds: float,
+def camera_case(bus: Bus, names: tuple[str, ...], seconds: float,
                 traffic: bool) -> dict[str, Any]:
     """One run: radar cycles of CAMERA_TRACKS threat tracks every 74 ms into a fusion
     shell with these cameras. With `traffic` it subscribes to the camera process's
@@ -390,15 +387,13 @@ def camera_case(bus: Bus, names: tuple[str, ...], policy: str, seconds: float,
     cycles, off the clock (the camera process keeps running: the same machine load)."""
     cals = rig(names)
     keys = names if traffic else tuple(f"idle-{n}" for n in names)
-    settings = camera_settings(names, policy, keys)
+    settings = camera_settings(names, keys)
     verifier = CountingVerifier(create("edge_density"))
     core = FusionCore(settings, {k: ColumnProjector(cals[n], ColumnGeometry())
                                  for n, k in zip(names, keys, strict=True)}, verifier)
     log = logging.getLogger("bench")
-    rhythm = RadarRhythm()
-    decoders = [FrameDecoder.for_policy(848, 480, settings.frames, log, k, rhythm)
-                for k in keys]
-    shell = FusionShell(bus, settings, core, decoders, log, None, rhythm)
+    decoders = [FrameDecoder(848, 480, log, k) for k in keys]
+    shell = FusionShell(bus, settings, core, decoders, log)
     timed = TimedPublisher(shell._cmd_pub, verifier)
     shell._cmd_pub = timed  # type: ignore[assignment]
     jpegs = [encode_jpeg(render(cals[n], Scene(obstacles=OBSTACLES, seed=5)), 80)
@@ -413,7 +408,7 @@ def camera_case(bus: Bus, names: tuple[str, ...], policy: str, seconds: float,
                 time.sleep(0.05)
         key = RADAR_TRACKS.key("ego", sensor="front")
         rng = np.random.default_rng(9)
-        warmup = 14                   # about 1 s: the radar rhythm settles
+        warmup = 14                   # about 1 s, not measured: streams and caches settle
         n_cycles = warmup + max(10, round(seconds / RADAR_PERIOD_S))
         latencies: list[float] = []
         start = None
@@ -444,20 +439,18 @@ def camera_case(bus: Bus, names: tuple[str, ...], policy: str, seconds: float,
         decode_cpu = sum(thread_cpu_s(d.thread_ident) for d in decoders) - sum(threads0)
         feeds1 = [d.snapshot() for d in decoders]
         received = sum(f.received for f in feeds1) - sum(f.received for f in feeds0)
-        skipped = sum(f.skipped for f in feeds1) - sum(f.skipped for f in feeds0)
         dropped = sum(f.dropped for f in feeds1) - sum(f.dropped for f in feeds0)
         proc_cpu = time.process_time() - proc0
         lat = np.array(latencies)
-        return {"cameras": len(names), "policy": policy, "traffic": traffic,
+        return {"cameras": len(names), "traffic": traffic,
                 "mean_us": float(lat.mean()), "p50_us": float(np.median(lat)),
                 "p95_us": float(np.percentile(lat, 95)), "max_us": float(lat.max()),
                 "n": len(lat), "seconds": wall,
                 "decode_cpu_pct": 100.0 * decode_cpu / wall,
                 "process_cpu_pct": 100.0 * proc_cpu / wall,
                 "frames_received_per_s": received / wall,
-                "frames_decoded_per_s": (received - skipped - dropped) / wall if traffic
-                else 0.0,
-                "frames_skipped_per_s": skipped / wall, "frames_dropped_per_s": dropped / wall,
+                "frames_decoded_per_s": (received - dropped) / wall if traffic else 0.0,
+                "frames_dropped_per_s": dropped / wall,
                 "jpeg_kb": float(np.mean([len(j) for j in jpegs]) / 1024)}
     finally:
         shell.stop()
@@ -490,7 +483,7 @@ def _wait_listening(endpoint: str, timeout_s: float) -> None:
 
 def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
                     ) -> dict[str, Any]:
-    """The cameras scale: each camera count, with and without traffic, both policies."""
+    """The cameras scale: each camera count, with and without traffic."""
     endpoint = free_endpoint()
     router = subprocess.Popen([sys.executable, "-m", "common.router", "--listen", endpoint],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -507,13 +500,10 @@ def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
         with Bus.open(client(endpoint), "ego", "fusion/bench") as bus:
             for n in counts:
                 names = RIG_ORDER[:n]
-                results[f"{n} idle"] = camera_case(bus, names, "every_frame", seconds,
-                                                   traffic=False)
-                for policy in POLICIES:
-                    if cameras.poll() is not None:
-                        raise RuntimeError("the camera process ended")
-                    results[f"{n} {policy}"] = camera_case(bus, names, policy, seconds,
-                                                           traffic=True)
+                results[f"{n} idle"] = camera_case(bus, names, seconds, traffic=False)
+                if cameras.poll() is not None:
+                    raise RuntimeError("the camera process ended")
+                results[f"{n} traffic"] = camera_case(bus, names, seconds, traffic=True)
     finally:
         stop_processes((cameras, router))
     return results
@@ -522,16 +512,15 @@ def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
 def print_cameras(cams: dict[str, Any]) -> None:
     print(f"\n{CAMERA_TRACKS} threat tracks every {RADAR_PERIOD_S * 1e3:.0f} ms, cameras at "
           f"{CAMERA_FPS:g} fps through a router (us; CPU in % of one core)")
-    print(f"{'cameras':>7} {'decode':<13} {'mean':>8} {'p95':>8} {'max':>8} {'decode CPU':>10} "
-          f"{'process CPU':>11} {'rx/s':>6} {'decoded/s':>9} {'skipped/s':>9}")
+    print(f"{'cameras':>7} {'frames':<13} {'mean':>8} {'p95':>8} {'max':>8} {'decode CPU':>10} "
+          f"{'process CPU':>11} {'rx/s':>6} {'decoded/s':>9}")
     for n in cams["counts"]:
-        for case in ("idle", *POLICIES):
+        for case in ("idle", "traffic"):
             r = cams[f"{n} {case}"]
-            label = "no traffic" if case == "idle" else case
+            label = "no traffic" if case == "idle" else "streaming"
             print(f"{n:>7} {label:<13} {r['mean_us']:8.1f} {r['p95_us']:8.1f} {r['max_us']:8.1f} "
                   f"{r['decode_cpu_pct']:10.1f} {r['process_cpu_pct']:11.1f} "
-                  f"{r['frames_received_per_s']:6.1f} {r['frames_decoded_per_s']:9.1f} "
-                  f"{r['frames_skipped_per_s']:9.1f}")
+                  f"{r['frames_received_per_s']:6.1f} {r['frames_decoded_per_s']:9.1f}")
     print(f"One decode_gray of a rig frame ({cams['1 idle']['jpeg_kb']:.0f} KB): "
           f"{cams['one_decode_us']:.0f} us (median, now)")
 
@@ -555,28 +544,18 @@ def figures(tracks: dict[str, Any], cams: dict[str, Any]) -> list[Figure]:
         return out
     decode_ms = cams["one_decode_us"] / 1e3
     for n in cams["counts"]:
-        idle = cams[f"{n} idle"]
-        for policy in POLICIES:
-            r = cams[f"{n} {policy}"]
-            out.append(Figure(
-                "scale", f"fusion tracks->command, {n} camera(s) at 30 fps, {policy}",
-                r["mean_us"] / 1e3, "ms", baseline="same cycles, no camera traffic",
-                baseline_value=idle["mean_us"] / 1e3,
-                extra={"p95_us": r["p95_us"], "idle_p95_us": idle["p95_us"]}))
-        lazy, every = cams[f"{n} before_radar"], cams[f"{n} every_frame"]
+        idle, r = cams[f"{n} idle"], cams[f"{n} traffic"]
         out.append(Figure(
-            "scale", f"decode CPU, {n} camera(s) at 30 fps, every_frame",
-            every["decode_cpu_pct"], "%", baseline="N x 30 fps x one decode (now)",
+            "scale", f"fusion tracks->command, {n} camera(s) at 30 fps",
+            r["mean_us"] / 1e3, "ms", baseline="same cycles, no camera traffic",
+            baseline_value=idle["mean_us"] / 1e3,
+            extra={"p95_us": r["p95_us"], "idle_p95_us": idle["p95_us"]}))
+        out.append(Figure(
+            "scale", f"decode CPU, {n} camera(s) at 30 fps",
+            r["decode_cpu_pct"], "%", baseline="N x 30 fps x one decode (now)",
             baseline_value=n * CAMERA_FPS * decode_ms / 10.0,
-            extra={"process_cpu_pct": every["process_cpu_pct"],
-                   "decoded_per_s": every["frames_decoded_per_s"]}))
-        out.append(Figure(
-            "scale", f"decode CPU, {n} camera(s) at 30 fps, before_radar",
-            lazy["decode_cpu_pct"], "%", baseline="every_frame, same run",
-            baseline_value=every["decode_cpu_pct"],
-            extra={"process_cpu_pct": lazy["process_cpu_pct"],
-                   "decoded_per_s": lazy["frames_decoded_per_s"],
-                   "skipped_per_s": lazy["frames_skipped_per_s"]}))
+            extra={"process_cpu_pct": r["process_cpu_pct"],
+                   "decoded_per_s": r["frames_decoded_per_s"]}))
     return out
 
 
@@ -589,18 +568,16 @@ def plot_cameras(cams: dict[str, Any], path: Path) -> None:
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
     counts = cams["counts"]
     xs = np.arange(len(counts))
-    cases = ("idle", *POLICIES)
-    for j, case in enumerate(cases):
+    for j, case in enumerate(("idle", "traffic")):
         sel = [cams[f"{n} {case}"] for n in counts]
-        label = "no camera traffic" if case == "idle" else case
-        a.bar(xs + (j - 1) * 0.27, [r["mean_us"] / 1e3 for r in sel], 0.27, label=label)
-        a.scatter(xs + (j - 1) * 0.27, [r["p95_us"] / 1e3 for r in sel], marker="_", s=150,
+        label = "no camera traffic" if case == "idle" else "cameras streaming"
+        a.bar(xs + (j - 0.5) * 0.35, [r["mean_us"] / 1e3 for r in sel], 0.35, label=label)
+        a.scatter(xs + (j - 0.5) * 0.35, [r["p95_us"] / 1e3 for r in sel], marker="_", s=150,
                   color="black", zorder=3)
-        if case != "idle":
-            b.bar(xs + (j - 1.5) * 0.35, [r["decode_cpu_pct"] for r in sel], 0.35,
-                  label=f"{case}: decoder threads")
-            b.scatter(xs + (j - 1.5) * 0.35, [r["process_cpu_pct"] for r in sel], marker="_",
-                      s=200, color="black", zorder=3)
+        if case == "traffic":
+            b.bar(xs, [r["decode_cpu_pct"] for r in sel], 0.5, label="decoder threads")
+            b.scatter(xs, [r["process_cpu_pct"] for r in sel], marker="_", s=200,
+                      color="black", zorder=3)
     b.plot(xs, [n * CAMERA_FPS * cams["one_decode_us"] / 1e4 for n in counts], "k:",
            label="N x 30 fps x one decode")
     for ax in (a, b):

@@ -145,8 +145,9 @@ def _send(kind: str, k: int, now: int, pubs: dict[str, Any], jpegs: list[bytes])
         return str(pubs[name].key)
 
     if kind == "jpeg":
-        return [put("jpeg", CompressedFrame(_h(k, "camera/front", now), "front", W, H,
-                                            jpegs[k % DISTINCT_FRAMES]))]
+        return [put("jpeg", CompressedFrame(header=_h(k, "camera/front", now), camera="front",
+                                            width=W, height=H,
+                                            jpeg=jpegs[k % DISTINCT_FRAMES]))]
     if kind == "ego":
         return [put("ego", EgoMotion(_h(k, "vehicle", now), 8.0, 0.0))]
     if kind == "slow":
@@ -164,25 +165,39 @@ def _send(kind: str, k: int, now: int, pubs: dict[str, Any], jpegs: list[bytes])
     tracks = tuple(RadarTrack(i, 5.0 + 2.5 * i, 0.3 * i - 1.0, -3.0, 0.1, 6.0 + 2.5 * i, -3.0,
                               5.0, i < 6, 5, 0, 0.1, 0.2) for i in range(8))
     mono = mono_ns()
-    sent = [put("tracks", RadarTracks(_h(k, "radar/front", now), "front", OutputMode.OBJECTS,
-                                      2 * k, True, 8, 8, mono, 300_000, tracks))]
+    sent = [put("tracks", RadarTracks(
+        header=_h(k, "radar/front", now), sensor="front", mode=OutputMode.OBJECTS,
+        meas_counter=2 * k, complete=True, n_detections=8, n_prefiltered=8,
+        last_frame_mono_ns=mono, processing_ns=300_000, tracks=tracks))]
     sent.append(put("can", RawCanFrames(
         _h(k, "radar/radar", now), "radar", "slcan", "/dev/ttyACM0",
-        tuple(CanFrame(k * 0.074 + i * 1e-4, now, mono, 0x60B, bytes(8)) for i in range(60)))))
+        tuple(CanFrame(timestamp_s=k * 0.074 + i * 1e-4, rx_wall_ns=now, rx_mono_ns=mono,
+                       arb_id=0x60B, data=bytes(8)) for i in range(60)))))
     targets = tuple(VerifiedTarget(
-        t.track_id, t.x_m, t.y_m, t.range_m, t.range_rate_mps, abs(t.y_m) < 1.2,
-        Verification.VERIFIED if i < 3 else Verification.NOT_CHECKED,
-        (300 + 20 * i, 200, 40, 90) if i < 3 else (), 0.06 if i < 3 else None, 2.0 + i,
-        1.0 + i, Decision.NONE, "no threat", k, 12.0) for i, t in enumerate(tracks[:6]))
-    sent.append(put("cmd", BrakeCommand(_h(k, "fusion/primary", now), "primary", Decision.NONE,
-                                        0.0, VerifierStatus.OK, False, -1, None, None,
-                                        "no threat among 6 confirmed tracks", k, mono)))
+        track_id=t.track_id, x_m=t.x_m, y_m=t.y_m, range_m=t.range_m,
+        range_rate_mps=t.range_rate_mps, in_path=abs(t.y_m) < 1.2,
+        verification=Verification.VERIFIED if i < 3 else Verification.NOT_CHECKED,
+        roi_xywh=(300 + 20 * i, 200, 40, 90) if i < 3 else (),
+        density=0.06 if i < 3 else None, ttc_s=2.0 + i, ttc_eff_s=1.0 + i,
+        decision=Decision.NONE, reason="no threat", frame_seq=k, frame_age_ms=12.0)
+        for i, t in enumerate(tracks[:6]))
+    sent.append(put("cmd", BrakeCommand(
+        header=_h(k, "fusion/primary", now), instance="primary", decision=Decision.NONE,
+        brake_level_pct=0.0, verifier_status=VerifierStatus.OK, held=False, track_id=-1,
+        range_m=None, ttc_s=None, reason="no threat among 6 confirmed tracks", radar_seq=k,
+        radar_last_frame_mono_ns=mono)))
     sent.append(put("targets", VerifiedTargets(
-        _h(k, "fusion/primary", now), "primary", "front", k, "edge_density",
-        {"low": 40, "high": 120, "tau": 0.025}, VerifierStatus.OK, targets, 900_000, "front")))
+        header=_h(k, "fusion/primary", now), instance="primary", radar_sensor="front",
+        radar_seq=k, verifier="edge_density",
+        verifier_params={"low": 40, "high": 120, "tau": 0.025},
+        verifier_status=VerifierStatus.OK, targets=targets, processing_ns=900_000,
+        camera="front")))
     sent.append(put("brake", BrakeStatus(
-        _h(k, "brake/main", now), BrakeState.ARMED, "commands arriving", "primary",
-        FailsafePolicy.HOLD, k, 0.0, 0.0, "OK", True, 200.0, 1500.0, {}, {"acks": k})))
+        header=_h(k, "brake/main", now), state=BrakeState.ARMED, reason="commands arriving",
+        instance="primary", policy=FailsafePolicy.HOLD, last_cmd_seq=k,
+        commanded_level_pct=0.0, actuator_position_pct=0.0, actuator_state="OK",
+        actuator_connected=True, cmd_to_serial_us=200.0, radar_to_serial_us=1500.0,
+        rejected={}, counters={"acks": k})))
     return sent
 
 

@@ -9,7 +9,7 @@ frames decoded only when a cycle's gate reads them.
 
 Baselines, in the same run: reading the recording alone (the floor: every record read
 and its message decoded, no fusion), and the re-run plus decoding every recorded frame
-(what a re-run costs that decodes every frame, as live fusion's `every_frame` policy).
+(what a re-run costs that decodes every frame, as live fusion does).
 
     python -m benchmarks.bench_rerun [--recording FILE.mcap | --record-demo]
 """

@@ -112,6 +112,15 @@ def load_key(path: str | Path) -> CommandKey:
     return CommandKey(f.key_id, f.instance, secret, f.insecure_example, str(p))
 
 
+def load_signing_key(path: str | Path, instance: str) -> CommandKey:
+    """The key fusion instance `instance` signs its commands with. Raises KeyFileError (a
+    bad file, another instance's key)."""
+    key = load_key(path)
+    if key.instance != instance:
+        raise KeyFileError(f"{path}: key of instance {key.instance!r}, this is {instance!r}")
+    return key
+
+
 def load_keyring(paths: Iterable[str], instance: str) -> dict[str, CommandKey]:
     """The keys the brake accepts, by key id: every file must hold a key of `instance`.
     Raises KeyFileError (no file, a bad file, another instance's key, a repeated id)."""

@@ -1,25 +1,41 @@
-"""What every service's `main` shares: arguments, config loading with CLI overrides,
-logging set-up, and a stop event wired to SIGINT/SIGTERM."""
+"""What every service's `main` shares: arguments, config loading with command-line
+overrides (`--set section.key=value` and the options that stand for one), logging
+set-up, and a stop event wired to SIGINT/SIGTERM."""
 
 import argparse
 import os
 import signal
 import sys
 import threading
-from typing import TypeVar
-
-import msgspec
+from collections.abc import Mapping, Sequence
+from typing import Any, TypeVar
 
 from common.bus import BusError, zenoh_config
 from common.config.base import ServiceConfig
 from common.config.loader import load_config_or_exit
+from common.config.overrides import Override, add_set_argument
 from common.log import add_log_level
 
 C = TypeVar("C", bound=ServiceConfig)
 
 
-def service_argparser(name: str, description: str) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=f"aeb {name}", description=description)
+class _Shortcut(argparse.Action):
+    """An option that stands for `--set <setting>=VALUE`, VALUE taken as written."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: str | Sequence[Any] | None, option_string: str | None = None) -> None:
+        text = str(values)
+        namespace.overrides = [*namespace.overrides,
+                               Override(self.const, text, f"{option_string} {text}", text)]
+
+
+def service_argparser(name: str, description: str,
+                      shortcuts: Mapping[str, tuple[str, str]] | None = None
+                      ) -> argparse.ArgumentParser:
+    """The options every service takes. `shortcuts`: option -> (setting, help) of the
+    options that stand for one `--set` (``{"--port": ("brake.serial.port", ...)}``)."""
+    parser = argparse.ArgumentParser(prog=f"aeb {name}", description=description,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", "-c", help="service TOML file (defaults when omitted)")
     parser.add_argument(
         "--connect", action="append", default=None, metavar="ENDPOINT",
@@ -30,34 +46,32 @@ def service_argparser(name: str, description: str) -> argparse.ArgumentParser:
     parser.add_argument("--check", action="store_true",
                         help="validate the configuration and every file it names as at start, "
                              "then exit (0 valid, 2 invalid) without opening the bus or devices")
+    add_set_argument(parser)
+    for option, (setting, text) in (shortcuts or {}).items():
+        parser.add_argument(option, action=_Shortcut, const=setting, metavar="VALUE",
+                            help=f"{text}: the same as --set {setting}=VALUE")
     return parser
 
 
 def load_service_config(args: argparse.Namespace, config_type: type[C]) -> C:
-    """The validated config with command-line overrides applied, its Zenoh settings
-    built into a Zenoh config as the bus will (file, keys, overrides); prints and exits 2
-    when invalid, so that `--check` rejects what a start would."""
-    cfg = load_config_or_exit(args.config, config_type)
+    """The validated config with the command-line overrides set in it (`--connect`,
+    `--vehicle`, `--log-level`, then `--set` and its shortcuts in command-line order), its
+    Zenoh settings built into a Zenoh config as the bus will (file, keys, overrides);
+    prints and exits 2 when invalid, so that `--check` rejects what a start would."""
+    overrides = []
     if args.connect:
-        try:
-            zenoh_settings = msgspec.structs.replace(cfg.zenoh, connect=tuple(args.connect))
-        except ValueError as exc:   # a malformed endpoint
-            print(f"error: --connect: {exc}", file=sys.stderr)
-            raise SystemExit(2) from exc
-        cfg = msgspec.structs.replace(cfg, zenoh=zenoh_settings)
+        overrides.append(Override("zenoh.connect", "", f"--connect {' '.join(args.connect)}",
+                                  list(args.connect)))
+    for setting, value, option in (("vehicle", args.vehicle, "--vehicle"),
+                                   ("log.level", args.log_level, "--log-level")):
+        if value:
+            overrides.append(Override(setting, value, f"{option} {value}", value))
+    cfg = load_config_or_exit(args.config, config_type, [*overrides, *args.overrides])
     try:
         zenoh_config(cfg.zenoh)
     except BusError as exc:
         print(f"error: {args.config or '<defaults>'}: zenoh: {exc}", file=sys.stderr)
         raise SystemExit(2) from exc
-    if args.vehicle:
-        cfg = msgspec.structs.replace(cfg, vehicle=args.vehicle)
-    if args.log_level:
-        from common.config.base import LogLevel
-
-        cfg = msgspec.structs.replace(
-            cfg, log=msgspec.structs.replace(cfg.log, level=LogLevel(args.log_level))
-        )
     return cfg
 
 

@@ -39,18 +39,6 @@ class GateScope(enum.Enum):
     ALL = "all"                # every visible confirmed track (densities for every track)
 
 
-class DecodePolicy(enum.Enum):
-    """Which arriving camera frames are decoded (docs/fusion.md, "Decoding")."""
-
-    EVERY_FRAME = "every_frame"    # every frame, on arrival
-    # Only the frames a radar cycle can use: while the radar's rhythm is steady, the
-    # newest frame waiting is decoded shortly before the next cycle is due; frames
-    # overtaken by a newer one before then are never decoded. Less CPU with several
-    # cameras; a radar cycle that comes early uses the previous frame. Radar irregular,
-    # late or silent: every frame.
-    BEFORE_RADAR = "before_radar"
-
-
 class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Which camera, and how a frame is matched to a radar cycle."""
 
@@ -60,7 +48,6 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # True: the frame nearest the radar cycle, with each track predicted (constant
     # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
     align: bool = True
-    decode: DecodePolicy = DecodePolicy.EVERY_FRAME
     # A camera whose picture has not changed for this long while the radar sees the scene
     # move relative to the ego is frozen: unavailable ("camera frozen"). 0: never.
     frozen_after_s: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.5

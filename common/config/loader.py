@@ -1,14 +1,17 @@
-"""Load a TOML file into a validated config type; fail fast naming the field. Paths in the
-file are resolved against its folder (common/config/paths.py)."""
+"""Load a TOML file into a validated config type, with command-line overrides
+(common/config/overrides.py); fail fast naming the field. Paths in the file are resolved
+against its folder (common/config/paths.py)."""
 
 import math
 import sys
 import tomllib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
 import msgspec
 
+from common.config.overrides import Override, OverrideError, apply_overrides
 from common.config.paths import resolve_paths
 
 T = TypeVar("T", bound=msgspec.Struct)
@@ -64,19 +67,34 @@ def first_unusable_number(value: Any, where: str = "$") -> tuple[str, float] | N
     return None
 
 
-def load_config(path: str | Path, config_type: type[T]) -> T:
-    """Read and validate a TOML file; relative paths in it are resolved against its
-    folder. Raises ConfigError (missing file, bad TOML, bad field)."""
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The tables of a TOML file. Raises ConfigError (missing file, bad TOML)."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read configuration: {exc.strerror}") from exc
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
-    return resolve_paths(parse_config(data, config_type, str(p)), p.resolve().parent)
+
+
+def load_config(path: str | Path | None, config_type: type[T],
+                overrides: Sequence[Override] = ()) -> T:
+    """Read and validate a TOML file (None: the defaults) with `overrides` set in it;
+    relative paths in the file are resolved against its folder. Raises ConfigError
+    (missing file, bad TOML, bad field, an override naming no setting)."""
+    data = {} if path is None else read_toml(path)
+    origin = "<defaults>" if path is None else str(path)
+    if overrides:
+        try:
+            data = apply_overrides(data, overrides, config_type)
+        except OverrideError as exc:
+            raise ConfigError(str(exc)) from exc
+        origin += " with " + ", ".join(o.option for o in overrides)
+    cfg = parse_config(data, config_type, origin)
+    return cfg if path is None else resolve_paths(cfg, Path(path).resolve().parent)
 
 
 def relocated_text(path: str | Path, config_type: type[T]) -> str:
@@ -95,12 +113,12 @@ def relocated_text(path: str | Path, config_type: type[T]) -> str:
     return text
 
 
-def load_config_or_exit(path: str | Path | None, config_type: type[T]) -> T:
-    """For a service's main: the config (defaults when `path` is None) or exit code 2."""
+def load_config_or_exit(path: str | Path | None, config_type: type[T],
+                        overrides: Sequence[Override] = ()) -> T:
+    """For a service's main: the config (defaults when `path` is None) with `overrides`,
+    or exit code 2."""
     try:
-        if path is None:
-            return parse_config({}, config_type, "<defaults>")
-        return load_config(path, config_type)
+        return load_config(path, config_type, overrides)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from exc

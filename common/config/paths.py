@@ -15,24 +15,24 @@ from typing import Annotated, Any, TypeVar
 
 import msgspec
 
-_MARK = "aeb_config_path"
+PATH_MARK = "aeb_config_path"
 # No path holds a NUL byte: refused as a bad field here, not as a ValueError from the OS
 # call that would meet it first
-ConfigPath = Annotated[str, msgspec.Meta(pattern="^[^\x00]*$", extra={_MARK: True})]
+ConfigPath = Annotated[str, msgspec.Meta(pattern="^[^\x00]*$", extra={PATH_MARK: True})]
 # A table of free parameters (a verifier's) whose entries under these keys are paths.
-_KEYS_MARK = "aeb_config_path_keys"
+PATH_KEYS_MARK = "aeb_config_path_keys"
 
 
 def path_keys(*keys: str) -> msgspec.Meta:
     """Mark a dict field: its string values under `keys` are paths (resolved as
     `ConfigPath` fields are)."""
-    return msgspec.Meta(extra={_KEYS_MARK: keys})
+    return msgspec.Meta(extra={PATH_KEYS_MARK: keys})
 
 S = TypeVar("S", bound=msgspec.Struct)
 
 
 def _is_path(annotation: Any) -> bool:
-    return any(isinstance(m, msgspec.Meta) and (m.extra or {}).get(_MARK)
+    return any(isinstance(m, msgspec.Meta) and (m.extra or {}).get(PATH_MARK)
                for m in getattr(annotation, "__metadata__", ()))
 
 
@@ -46,8 +46,8 @@ def _is_path_tuple(annotation: Any) -> bool:
         and _is_path(args[0])
 def _keys(annotation: Any) -> tuple[str, ...]:
     for m in getattr(annotation, "__metadata__", ()):
-        if isinstance(m, msgspec.Meta) and (m.extra or {}).get(_KEYS_MARK):
-            return tuple((m.extra or {})[_KEYS_MARK])
+        if isinstance(m, msgspec.Meta) and (m.extra or {}).get(PATH_KEYS_MARK):
+            return tuple((m.extra or {})[PATH_KEYS_MARK])
     return ()
 
 

@@ -39,7 +39,7 @@ class CameraCheck(msgspec.Struct, frozen=True):
     density: float | None = None
 
 
-class VerifiedTarget(msgspec.Struct, frozen=True):
+class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
     """One confirmed radar track after verification and decision.
 
     `x_m`, `y_m` are the track predicted to the frame's capture time (what was projected;
@@ -78,7 +78,7 @@ class VerifiedTarget(msgspec.Struct, frozen=True):
     cameras: tuple[CameraCheck, ...] = ()
 
 
-class VerifiedTargets(msgspec.Struct, frozen=True):
+class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
     header: Header
     instance: str
     radar_sensor: str
@@ -94,7 +94,9 @@ class VerifiedTargets(msgspec.Struct, frozen=True):
     frames_received: int = 0       # camera frames seen by this instance since start
     frames_undecodable: int = 0    # ... of which could not be decoded (counted, skipped)
     frames_dropped: int = 0        # ... dropped before decoding because the decoder lagged
-    frames_skipped: int = 0        # ... not decoded: overtaken before a radar cycle needed them
+    # Always 0: fusion decodes every frame it receives. Kept on the wire: removing a field
+    # is a breaking change (common/messages/schema.py).
+    frames_skipped: int = 0
     frames_corrupt: int = 0        # ... of the undecodable: JPEG bytes failing their CRC-32
     # Cameras without a usable frame this cycle, and why (the others verified as usual).
     cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)
@@ -113,7 +115,7 @@ class CommandAuth(msgspec.Struct, frozen=True):
     mac: bytes
 
 
-class BrakeCommand(msgspec.Struct, frozen=True):
+class BrakeCommand(msgspec.Struct, frozen=True, kw_only=True):
     """Exactly one per radar cycle per fusion instance: the most severe decision, or a
     plain heartbeat (decision NONE, level 0).
 

@@ -3,8 +3,6 @@
 import sys
 import threading
 
-import msgspec
-
 from common import systemd
 from common.bus import Bus, BusError
 from common.command_auth import KeyFileError, load_keyring
@@ -18,6 +16,8 @@ from common.service import (
 )
 from common.systemd import Watchdog
 from services.brake.shell import SOURCE, BrakeShell
+
+SHORTCUTS = {"--port": ("brake.serial.port", "actuator serial port")}
 
 
 def _serve_bus(cfg: BrakeConfig, shell: BrakeShell, stop: threading.Event,
@@ -36,13 +36,8 @@ def _serve_bus(cfg: BrakeConfig, shell: BrakeShell, stop: threading.Event,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = service_argparser("brake", __doc__ or "")
-    parser.add_argument("--port", help="actuator serial port, overrides brake.serial.port")
-    args = parser.parse_args(argv)
+    args = service_argparser("brake", __doc__ or "", SHORTCUTS).parse_args(argv)
     cfg = load_service_config(args, BrakeConfig)
-    if args.port:
-        serial = msgspec.structs.replace(cfg.brake.serial, port=args.port)
-        cfg = msgspec.structs.replace(cfg, brake=msgspec.structs.replace(cfg.brake, serial=serial))
     try:
         keys = load_keyring(cfg.brake.command_keys, cfg.brake.instance)
     except KeyFileError as exc:

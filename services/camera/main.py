@@ -20,8 +20,7 @@ from services.camera.source import SourceConfigError
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = service_argparser("camera", __doc__ or "")
-    args = parser.parse_args(argv)
+    args = service_argparser("camera", __doc__ or "").parse_args(argv)
     cfg = load_service_config(args, CameraConfig)
     settings = cfg.camera
     log = setup_logging("camera", cfg.log.level.value)

@@ -218,7 +218,6 @@ class FusionCore:
             frames_received=sum(f.received for f in feeds),
             frames_undecodable=sum(f.undecodable for f in feeds),
             frames_dropped=sum(f.dropped for f in feeds),
-            frames_skipped=sum(f.skipped for f in feeds),
             frames_corrupt=sum(f.corrupt for f in feeds),
             cameras_unavailable=cycle.cameras_unavailable)
 
@@ -244,9 +243,11 @@ class FusionCore:
         reason = (f"radar stale (age {age_ns / 1e6:.0f} ms, max "
                   f"{self._radar_max_age_ns / 1e6:.0f} ms)")
         return VerifiedTarget(
-            t.track_id, t.x_m, t.y_m, t.range_m, t.range_rate_mps, k.in_path,
-            Verification.NOT_CHECKED, _NO_ROI, None, k.ttc_s, k.ttc_eff_s, Decision.NONE,
-            reason, None, None, path_predicted=k.window is not None)
+            track_id=t.track_id, x_m=t.x_m, y_m=t.y_m, range_m=t.range_m,
+            range_rate_mps=t.range_rate_mps, in_path=k.in_path,
+            verification=Verification.NOT_CHECKED, roi_xywh=_NO_ROI, density=None,
+            ttc_s=k.ttc_s, ttc_eff_s=k.ttc_eff_s, decision=Decision.NONE, reason=reason,
+            frame_seq=None, frame_age_ms=None, path_predicted=k.window is not None)
 
     def _target(self, t: RadarTrack, k: Kinematics, threat: tuple[Decision, str],
                 views: list[CameraView], j: int, radar_stamp_ns: int,
@@ -267,12 +268,15 @@ class FusionCore:
         frame = view.frame
         x, y = view.xy[j]
         return VerifiedTarget(
-            t.track_id, x, y, t.range_m, t.range_rate_mps, k.in_path, verification,
-            _NO_ROI if check.roi is None or verification is Verification.UNAVAILABLE
-            else tuple(check.roi), density, k.ttc_s, k.ttc_eff_s, decision, reason,
-            frame.seq if frame is not None else None,
-            (radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None else None,
-            check.result.detail if check.result is not None else {},
+            track_id=t.track_id, x_m=x, y_m=y, range_m=t.range_m,
+            range_rate_mps=t.range_rate_mps, in_path=k.in_path, verification=verification,
+            roi_xywh=(_NO_ROI if check.roi is None or verification is Verification.UNAVAILABLE
+                      else tuple(check.roi)),
+            density=density, ttc_s=k.ttc_s, ttc_eff_s=k.ttc_eff_s, decision=decision,
+            reason=reason, frame_seq=frame.seq if frame is not None else None,
+            frame_age_ms=((radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None
+                          else None),
+            gate_detail=check.result.detail if check.result is not None else {},
             path_predicted=k.window is not None,
             camera=check.view.name if check.view is not None else "",
             cameras=check.per_camera)
@@ -367,9 +371,12 @@ def _finite(t: RadarTrack) -> bool:
 
 def _invalid_target(t: RadarTrack) -> VerifiedTarget:
     """A confirmed track with NaN or infinite numbers: reported, never decided on."""
-    return VerifiedTarget(t.track_id, t.x_m, t.y_m, t.range_m, t.range_rate_mps, False,
-                          Verification.NOT_CHECKED, _NO_ROI, None, None, None, Decision.NONE,
-                          "invalid track: non-finite position, velocity or range", None, None)
+    return VerifiedTarget(
+        track_id=t.track_id, x_m=t.x_m, y_m=t.y_m, range_m=t.range_m,
+        range_rate_mps=t.range_rate_mps, in_path=False, verification=Verification.NOT_CHECKED,
+        roi_xywh=_NO_ROI, density=None, ttc_s=None, ttc_eff_s=None, decision=Decision.NONE,
+        reason="invalid track: non-finite position, velocity or range", frame_seq=None,
+        frame_age_ms=None)
 
 
 def _rank(decision: Decision, ttc_eff_s: float | None) -> tuple[int, float]:

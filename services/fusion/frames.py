@@ -3,8 +3,7 @@ small ring of recent frames; and the pure choice of the frame for a radar cycle.
 
 The radar callback never waits for a JPEG decode: it takes a snapshot of the ring and
 works on frames already decoded. Decoding goes through common.imaging.decode_gray, the
-project's one path. With `decode = "before_radar"` the worker decodes only the frames a
-radar cycle can use (services/fusion/rhythm.py); the others are counted as skipped.
+project's one path.
 
 Depth (when the verifier needs it): each DepthFrame is decoded in the same worker
 (common/depth_image.py, the one depth path), brought to the frame's size (nearest
@@ -22,12 +21,10 @@ import cv2
 import numpy as np
 
 from common.clock import mono_ns
-from common.config.fusion import DecodePolicy, FrameSettings
 from common.depth_image import DepthDecodeError, decode_depth, to_metres
 from common.imaging import ImageCorruptError, ImageDecodeError, decode_gray
 from common.log import RateLimitedLog
 from common.messages import CompressedFrame, DecodeError, DepthFrame, decode
-from services.fusion.rhythm import RadarRhythm
 
 # Decoded frames kept per camera: a cycle uses the one nearest its stamp, which within the
 # skew bound is one of the last few at 30 fps.
@@ -35,9 +32,6 @@ RING_SIZE = 4
 # Frames waiting for the decoder; when full the oldest is dropped (and counted): a newer
 # frame is always worth more than a backlog.
 QUEUE_SIZE = 2
-# before_radar: the newest waiting frame is decoded this long before the next radar
-# cycle is due: time for one decode and a late thread wake-up.
-DECODE_LEAD_S = 0.012
 # Two pictures are the same when their pixels on a coarse grid (every SAME_STRIDE-th row
 # and column) differ by at most this many grey levels on average: a repeated picture
 # differs by 0 (or JPEG re-encoding noise, well below 1); a live sensor's noise alone
@@ -75,7 +69,6 @@ class FrameFeed:
     dropped: int = 0
     last_error: str = ""
     last_error_rx_mono_ns: int | None = None
-    skipped: int = 0       # overtaken by a newer frame before a radar cycle needed them
     corrupt: int = 0       # of `undecodable`: bytes not matching the camera's CRC-32
     # capture stamp of the first of the newest decoded frames whose pictures are all
     # (near-)identical to it; None when the newest frame differs from the one before
@@ -188,11 +181,9 @@ def unavailable_reason(feed: FrameFeed, radar_stamp_ns: int, max_skew_ns: int) -
 
 class FrameDecoder:
     """Decodes one camera's frames in its own thread; `submit` (from Zenoh's thread)
-    never blocks. With `rhythm` (decode = before_radar) a frame waits undecoded until the
-    next radar cycle is near, and only the newest waiting frame is decoded."""
+    never blocks."""
 
-    def __init__(self, width: int, height: int, log: logging.Logger, camera: str = "",
-                 rhythm: RadarRhythm | None = None) -> None:
+    def __init__(self, width: int, height: int, log: logging.Logger, camera: str = "") -> None:
         self.width = width
         self.height = height
         self.camera = camera
@@ -200,16 +191,11 @@ class FrameDecoder:
         self._depth_pending: deque[bytes] = deque()
         # Decoded depth still waiting for its frame, by capture stamp.
         self._depth_waiting: deque[tuple[int, np.ndarray]] = deque(maxlen=RING_SIZE)
-        # Waiting for the radar, only the newest frame is worth keeping.
-        self._queue_size = 1 if rhythm is not None else QUEUE_SIZE
-        self._rhythm = rhythm
-        self._lead_ns = round(DECODE_LEAD_S * 1e9)
         self._ring: deque[DecodedFrame] = deque(maxlen=RING_SIZE)
         self._cond = threading.Condition()
         self._received = 0
         self._undecodable = 0
         self._dropped = 0
-        self._skipped = 0
         self._depth_received = 0
         self._depth_undecodable = 0
         self._depth_dropped = 0
@@ -223,15 +209,6 @@ class FrameDecoder:
                                         else "frame-decoder")
         self._log = log
         self._rl = RateLimitedLog(log)
-
-    @classmethod
-    def for_policy(cls, width: int, height: int, settings: FrameSettings,
-                   log: logging.Logger, camera: str = "",
-                   rhythm: RadarRhythm | None = None) -> "FrameDecoder":
-        """A decoder as `settings` ([fusion.frames]) asks; `rhythm` is used only with
-        decode = before_radar."""
-        use = rhythm if settings.decode is DecodePolicy.BEFORE_RADAR else None
-        return cls(width, height, log, camera, use)
 
     def start(self) -> None:
         self._thread.start()
@@ -253,12 +230,9 @@ class FrameDecoder:
         dropped (and counted): a newer frame is always worth more."""
         with self._cond:
             self._received += 1
-            if len(self._pending) >= self._queue_size:
+            if len(self._pending) >= QUEUE_SIZE:
                 self._pending.popleft()
-                if self._rhythm is not None:
-                    self._skipped += 1      # by design: a newer frame will be used instead
-                else:
-                    self._dropped += 1      # the decoder could not keep up
+                self._dropped += 1
             self._pending.append((payload, rx_mono_ns))
             self._cond.notify()
 
@@ -323,23 +297,16 @@ class FrameDecoder:
             self._last_error_rx = rx_mono_ns
 
     def _next(self) -> tuple[bytes, int] | bytes | None:
-        """The next frame to decode, once it is time, or a depth payload (None:
-        stopping). Depth is decoded at once: its frame may be waiting for the radar."""
+        """The next frame or depth payload to decode, depth first (None: stopping)."""
         with self._cond:
             while True:
                 if self._stop:
                     return None
                 if self._depth_pending:
                     return self._depth_pending.popleft()
-                if not self._pending:
-                    self._cond.wait()
-                    continue
-                at = (None if self._rhythm is None
-                      else self._rhythm.decode_at(mono_ns(), self._lead_ns))
-                if at is None:
+                if self._pending:
                     return self._pending.popleft()
-                # A newer frame (notify) replaces this one; the timeout is the due time.
-                self._cond.wait(max(0.0, (at - mono_ns()) / 1e9))
+                self._cond.wait()
 
     def _run(self) -> None:
         while True:
@@ -361,7 +328,7 @@ class FrameDecoder:
         with self._cond:
             return FrameFeed(tuple(self._ring), self._received, self._undecodable,
                              self._dropped, self._last_error, self._last_error_rx,
-                             self._skipped, corrupt=self.errors_by_reason.get("corrupt", 0),
+                             corrupt=self.errors_by_reason.get("corrupt", 0),
                              unchanged_since_ns=self._unchanged_since,
                              depth_received=self._depth_received,
                              depth_undecodable=self._depth_undecodable,

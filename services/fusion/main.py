@@ -2,21 +2,19 @@
 
     aeb fusion --config deploy/fusion.toml
     aeb fusion --config deploy/fusion-candidate.toml     # a shadow A/B instance
+    aeb fusion --config deploy/fusion.toml --set fusion.verifier.params.tau=0.03
 
 Exit codes: 0 after SIGINT/SIGTERM, 2 for an invalid configuration or calibration
 (named on stderr), 1 when the bus cannot be opened.
 """
 
-import argparse
+import logging
 import sys
 
-import msgspec
-
-from common import systemd
 from common.bus import Bus, BusError
 from common.calibration import Calibration
-from common.command_auth import CommandSigner, KeyFileError, load_key
-from common.config.fusion import FusionConfig
+from common.command_auth import CommandSigner, KeyFileError, load_signing_key
+from common.config.fusion import FusionConfig, FusionSettings
 from common.config.loader import ConfigError
 from common.log import kv, setup_logging
 from common.realtime import apply_process
@@ -29,10 +27,12 @@ from common.service import (
 from common.systemd import Watchdog
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
-from services.fusion.rhythm import RadarRhythm
 from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.shell import FusionShell, run_until
+from services.fusion.shell import FusionShell
 from services.fusion.verifiers import VerifierConfigError, create
+
+SHORTCUTS = {"--instance": ("fusion.instance", "instance name"),
+             "--calibration": ("fusion.calibration", "calibration TOML of the one camera")}
 
 
 def build_core(cfg: FusionConfig) -> tuple[FusionCore, dict[str, Calibration]]:
@@ -47,57 +47,35 @@ def build_core(cfg: FusionConfig) -> tuple[FusionCore, dict[str, Calibration]]:
     return FusionCore(s, projectors, verifier), cals
 
 
+def build_signer(s: FusionSettings, log: logging.Logger) -> CommandSigner | None:
+    """The signer of this instance's commands; None without `command_key` (unsigned, which
+    no brake follows: logged). Raises KeyFileError."""
+    if not s.command_key:
+        log.warning(kv("commands_unsigned", instance=s.instance,
+                       note="no fusion.command_key: no brake follows these commands"))
+        return None
+    key = load_signing_key(s.command_key, s.instance)
+    if key.insecure_example:
+        log.warning(kv("insecure_example_key", key_id=key.key_id, path=key.path,
+                       note="published with the source: demo and simulator only"))
+    return CommandSigner(key)
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = service_argparser("fusion", __doc__ or "")
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.add_argument("--instance", help="instance name, overrides fusion.instance")
-    parser.add_argument("--calibration", help="calibration TOML, overrides fusion.calibration")
-    args = parser.parse_args(argv)
+    args = service_argparser("fusion", __doc__ or "", SHORTCUTS).parse_args(argv)
     cfg = load_service_config(args, FusionConfig)
-    overrides = {k: v for k, v in (("instance", args.instance),
-                                   ("calibration", args.calibration)) if v}
-    if args.calibration and cfg.fusion.cameras:
-        print("error: --calibration applies to a single camera; this config has "
-              "[[fusion.cameras]], each with its own calibration", file=sys.stderr)
-        return 2
-    if overrides:
-        try:
-            cfg = msgspec.convert(
-                msgspec.to_builtins(msgspec.structs.replace(
-                    cfg, fusion=msgspec.structs.replace(cfg.fusion, **overrides))),
-                FusionConfig)
-        except msgspec.ValidationError as exc:
-            print(f"error: invalid command-line override: {exc}", file=sys.stderr)
-            return 2
     s = cfg.fusion
     log = setup_logging(f"fusion.{s.instance}", cfg.log.level.value)
     try:
         core, cals = build_core(cfg)
-    except (ConfigError, VerifierConfigError) as exc:
+        signer = build_signer(s, log)
+    except (ConfigError, VerifierConfigError, KeyFileError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     for name, cal in cals.items():
         for warning in cal.warnings():
             log.warning(kv("calibration_implausible", camera=name, file=cal.origin,
                            detail=warning))
-    signer = None
-    if s.command_key:
-        try:
-            key = load_key(s.command_key)
-        except KeyFileError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        if key.instance != s.instance:
-            print(f"error: {s.command_key}: key of instance {key.instance!r}, this is "
-                  f"{s.instance!r}", file=sys.stderr)
-            return 2
-        signer = CommandSigner(key)
-        if key.insecure_example:
-            log.warning(kv("insecure_example_key", key_id=key.key_id, path=key.path,
-                           note="published with the source: demo and simulator only"))
-    else:
-        log.warning(kv("commands_unsigned", instance=s.instance,
-                       note="no fusion.command_key: no brake follows these commands"))
     if args.check:
         return config_checked("fusion", args)
     stop = stop_event_on_signals()
@@ -109,28 +87,17 @@ def main(argv: list[str] | None = None) -> int:
     if opened is None:
         log.info(kv("fusion_stopped"))
         return 0
-    bus = opened
-    with bus:
-        rhythm = RadarRhythm()
-        decoders = [FrameDecoder.for_policy(cal.width, cal.height, s.frames, log, name, rhythm)
-                    for name, cal in cals.items()]
-        shell = FusionShell(bus, s, core, decoders, log, cals, rhythm, signer)
+    with opened as bus:
+        decoders = [FrameDecoder(cal.width, cal.height, log, name) for name, cal in cals.items()]
+        shell = FusionShell(bus, s, core, decoders, log, cals, signer)
         shell.start()
         apply_process(s.realtime, log)
-        token = bus.declare_health("fusion", s.instance)
         log.info(kv("fusion_ready", instance=s.instance, verifier=core.verifier.name,
-                    params=core.verifier_params, radar=s.radar_sensor,
-                    cameras=core.camera_names, decode=s.frames.decode.value,
+                    params=core.verifier_params, radar=s.radar_sensor, cameras=core.camera_names,
                     calibration=",".join(c.calibration for c in s.camera_inputs)))
-        systemd.ready(f"serving fusion {s.instance}")
-        try:
-            run_until(stop, shell, s.stats_interval_s, Watchdog())
-        finally:
-            token.undeclare()
-            shell.stop()
-            shell.log_stats()
-    log.info(kv("fusion_stopped"))
-    return 0
+        code = shell.run(stop, Watchdog())
+    log.info(kv("fusion_stopped", code=code))
+    return code
 
 
 if __name__ == "__main__":

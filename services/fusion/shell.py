@@ -12,6 +12,7 @@ from typing import Any
 import msgspec
 import zenoh
 
+from common import systemd
 from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
@@ -40,20 +41,17 @@ from common.systemd import Watchdog
 from services.fusion.camera_check import calibration_differences
 from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FROZEN_REASON, FrameDecoder
-from services.fusion.rhythm import RadarRhythm
 from services.fusion.verifiers import wants_depth
 
 
 class FusionShell:
     """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
     single camera). `calibrations`: what each camera's CameraInfo is checked against.
-    `rhythm`: told every radar cycle's arrival (decoders with decode = before_radar
-    share it). `signer`: signs every BrakeCommand (None: published unsigned)."""
+    `signer`: signs every BrakeCommand (None: published unsigned)."""
 
     def __init__(self, bus: Bus, settings: FusionSettings, core: FusionCore,
                  decoders: FrameDecoder | Sequence[FrameDecoder], log: logging.Logger,
                  calibrations: Calibration | Mapping[str, Calibration] | None = None,
-                 rhythm: RadarRhythm | None = None,
                  signer: CommandSigner | None = None) -> None:
         self.bus = bus
         self.s = settings
@@ -62,7 +60,6 @@ class FusionShell:
         if len(self.decoders) != len(core.cameras):
             raise ValueError(f"{len(self.decoders)} decoders for {len(core.cameras)} cameras")
         self.camera_names = [c.name for c in core.cameras]
-        self.rhythm = rhythm
         self.signer = signer
         self.log = log
         self.counters = ReasonCounter()
@@ -134,7 +131,7 @@ class FusionShell:
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
         """Process one cycle: its BrakeCommand is published as soon as it is decided, then
-        its VerifiedTargets; the radar's rhythm (for the frame decoders) is updated last."""
+        its VerifiedTargets."""
         with self._lock:
             self._check_order(tracks)
             feeds = [d.snapshot() for d in self.decoders]
@@ -172,8 +169,6 @@ class FusionShell:
             result = CycleResult(targets, command)
             self._count(result)
             self._proc_us.append(processing_ns / 1e3)
-        if self.rhythm is not None:
-            self.rhythm.on_cycle(rx_mono_ns)
         return result
 
     def _count_failure(self, tracks: RadarTracks, exc: Exception) -> None:
@@ -217,14 +212,13 @@ class FusionShell:
         out.update(frames=sum(f.received for f in feeds),
                    frames_unusable=sum(f.undecodable for f in feeds),
                    frames_dropped=sum(f.dropped for f in feeds),
-                   frames_skipped=sum(f.skipped for f in feeds),
                    frames_corrupt=sum(f.corrupt for f in feeds),
                    depth_received=sum(f.depth_received for f in feeds),
                    depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
                    invalid_tracks=self.core.invalid_tracks)
         if len(feeds) > 1:
             for name, f in zip(self.camera_names, feeds, strict=True):
-                out[f"frames_{name}"] = f"{f.received}/{f.skipped}/{f.undecodable}/{f.dropped}"
+                out[f"frames_{name}"] = f"{f.received}/{f.undecodable}/{f.dropped}"
         if proc:
             out.update(proc_p50_us=proc[len(proc) // 2], proc_max_us=proc[-1])
         return out
@@ -232,12 +226,21 @@ class FusionShell:
     def log_stats(self) -> None:
         self.log.info(kv("fusion_stats", **self.stats()))
 
-
-def run_until(stop: threading.Event, shell: FusionShell, interval_s: float,
-              watchdog: Watchdog | None = None) -> None:
-    """Log statistics every interval until `stop` is set; feed systemd's watchdog."""
-    wait = (watchdog or Watchdog(env={})).wait
-    next_log = time.monotonic() + interval_s
-    while not wait(stop, max(0.0, next_log - time.monotonic())):
-        shell.log_stats()
-        next_log += interval_s
+    def run(self, stop: threading.Event, watchdog: Watchdog | None = None) -> int:
+        """Serve until `stop` is set, after `start`: the health token and systemd's ready,
+        then statistics every `stats_interval_s` (feeding systemd's watchdog); on the way
+        out the token is withdrawn, the subscriptions and decoders stopped and the last
+        statistics logged."""
+        wait = (watchdog or Watchdog(env={})).wait
+        token = self.bus.declare_health("fusion", self.s.instance)
+        try:
+            systemd.ready(f"serving fusion {self.s.instance}")
+            next_log = time.monotonic() + self.s.stats_interval_s
+            while not wait(stop, max(0.0, next_log - time.monotonic())):
+                self.log_stats()
+                next_log += self.s.stats_interval_s
+        finally:
+            token.undeclare()
+            self.stop()
+            self.log_stats()
+        return 0

@@ -50,8 +50,7 @@ class ZenohRadarOutput:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = service_argparser("radar", __doc__ or "")
-    args = parser.parse_args(argv)
+    args = service_argparser("radar", __doc__ or "").parse_args(argv)
     cfg = load_service_config(args, RadarConfig)
     log = setup_logging("radar", cfg.log.level.value)
     try:

@@ -238,8 +238,9 @@ class RadarShell:
     def _on_message(self, msg: can.Message, wall: int, mono: int) -> None:
         if self._raw_sink is not None:
             self._raw.append(CanFrame(
-                msg.timestamp, wall, mono, msg.arbitration_id, bytes(msg.data),
-                (CAN_EXTENDED if msg.is_extended_id else 0)
+                timestamp_s=msg.timestamp, rx_wall_ns=wall, rx_mono_ns=mono,
+                arb_id=msg.arbitration_id, data=bytes(msg.data),
+                flags=(CAN_EXTENDED if msg.is_extended_id else 0)
                 | (CAN_REMOTE if msg.is_remote_frame else 0)
                 | (CAN_ERROR if msg.is_error_frame else 0)))
         if msg.is_error_frame:

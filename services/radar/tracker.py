@@ -16,17 +16,34 @@ association cost (`radar_id_bonus`) but never overrides the gate: the radar swap
 With a constant-velocity model, white-acceleration noise per axis and diagonal
 measurement and initial noise, x and y never correlate: the 4x4 covariance is two 2x2
 blocks [[var_p, cov_pv], [cov_pv, var_v]], one per axis, and every step is a closed-form
-formula over all tracks at once. The state is one float matrix (`state`) and one integer
-matrix (`meta`), a row per quantity and a column per track. The prediction is linear in
-the rows of `state` (x' = F x and P' = F P F^T + Q written on the blocks): one matrix
-product and the noise.
+formula over all tracks at once. Each quantity is a (2, n) array, row 0 the x axis and
+row 1 the y axis, a column per track: `pos` (x, y), `vel` (vx, vy), `var_p`, `cov_pv`,
+`var_v`; they are rows of one float matrix (`state`, beside the integer matrix `meta`),
+so that deleting or adding tracks is one operation on each matrix. With the noise q of
+piecewise-constant white acceleration (variance w), the prediction over dt is, per axis:
+
+    pos' = pos + dt vel
+    var_p' = var_p + 2 dt cov_pv + dt^2 var_v + w dt^4 / 4
+    cov_pv' = cov_pv + dt var_v + w dt^3 / 2
+    var_v' = var_v + w dt^2
 
 The chi-square gate bounds each position axis (|dx| <= sqrt(chi2 S_xx), |dy| <=
 sqrt(chi2 S_yy)), so only the pairs inside those boxes get the 4-d Mahalanobis distance;
 with many tracks and detections a strip grid (`neighbours.candidates_in_boxes`) finds
-them without looking at every pair. The update reuses the gate's S^-1:
-x' = z - R S^-1 (z - x), P' = R S^-1 P (the same as x + K (z - x), (I - K) P with
-K = P S^-1).
+them without looking at every pair. Per axis, with S = P + R = [[a, b], [b, v]] and the
+innovation e = z - x = [dp; dv]:
+
+    S^-1 = [[inv_pp, inv_pv], [inv_pv, inv_vv]] = [[v, -b], [-b, a]] / (a v - b^2)
+    d^2 = e' S^-1 e, summed over both axes
+
+The update reuses the gate's S^-1: x' = z - R S^-1 e and P' = R S^-1 P (the same as
+x + K e and (I - K) P with K = P S^-1), with R = diag(r_p, r_v) per axis:
+
+    pos' = z_p - r_p (inv_pp dp + inv_pv dv)
+    vel' = z_v - r_v (inv_pv dp + inv_vv dv)
+    var_p' = r_p (inv_pp var_p + inv_pv cov_pv)
+    cov_pv' = r_p (inv_pp cov_pv + inv_pv var_v)
+    var_v' = r_v (inv_pv cov_pv + inv_vv var_v)
 """
 
 from functools import lru_cache
@@ -50,8 +67,8 @@ _EMPTY = np.zeros(0, dtype=np.int64)
 _DENSE_MAX = 2048
 
 # Rows of KalmanTracker.state: the state [x, y, vx, vy] and the last detection's RCS (the
-# rows of a detection's floats, in the same order); per axis (x, y) the 2x2 covariance
-# block [[var_p, cov_pv], [cov_pv, var_v]].
+# rows of a detection's floats, in the same order); the per-axis (x, y) covariance
+# entries var_p, cov_pv, var_v, two rows each.
 POS = slice(0, 2)
 VEL = slice(2, 4)
 STATE = slice(0, 4)
@@ -69,28 +86,6 @@ N_META = 7
 # Detection rows carried into a track's meta rows META_RADAR_ID.. (radar ID, DynProp, class)
 _DET_META = slice(RADAR_ID, OBJ_CLASS + 1)
 
-# Rows of KalmanTracker._gain: S^-1 = [[alpha, -beta], [-beta, gamma]] per axis and
-# track, from S = P + R = [[a, b], [b, v]] (rows a, b, v of `S` below, two each):
-# alpha = v / det, beta = b / det, gamma = a / det, laid out as alpha, alpha, gamma,
-# beta, beta, beta (two rows each, x and y), so that every product below is on slices:
-# - S^-1 e of an innovation e = [dp; dv]: gain[2:6] * e - gain[6:10] * [dv; dp];
-# - P' = R S^-1 P on the covariance rows [var_p; cov_pv; var_v]: R times
-#   gain[0:6] * P - gain[6:12] * [cov_pv; var_v; cov_pv].
-_GAIN_FROM_S = np.array([4, 5, 4, 5, 0, 1, 2, 3, 2, 3, 2, 3])
-_GAIN_AXIS = np.array([0, 1] * 6)
-_SWAP = np.array([2, 3, 0, 1])
-_COV_SECOND = np.array([2, 3, 4, 5, 2, 3])
-# The entries of the prediction's matrix A (state' = A @ state + q) off the identity, with
-# Q from piecewise-constant white acceleration, per axis: position' = position + dt
-# velocity; var_p' = var_p + 2 dt cov_pv + dt^2 var_v; cov_pv' = cov_pv + dt var_v. The
-# noise q on the covariance rows: dt^4 / 4, dt^3 / 2, dt^2 times the acceleration variance.
-_TRANSITION_AT = np.ravel_multi_index((
-    [X, Y, VAR_P.start, VAR_P.start + 1, VAR_P.start, VAR_P.start + 1, COV_PV.start,
-     COV_PV.start + 1],
-    [VX, VY, COV_PV.start, COV_PV.start + 1, VAR_V.start, VAR_V.start + 1, VAR_V.start,
-     VAR_V.start + 1]), (N_STATE, N_STATE))
-_IDENTITY = np.eye(N_STATE)
-_MESSAGE_ROWS = np.array([X, Y, VX, VY, TRACK_RCS, VAR_P.start, VAR_P.start + 1])
 # The object class by radar ID (8 bits) before a cycle's classes are looked up.
 _NO_CLASS_BY_ID = np.full(256, -1, dtype=np.int64)
 # A track at the origin has no range rate: its numerator is 0, so 0 / _TINY = 0.
@@ -143,12 +138,11 @@ class KalmanTracker:
         self.s = settings
         r_pos = [settings.pos_x_std_m**2, settings.pos_y_std_m**2]
         r_vel = [settings.vel_x_std_mps**2, settings.vel_y_std_mps**2]
-        # Measurement noise R = diag(r_pos, r_vel) per axis, as columns: on the state
-        # rows, on the covariance rows (S = P + R; cov_pv gets none; P0 = R), and the
-        # factor of each covariance row in P' = R S^-1 P.
-        self._r_state = np.array([[*r_pos, *r_vel]]).T
-        self._r_cov = np.array([[*r_pos, 0.0, 0.0, *r_vel]]).T
-        self._r_posterior = np.array([[*r_pos, *r_pos, *r_vel]]).T
+        # Measurement noise R = diag(r_p, r_v) per axis, as (2, 1) columns (x, y); a new
+        # track's covariance rows, P0 = R.
+        self._r_p = np.array([r_pos]).T
+        self._r_v = np.array([r_vel]).T
+        self._p0 = np.array([[*r_pos, 0.0, 0.0, *r_vel]]).T
         # A new track's meta rows ID..CONFIRMED (the ID set at birth).
         self._meta_born = np.array([[0, 1, 0, int(settings.confirm_hits <= 1)]]).T
         # Misses that delete a track, by its CONFIRMED row (0, 1).
@@ -164,8 +158,9 @@ class KalmanTracker:
     def _clear(self) -> None:
         self.state: F = np.zeros((N_STATE, 0))
         self.meta: I = np.zeros((N_META, 0), dtype=np.int64)
-        # S^-1 per axis and track from this cycle's innovation covariance (_GAIN_FROM_S).
-        self._gain: F = np.zeros((12, 0))
+        # S^-1 per axis and track from this cycle's innovation covariance: (3, 2, n), the
+        # entries inv_pp, inv_pv, inv_vv.
+        self._s_inv: F = np.zeros((3, 2, 0))
 
     def __len__(self) -> int:
         return int(self.state.shape[1])
@@ -211,20 +206,21 @@ class KalmanTracker:
             self._birth(det, (taken == 0).nonzero()[0] if len(drows) else None)
 
     def predict(self, dt: float) -> None:
-        """x' = F x, P' = F P F^T + Q, on every track."""
-        a = _IDENTITY.copy()
-        a.put(_TRANSITION_AT, (dt, dt, 2 * dt, 2 * dt, dt * dt, dt * dt, dt, dt))
+        """x' = F x, P' = F P F^T + Q, on every track (in place, per axis)."""
+        st = self.state
+        pos, vel, var_p, cov_pv, var_v = st[POS], st[VEL], st[VAR_P], st[COV_PV], st[VAR_V]
         w = self.s.accel_std_mps2**2
-        q = np.zeros((N_STATE, 1))
-        q[COV, 0] = (w * dt**4 / 4, w * dt**4 / 4, w * dt**3 / 2, w * dt**3 / 2, w * dt * dt,
-                     w * dt * dt)
-        self.state = a @ self.state + q
+        pos += dt * vel
+        var_p += 2 * dt * cov_pv + dt * dt * var_v + w * dt**4 / 4
+        cov_pv += dt * var_v + w * dt**3 / 2
+        var_v += w * dt * dt
 
     def _innovation(self) -> None:
-        """S^-1 per track and axis from S = P + R (the rows of `_gain`)."""
-        s = self.state[COV] + self._r_cov
-        det = s[0:2] * s[4:6] - s[2:4] * s[2:4]
-        self._gain = s.take(_GAIN_FROM_S, axis=0) / det.take(_GAIN_AXIS, axis=0)
+        """S^-1 per track and axis from S = P + R = [[a, b], [b, v]] (`_s_inv`)."""
+        st = self.state
+        a, b, v = st[VAR_P] + self._r_p, st[COV_PV], st[VAR_V] + self._r_v
+        det = a * v - b * b
+        self._s_inv = np.array([v, -b, a]) / det
 
     def _candidates(self, det: Detections) -> tuple[I, I]:
         """Track x detection pairs that may lie inside the gate: every pair when there
@@ -234,7 +230,7 @@ class KalmanTracker:
         if n * m <= _DENSE_MAX:
             return _every_pair(n, m)
         st = self.state
-        half = np.minimum(np.sqrt(self._chi2 * (st[VAR_P] + self._r_cov[0:2])), self._cap)
+        half = np.minimum(np.sqrt(self._chi2 * (st[VAR_P] + self._r_p)), self._cap)
         return candidates_in_boxes(st[X], st[Y], float(half[0].max()), half[1], det.x, det.y)
 
     def associate(self, det: Detections) -> tuple[I, I]:
@@ -246,11 +242,11 @@ class KalmanTracker:
         ti, di = self._candidates(det)
         if len(ti) == 0:
             return _EMPTY, _EMPTY
-        g = self._gain[2:10].take(ti, axis=1)          # alpha, gamma, beta, beta
+        inv_pp, inv_pv, inv_vv = self._s_inv.take(ti, axis=2)
         e = det.floats[STATE].take(di, axis=1) - self.state[STATE].take(ti, axis=1)
-        d2 = (e * (g[0:4] * e - g[4:8] * e.take(_SWAP, axis=0))).sum(axis=0)   # e' S^-1 e
-        inside = ((d2 <= self._chi2) & ((e[POS] * e[POS]).sum(axis=0) <= self._cap**2)
-                  ).nonzero()[0]
+        dp, dv = e[POS], e[VEL]
+        d2 = (dp * (inv_pp * dp + inv_pv * dv) + dv * (inv_pv * dp + inv_vv * dv)).sum(axis=0)
+        inside = ((d2 <= self._chi2) & ((dp * dp).sum(axis=0) <= self._cap**2)).nonzero()[0]
         if len(inside) == 0:
             return _EMPTY, _EMPTY
         ti, di = ti.take(inside), di.take(inside)
@@ -265,18 +261,24 @@ class KalmanTracker:
 
     def _update(self, rows: I, det: Detections, drows: I) -> None:
         """Kalman update of tracks `rows` with detections `drows`, after `associate`,
-        whose S^-1 it reuses: x' = z - R S^-1 (z - x), P' = R S^-1 P on each axis's
-        block."""
+        whose S^-1 it reuses: x' = z - R S^-1 e, P' = R S^-1 P on each axis's block."""
         if len(rows) == 0:
             return
         z = det.floats.take(drows, axis=1)       # the new [x, y, vx, vy, rcs]
         old = self.state.take(rows, axis=1)
-        g = self._gain.take(rows, axis=1)
+        inv_pp, inv_pv, inv_vv = self._s_inv.take(rows, axis=2)
         e = z[STATE] - old[STATE]
-        z[STATE] -= self._r_state * (g[2:6] * e - g[6:10] * e.take(_SWAP, axis=0))
-        cov = old[COV]
-        posterior = self._r_posterior * (g[0:6] * cov - g[6:12] * cov.take(_COV_SECOND, axis=0))
-        self.state[:, rows] = np.concatenate([z, posterior])
+        dp, dv = e[POS], e[VEL]
+        var_p, cov_pv, var_v = old[VAR_P], old[COV_PV], old[VAR_V]
+        r_p, r_v = self._r_p, self._r_v
+        new = np.empty_like(old)
+        new[POS] = z[POS] - r_p * (inv_pp * dp + inv_pv * dv)
+        new[VEL] = z[VEL] - r_v * (inv_pv * dp + inv_vv * dv)
+        new[TRACK_RCS] = z[RCS]
+        new[VAR_P] = r_p * (inv_pp * var_p + inv_pv * cov_pv)
+        new[COV_PV] = r_p * (inv_pp * cov_pv + inv_pv * var_v)
+        new[VAR_V] = r_v * (inv_pv * cov_pv + inv_vv * var_v)
+        self.state[:, rows] = new
         self.meta[META_RADAR_ID:, rows] = det.ints[_DET_META].take(drows, axis=1)
 
     def _count(self, rows: I) -> None:
@@ -304,7 +306,7 @@ class KalmanTracker:
         k = fd.shape[1]
         new = np.empty((N_STATE, k))
         new[MEASURED] = fd
-        new[COV] = self._r_cov           # P0 = R
+        new[COV] = self._p0
         meta = np.empty((N_META, k), dtype=np.int64)
         meta[:META_RADAR_ID] = self._meta_born
         meta[ID] = np.arange(self.next_id, self.next_id + k)
@@ -334,7 +336,8 @@ class KalmanTracker:
         st = self.state
         r = np.hypot(st[X], st[Y])
         rr = (st[X] * st[VX] + st[Y] * st[VY]) / np.maximum(r, _TINY)
-        x, y, vx, vy, rcs, x_var, y_var = st.take(_MESSAGE_ROWS, axis=0).tolist()
+        x, y, vx, vy, rcs = st[MEASURED].tolist()
+        x_var, y_var = st[VAR_P].tolist()
         m = self.meta.tolist()
         return list(starmap(RadarTrack, zip(
             m[ID], x, y, vx, vy, r.tolist(), rr.tolist(), rcs, map(bool, m[CONFIRMED]),

@@ -57,8 +57,8 @@ def test_metres_round_to_millimetres_and_out_of_range_is_no_return():
 
 def test_depth_frame_round_trips_on_its_own_key_beside_the_jpeg():
     units = depth_units()
-    msg = DepthFrame(Header(3, "camera/front", 1_000, 2_000), "front", 64, 48, "zstd",
-                     encode_depth(units, "zstd"))
+    msg = DepthFrame(header=Header(3, "camera/front", 1_000, 2_000), camera="front", width=64,
+                     height=48, codec="zstd", data=encode_depth(units, "zstd"))
     got = decode(encode(msg), DepthFrame)
     assert got == msg and got.units_m == 0.001
     assert np.array_equal(decode_depth(got.data, got.codec, got.width, got.height), units)

@@ -92,15 +92,16 @@ def write_sim_recording(path: Path, n_cycles: int = 8, corrupt_seqs: tuple[int, 
                 jpeg = jpeg[: len(jpeg) // 3]
             else:
                 frames.append((seq, t, t + 5 * MS))
-            msg = CompressedFrame(Header(seq, "camera/front", t, 0), "front", CAL.width,
-                                  CAL.height, jpeg)
+            msg = CompressedFrame(header=Header(seq, "camera/front", t, 0), camera="front",
+                                  width=CAL.width, height=CAL.height, jpeg=jpeg)
             w.write_message(jpeg_topic, msg, t + 5 * MS)
             if with_depth and seq % depth_every == 0:
                 units = to_units(box_depth(t))[::2, ::2]
                 w.write_message(CAMERA_DEPTH.key(vehicle, camera="front"),
-                                DepthFrame(Header(seq, "camera/front", t, 0), "front",
-                                           units.shape[1], units.shape[0], "zstd",
-                                           encode_depth(units)), t + 6 * MS)
+                                DepthFrame(header=Header(seq, "camera/front", t, 0),
+                                           camera="front", width=units.shape[1],
+                                           height=units.shape[0], codec="zstd",
+                                           data=encode_depth(units)), t + 6 * MS)
             seq += 1
             t += FRAME_NS
         for i, t in enumerate(range(T0, end, 20 * MS)):

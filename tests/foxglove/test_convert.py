@@ -63,7 +63,8 @@ def test_images_scale_and_scenes_draw_the_corridor():
     from common.messages import CompressedFrame
     from tests.system.messages import header
 
-    frame = CompressedFrame(header(3, "camera/front", STAMP), "front", 848, 480, textured_jpeg())
+    frame = CompressedFrame(header=header(3, "camera/front", STAMP), camera="front", width=848,
+                            height=480, jpeg=textured_jpeg())
     same = decoded(Converter("ego").image(frame))
     assert same.data == frame.jpeg and same.format == "jpeg"
     from common.imaging import decode_gray

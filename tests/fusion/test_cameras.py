@@ -219,7 +219,7 @@ def test_a_shell_with_two_cameras_decodes_each_and_decides_on_both():
     assert [name for name, _ in bus.log] == ["fusion_brake_cmd", "fusion_targets"]
     assert res.targets.frames_undecodable == 1
     stats = shell.stats()
-    assert stats["frames_unusable"] == 1 and stats["frames_left"] == "0/0/1/0"
+    assert stats["frames_unusable"] == 1 and stats["frames_left"] == "0/1/0"
 
 
 # -- configuration ----------------------------------------------------------------------
@@ -246,7 +246,7 @@ def test_invalid_camera_lists_are_refused_naming_the_problem(fusion, named):
 
 def multicam_config(tmp_path, names=("front", "left", "right")):
     """A fusion TOML with [[fusion.cameras]] and the rig's calibration files."""
-    lines = ['[fusion]', 'instance = "multi"', '[fusion.frames]', 'decode = "before_radar"']
+    lines = ['[fusion]', 'instance = "multi"']
     for n in names:
         cal = tmp_path / f"{n}.toml"
         cal.write_text(rig_calibration_toml(n))
@@ -261,14 +261,15 @@ def test_a_multi_camera_config_builds_with_each_calibration(tmp_path):
     core, cals = build_core(cfg)
     assert [c.name for c in core.cameras] == list(cals) == ["front", "left", "right"]
     assert cals["left"].spec.name == "synthetic-rig-left"
-    assert cfg.fusion.frames.decode.value == "before_radar"
 
 
 def test_calibration_override_is_refused_for_several_cameras(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
                            str(multicam_config(tmp_path)), "--calibration", "x.toml"],
                           capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2 and "--calibration applies to a single camera" in proc.stderr
+    assert proc.returncode == 2 and "with --calibration x.toml" in proc.stderr
+    assert "give either frames.camera and calibration (one camera) or [[fusion.cameras]]" \
+        in proc.stderr
 
 
 def test_each_camera_predicts_the_tracks_to_its_own_frame_time():

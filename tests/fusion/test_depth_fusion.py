@@ -20,9 +20,9 @@ W, H = CAL.width, CAL.height
 def depth_payload(depth_m: np.ndarray, stamp_ns: int = T0, decimation: int = 2,
                   codec: str = "zstd") -> bytes:
     units = to_units(depth_m)[::decimation, ::decimation]
-    return encode(DepthFrame(Header(0, "camera/front", stamp_ns, 0), "front",
-                             units.shape[1], units.shape[0], codec,
-                             encode_depth(units, codec)))
+    return encode(DepthFrame(header=Header(0, "camera/front", stamp_ns, 0), camera="front",
+                             width=units.shape[1], height=units.shape[0], codec=codec,
+                             data=encode_depth(units, codec)))
 
 
 def test_a_decimated_depth_frame_comes_back_in_metres_at_the_frame_size():
@@ -48,7 +48,8 @@ def test_unusable_depth_raises_with_a_reason(payload, reason):
 
 
 def test_a_corrupt_depth_payload_is_a_codec_error():
-    msg = DepthFrame(Header(0, "camera/front", T0, 0), "front", 424, 240, "zstd", b"\x28junk")
+    msg = DepthFrame(header=Header(0, "camera/front", T0, 0), camera="front", width=424,
+                     height=240, codec="zstd", data=b"\x28junk")
     with pytest.raises(FrameError) as err:
         decode_depth_frame(encode(msg), W, H)
     assert err.value.reason == "depth_codec"

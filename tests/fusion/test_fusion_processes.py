@@ -265,7 +265,6 @@ name = "left"
 calibration = "{tmp_path / 'left.toml'}"
 [fusion.frames]
 max_skew_s = 0.5
-decode = "before_radar"
 frozen_after_s = 0.0    # still pictures, as above
 [fusion.decision]
 hold_s = 0.0

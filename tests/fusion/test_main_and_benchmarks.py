@@ -28,6 +28,14 @@ def test_bad_configuration_exits_2_naming_the_problem(tmp_path, toml, named):
     assert named in proc.stderr
 
 
+def test_another_instances_key_exits_2_naming_both_instances():
+    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c", "deploy/fusion.toml",
+                           "--instance", "shadow", "--check"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert "primary.key: key of instance 'primary', this is 'shadow'" in proc.stderr
+
+
 @pytest.mark.parametrize("path", ["deploy/fusion.toml", "deploy/fusion-candidate.toml",
                                   "deploy/fusion-paper.toml"])
 def test_shipped_configs_build(path):
@@ -62,15 +70,14 @@ def test_benchmarks_run_quick_and_write_their_results(tmp_path, capsys):
     assert (tmp_path / "bench_fusion_cameras.png").stat().st_size > 0
     assert "64 tracks, threats" in capsys.readouterr().out
     # The cameras scale (quick: its two ends): every camera count streamed into fusion,
-    # frames decoded, and the before_radar policy skipping some.
+    # its frames decoded.
     cams = fusion["cameras"]
     assert cams["counts"] == list(bench_fusion.QUICK_CAMERA_COUNTS) == [1, 4]
     for n in (1, 4):
-        assert cams[f"{n} every_frame"]["frames_decoded_per_s"] > 10 * n
-        assert cams[f"{n} before_radar"]["frames_skipped_per_s"] > 0
+        assert cams[f"{n} traffic"]["frames_decoded_per_s"] > 10 * n
     names = {f.name for f in figures}
     assert {f"fusion tracks->command, {n} tracks (threats)" for n in (1, 8, 64, 128)} <= names
-    assert {f"decode CPU, {n} camera(s) at 30 fps, before_radar" for n in (1, 4)} <= names
+    assert {f"decode CPU, {n} camera(s) at 30 fps" for n in (1, 4)} <= names
     assert all(f.group == "scale" and f.baseline_value is not None for f in figures)
 
 

@@ -156,27 +156,3 @@ def test_a_camera_calibration_other_than_ours_is_counted_and_named():
     shell.on_camera_info(info(), "k")
     shell.on_camera_info(info(k=(1.0,) * 9), "k")
     assert shell.counters.get("camera_calibration_mismatch") == 1
-
-
-def test_the_radar_rhythm_learns_each_arrival_after_the_cycle_is_published():
-    from services.fusion.rhythm import RadarRhythm
-
-    class Recording(RadarRhythm):
-        def on_cycle(self, rx_mono_ns: int) -> None:
-            bus.log.append(("rhythm", rx_mono_ns))
-            super().on_cycle(rx_mono_ns)
-
-    bus = FakeBus()
-    core = make_core(FixedVerifier())
-    decoder = FrameDecoder(848, 480, logging.getLogger("test"))
-    rhythm = Recording()
-    shell = FusionShell(bus, core.s, core, decoder, logging.getLogger("test"),  # type: ignore[arg-type]
-                      rhythm=rhythm)
-    fresh(shell)
-    period = 74_000_000
-    for k in range(6):
-        shell.on_tracks_payload(payload(track(x=30.0), seq=k), "k", 1_000_000_000 + k * period)
-    # each cycle: command, targets, then the arrival time (off the command's path)
-    assert [name for name, _ in bus.log] == ["fusion_brake_cmd", "fusion_targets",
-                                             "rhythm"] * 6
-    assert rhythm.period_ns == period

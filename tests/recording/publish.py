@@ -107,8 +107,9 @@ class StackPublisher:
         last_frame_stamp = 0
         while not self.stop.wait(self.frame_s):
             now = wall_ns()
-            self._put("jpeg", CompressedFrame(header(i, "camera/front", now, mono_ns()), "front",
-                                              WIDTH, HEIGHT, self.jpeg))
+            self._put("jpeg", CompressedFrame(header=header(i, "camera/front", now, mono_ns()),
+                                              camera="front", width=WIDTH, height=HEIGHT,
+                                              jpeg=self.jpeg))
             if i % 2 == 1:
                 k = i // 2
                 decision = Decision.BRAKE if k % 10 >= 5 else Decision.NONE
@@ -118,7 +119,8 @@ class StackPublisher:
                                                  now, mono))
                 self._put("can", RawCanFrames(
                     header(k, "radar/radar", now, mono), "radar", "slcan", "/dev/pts/x",
-                    (CanFrame(1.0 + k, now, mono, 0x60A, bytes([1, 0, 0, 0x10])),)))
+                    (CanFrame(timestamp_s=1.0 + k, rx_wall_ns=now, rx_mono_ns=mono,
+                              arb_id=0x60A, data=bytes([1, 0, 0, 0x10])),)))
                 age_ms = (now - last_frame_stamp) / 1e6
                 tgt = VerifiedTarget(
                     track_id=1, x_m=12.0, y_m=0.0, range_m=12.0, range_rate_mps=-5.0,

@@ -29,8 +29,8 @@ def decoded(r):
 
 
 def frame(i: int, size: int = 2000) -> bytes:
-    return encode(CompressedFrame(header(i, "camera/front", 1_000 + i), "front", 848, 480,
-                                  bytes([i % 256]) * size))
+    return encode(CompressedFrame(header=header(i, "camera/front", 1_000 + i), camera="front",
+                                  width=848, height=480, jpeg=bytes([i % 256]) * size))
 
 
 def write(writer: RecordingWriter, n: int, step_ns: int = 10_000_000) -> None:

@@ -25,8 +25,9 @@ T0 = 1_800_000_000 * 10**9
 def frame(stamp_ns: int, seq: int = 0, jpeg: bytes = b"\xff\xd8") -> CompressedFrame:
     from common.messages import Header
 
-    return CompressedFrame(Header(seq=seq, source="camera/front", stamp_ns=stamp_ns,
-                                  pub_mono_ns=0), "front", 848, 480, jpeg)
+    return CompressedFrame(header=Header(seq=seq, source="camera/front", stamp_ns=stamp_ns,
+                                         pub_mono_ns=0), camera="front", width=848, height=480,
+                           jpeg=jpeg)
 
 
 def tracks_at(stamp_ns: int, seq: int = 0) -> RadarTracks:

@@ -365,8 +365,9 @@ def fuzz_jpeg(n: int, rng: random.Random, progress: Progress) -> Tally:
         jpeg = mutate_bytes(rng, seed) if rng.random() < 0.7 else _mutate_jpeg_body(rng, seed)
         unchanged += jpeg == seed
         with_crc = i % 2 == 0
-        payload = encode(CompressedFrame(Header(i, "camera/front", 0, 0), "front", width,
-                                         height, jpeg, seed_crc if with_crc else None))
+        payload = encode(CompressedFrame(header=Header(i, "camera/front", 0, 0), camera="front",
+                                         width=width, height=height, jpeg=jpeg,
+                                         crc32=seed_crc if with_crc else None))
         tally.inputs += 1
         try:
             decode_frame(payload, i, width, height)

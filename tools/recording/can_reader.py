@@ -76,8 +76,9 @@ class CanReader:
                 if not batch:
                     started = mono
                 batch.append(CanFrame(
-                    msg.timestamp, wall_ns(), mono, msg.arbitration_id, bytes(msg.data),
-                    (CAN_EXTENDED if msg.is_extended_id else 0)
+                    timestamp_s=msg.timestamp, rx_wall_ns=wall_ns(), rx_mono_ns=mono,
+                    arb_id=msg.arbitration_id, data=bytes(msg.data),
+                    flags=(CAN_EXTENDED if msg.is_extended_id else 0)
                     | (CAN_REMOTE if msg.is_remote_frame else 0)
                     | (CAN_ERROR if msg.is_error_frame else 0)))
             if batch and (msg is None or mono - started >= BATCH_S * 1e9):

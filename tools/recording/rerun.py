@@ -24,15 +24,14 @@ import argparse
 import json
 import sys
 import time
-import tomllib
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import msgspec
 
 from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, parse_config
-from common.config.paths import resolve_paths
+from common.config.loader import ConfigError, load_config
+from common.config.overrides import add_set_argument
 from common.config.radar import RadarConfig
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import add_log_level, setup_logging
@@ -44,40 +43,6 @@ from tools.recording.format import stack_channel
 from tools.recording.foxglove_views import Converter, encode_derived
 from tools.recording.reader import Recording, RecordingError
 from tools.recording.writer import RecordingWriter
-
-C = TypeVar("C", bound=msgspec.Struct)
-
-
-def load_with_overrides(path: str | Path, config_type: type[C], sets: list[str]) -> C:
-    """A config file (defaults when empty) with `--set a.b.c=VALUE` applied (VALUE read
-    as a TOML value, else as a string); relative paths in the file resolve against its
-    folder, as for the services. Raises ConfigError."""
-    data: dict[str, Any] = {}
-    if path:
-        try:
-            data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ConfigError(f"{path}: cannot read configuration: {exc.strerror}") from exc
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
-    for item in sets:
-        name, sep, raw = item.partition("=")
-        if not sep or not name:
-            raise ConfigError(f"--set {item!r}: expected NAME=VALUE")
-        try:
-            value: Any = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw
-        node = data
-        *parents, leaf = name.split(".")
-        for p in parents:
-            child = node.setdefault(p, {})
-            if not isinstance(child, dict):
-                raise ConfigError(f"--set {item!r}: {p} is not a table")
-            node = child
-        node[leaf] = value
-    cfg = parse_config(data, config_type, str(path) or "<defaults>")
-    return resolve_paths(cfg, Path(path).resolve().parent) if path else cfg
 
 
 class Progress:
@@ -104,8 +69,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("-c", "--config", default="",
                         help="the service's config (default: the shipped deploy/fusion.toml "
                              "or deploy/radar.toml)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="override one config field, e.g. fusion.verifier.params.tau=0.05")
+    add_set_argument(parser)
     parser.add_argument("--instance", default="",
                         help="fusion: the recorded instance to compare with (default: the "
                              "config's)")
@@ -142,7 +106,7 @@ def run_fusion(args: argparse.Namespace, rec: Recording,
                vehicle: str) -> tuple[Comparison, dict[str, Any]]:
     from tools.recording.rerun_fusion import FusionRerun, config_params, normalised
 
-    cfg = load_with_overrides(args.config or DEPLOY / "fusion.toml", FusionConfig, args.set)
+    cfg = load_config(args.config or DEPLOY / "fusion.toml", FusionConfig, args.overrides)
     rerun = FusionRerun(cfg, args.instance or None, vehicle)
     first, last, start, end = _window(rec, args)
     span_start = start if start is not None else first
@@ -201,7 +165,7 @@ def run_radar(args: argparse.Namespace, rec: Recording,
               vehicle: str) -> tuple[Comparison, dict[str, Any]]:
     from tools.recording.rerun_radar import RadarRerun
 
-    cfg = load_with_overrides(args.config or DEPLOY / "radar.toml", RadarConfig, args.set)
+    cfg = load_config(args.config or DEPLOY / "radar.toml", RadarConfig, args.overrides)
     rerun = RadarRerun(cfg.radar, vehicle, exact=args.exact)
     _, _, start, end = _window(rec, args)
     writer = _writer(args, {"source": ",".join(map(str, rec.files)), "service": "radar"})
@@ -280,7 +244,8 @@ def report(args: argparse.Namespace, comparison: Comparison, timing: dict[str, A
                                 "undeclared": len(undeclared), "missing": len(missing)}
         if args.write_expected:
             Path(args.write_expected).write_text(json.dumps(
-                {"recording": " ".join(args.recording), "set": args.set,
+                {"recording": " ".join(args.recording),
+                 "set": [o.assignment for o in args.overrides],
                  "config": args.config,
                  "differences": [d.as_json() for d in comparison.differences]}, indent=1))
     if args.json:

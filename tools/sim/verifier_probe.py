@@ -61,8 +61,9 @@ def probe(scenario: Scenario, renderer: Renderer, verifiers: list[str],
             image, depth_mm = renderer.render_rgbd(bodies, world.ego.x_m, millimetres=True)
             gray = decode_gray(encode_jpeg(image, 80))
             small = np.ascontiguousarray(depth_mm[::DECIMATION, ::DECIMATION])
-            msg = DepthFrame(Header(0, "probe", wall_ns(), 0), "front", small.shape[1],
-                             small.shape[0], "zstd", encode_depth(small))
+            msg = DepthFrame(header=Header(0, "probe", wall_ns(), 0), camera="front",
+                             width=small.shape[1], height=small.shape[0], codec="zstd",
+                             data=encode_depth(small))
             _, depth = decode_depth_frame(encode(msg), cal.width, cal.height)
             xy = np.array([[r.x_m, r.y_m] for r in returns])
             for r, boxes in zip(returns, projector.boxes(xy), strict=True):
