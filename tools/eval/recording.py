@@ -37,7 +37,7 @@ from common.messages import (
 )
 from common.messages.schema import schema_name
 from services.fusion.cameras import Camera, camera_views
-from services.fusion.core import _finite as finite_track  # fusion's own test of a track
+from services.fusion.core import finite_track
 from services.fusion.frames import (
     RING_SIZE,
     DecodedFrame,
