@@ -1,9 +1,10 @@
 """ROIs from a recording, exactly as fusion builds them: for every radar cycle, each
 camera's frame is chosen among the frames fusion would hold at that moment (its ring of
-the last RING_SIZE decoded frames received before the cycle) by fusion's own
-`select_frame`, the tracks are predicted to that frame's capture time and projected by
-fusion's `camera_views` with the ColumnProjector of the fusion configuration (padding,
-clipping), and every confirmed track in the decision's range (3-25 m) becomes a ROI.
+the last RING_SIZE decoded frames received before the cycle, tools/recording/
+frame_source.py) by fusion's own `select_frame`, the tracks are predicted to that frame's
+capture time and projected by fusion's `camera_views` with the ColumnProjector of the
+fusion configuration (padding, clipping), and every confirmed track in the decision's
+range (3-25 m) becomes a ROI.
 
 Frames are decoded only when chosen: a frame that turns out undecodable is dropped from
 the ring (fusion never holds one) and the choice is made again; it is counted.
@@ -18,7 +19,6 @@ depth verifiers not applicable for its ROIs (`frame_without_depth`).
 """
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,13 +38,7 @@ from common.messages import (
 from common.messages.schema import schema_name
 from services.fusion.cameras import Camera, camera_views
 from services.fusion.core import finite_track
-from services.fusion.frames import (
-    RING_SIZE,
-    DecodedFrame,
-    FrameError,
-    FrameFeed,
-    decode_frame,
-)
+from services.fusion.frames import FrameError
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation
 from tools.eval import sim_truth
@@ -52,7 +46,7 @@ from tools.eval.adapters.paper_rois import free_rois
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
 from tools.messages import SimWorld
-from tools.recording.depth import RecordedDepth
+from tools.recording.frame_source import FrameSource
 from tools.recording.reader import ChannelSummary, Recording, RecordingError
 
 _FRAME = schema_name(CompressedFrame)
@@ -60,12 +54,6 @@ _INFO = schema_name(CameraInfo)
 _DEPTH = schema_name(DepthFrame)
 _TRACKS = schema_name(RadarTracks)
 _WORLD = schema_name(SimWorld)
-
-# Frames kept per camera beyond fusion's ring, so that the ring can be refilled when a
-# chosen frame turns out undecodable.
-_BUFFER = RING_SIZE * 4
-_EMPTY = np.zeros((0, 0), np.uint8)
-
 
 @dataclass(frozen=True)
 class RecordingSettings:
@@ -77,15 +65,6 @@ class RecordingSettings:
     background_per_object: int = 2            # with ground truth only
     timing: bool = True
     seed: int = 0
-
-
-@dataclass
-class _Stub:
-    seq: int
-    stamp_ns: int
-    log_time_ns: int
-    payload: bytes
-    bad: bool = False
 
 
 def _vehicle(topic: str) -> str:
@@ -138,22 +117,20 @@ class _Cameras:
                                   s.fusion.roi.column_half_width_m, s.fusion.roi.padding_px)
         self.cals = cals
         self.cameras = [Camera(n, ColumnProjector(cals[n], geometry)) for n in self.names]
-        self.frames: dict[str, deque[_Stub]] = {n: deque(maxlen=_BUFFER) for n in self.names}
         self.by_topic = {self.topics[n]: n for n in self.names}
-        # Only cameras with a depth topic; raw payloads kept as long as their frames.
+        # Only cameras with a depth topic.
         self.by_depth_topic = {depth_topics[n]: n for n in self.names if n in depth_topics}
-        self.depth = RecordedDepth({n: (cals[n].width, cals[n].height)
-                                    for n in self.by_depth_topic.values()}, _BUFFER, counters)
+        self.source = FrameSource({n: (c.width, c.height) for n, c in cals.items()}, counters)
 
     def depth_at(self, name: str, stamp_ns: int, counters: dict[str, int]) -> np.ndarray | None:
         """The camera's depth for the frame captured at `stamp_ns` (metres at the
         frame's size), or None (no depth recorded for it, or unusable: counted)."""
         if name not in self.by_depth_topic.values():
             return None
-        if not self.depth.has(name, stamp_ns):
+        if not self.source.depth.has(name, stamp_ns):
             _bump(counters, "frame_without_depth")
             return None
-        return self.depth.at(name, stamp_ns)
+        return self.source.depth.at(name, stamp_ns)
 
     def _calibration(self, recording: Recording, name: str, s: RecordingSettings, config_file: str,
                      info_topic: str | None) -> Calibration:
@@ -173,26 +150,6 @@ class _Cameras:
         self.calibration_source[name] = config_file
         return Calibration.load(config_file)
 
-    def ring(self, name: str) -> list[_Stub]:
-        """Fusion's ring: the newest RING_SIZE frames not known to be undecodable."""
-        good = [f for f in self.frames[name] if not f.bad]
-        return good[-RING_SIZE:]
-
-
-def _decoded(stub: _Stub, cal: Calibration, cache: dict[tuple[int, int], np.ndarray],
-             counters: dict[str, int]) -> np.ndarray | None:
-    key = (stub.seq, stub.log_time_ns)
-    if key in cache:
-        return cache[key]
-    try:
-        frame = decode_frame(stub.payload, stub.log_time_ns, cal.width, cal.height)
-    except FrameError as exc:
-        stub.bad = True
-        _bump(counters, f"frame_{exc.reason}")
-        return None
-    cache.clear()                 # cycles move forward: one frame per camera is enough
-    cache[key] = frame.gray
-    return frame.gray
 
 
 def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
@@ -215,7 +172,6 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
     truth = sim_truth.Truth() if world_topics else None
     decision = s.fusion.decision
     max_skew_ns = round(s.fusion.frames.max_skew_s * 1e9)
-    caches: dict[str, dict[tuple[int, int], np.ndarray]] = {n: {} for n in cams.names}
     rng = np.random.default_rng(s.seed)
     session = path.stem
     out: list[RoiRecord] = []
@@ -223,17 +179,13 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
     topics = tracks_topics + list(cams.by_topic) + list(cams.by_depth_topic) + world_topics
     for m in recording.records(topics):
         if m.topic in cams.by_depth_topic:
-            cams.depth.add(cams.by_depth_topic[m.topic], m.data)
+            cams.source.add_depth(cams.by_depth_topic[m.topic], m.data, m.log_time_ns)
             continue
         if m.topic in cams.by_topic:
-            name = cams.by_topic[m.topic]
             try:
-                msg = decode(m.data, CompressedFrame)
+                cams.source.add_recorded(cams.by_topic[m.topic], m.data, m.log_time_ns)
             except DecodeError:
                 _bump(counters, "frame_message")
-                continue
-            cams.frames[name].append(_Stub(msg.header.seq, msg.header.stamp_ns,
-                                           m.log_time_ns, m.data))
             continue
         if truth is not None and m.topic in world_topics:
             truth.add(m.data, counters)
@@ -253,19 +205,18 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
             name = cam.name
             cal = cams.cals[name]
             while True:
-                ring = cams.ring(name)
-                feed = FrameFeed(tuple(DecodedFrame(name, f.seq, f.stamp_ns, f.log_time_ns,
-                                                    _EMPTY) for f in ring))
+                feed = cams.source.feed(name, m.log_time_ns)
                 view = camera_views([cam], [feed], tracks, stamp, max_skew_ns,
                                     s.fusion.frames.align)[0]
                 if view.frame is None:
                     gray, stub = None, None
                     break
-                stub = next(f for f in ring if f.seq == view.frame.seq
-                            and f.log_time_ns == view.frame.rx_mono_ns)
-                gray = _decoded(stub, cal, caches[name], counters)
-                if gray is not None:
+                stub = view.frame
+                try:
+                    gray = stub.gray
                     break
+                except FrameError as exc:
+                    _bump(counters, f"frame_{exc.reason}")
             if view.frame is None or gray is None or stub is None:
                 _bump(counters, "cycle_without_frame")
                 continue
@@ -297,7 +248,7 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
                     image_w=cal.width, image_h=cal.height, roi=roi,
                     column=column, range_m=track.range_m, kind=KIND_TRACK,
                     frame_ref=FrameRef("mcap", str(path), cams.topics[name],
-                                       stub.log_time_ns, stub.seq),
+                                       stub.rx_mono_ns, stub.seq),
                     ttc_s=(track.range_m / -track.range_rate_mps
                            if track.range_rate_mps < 0 else None),
                     track_id=track.track_id, obj_class=obj_class, truth=label,
