@@ -19,9 +19,12 @@ picture repeated (a frozen camera), which take every frame decoded; `dropped`, `
 and `unchanged_since_ns` keep their defaults. Undecodable frames are known once read.
 """
 
+from bisect import bisect_right
 from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from itertools import islice
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +44,7 @@ Pixels = Callable[[], np.ndarray]
 Raises FrameError (`reason` names the counter)."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class RecordedJpeg:
     """The pixels of a recorded CompressedFrame, decoded as fusion decodes it."""
 
@@ -69,10 +72,15 @@ class SourcedFrame(DecodedFrame):
 
     def __init__(self, camera: str, seq: int, stamp_ns: int, rx_mono_ns: int,
                  produce: Pixels, source: "FrameSource") -> None:
-        for name, value in (("camera", camera), ("seq", seq), ("stamp_ns", stamp_ns),
-                            ("rx_mono_ns", rx_mono_ns), ("_produce", produce),
-                            ("_source", source), ("_pixels", None), ("_error", None)):
-            object.__setattr__(self, name, value)
+        init = object.__setattr__      # frozen to fusion's code, not to its source
+        init(self, "camera", camera)
+        init(self, "seq", seq)
+        init(self, "stamp_ns", stamp_ns)
+        init(self, "rx_mono_ns", rx_mono_ns)
+        init(self, "_produce", produce)
+        init(self, "_source", source)
+        init(self, "_pixels", None)
+        init(self, "_error", None)
 
     __eq__ = object.__eq__
     __hash__ = object.__hash__
@@ -96,25 +104,34 @@ class SourcedFrame(DecodedFrame):
                 f"rx_mono_ns={self.rx_mono_ns})")
 
 
+def _recent() -> deque[Any]:
+    return deque(maxlen=2 * WINDOW_FRAMES)
+
+
 @dataclass
 class _Camera:
-    """One camera's frames and the counts fusion's decoder keeps of them."""
+    """One camera's frames and the counts fusion's decoder keeps of them. Payloads come
+    in the order received, so receive times only grow."""
 
     width: int
     height: int
     frames: deque[SourcedFrame] = field(default_factory=lambda: deque(maxlen=WINDOW_FRAMES))
     received: int = 0
+    rx: deque[int] = field(default_factory=_recent)       # of the last payloads
     undecodable: int = 0
     errors_by_reason: dict[str, int] = field(default_factory=dict)
-    # Messages without a readable header (never frames): receive time and error.
-    unreadable: deque[tuple[int, str]] = field(
-        default_factory=lambda: deque(maxlen=WINDOW_FRAMES))
+    errors: deque[tuple[int, str]] = field(default_factory=_recent)  # receive time, error
     depth_received: int = 0
-    depth_rx: deque[int] = field(default_factory=lambda: deque(maxlen=2 * WINDOW_FRAMES))
+    depth_rx: deque[int] = field(default_factory=_recent)
 
-    def count_undecodable(self, reason: str) -> None:
+    def count_received(self, rx_ns: int) -> None:
+        self.received += 1
+        self.rx.append(rx_ns)
+
+    def count_undecodable(self, rx_ns: int, error: FrameError) -> None:
         self.undecodable += 1
-        self.errors_by_reason[reason] = self.errors_by_reason.get(reason, 0) + 1
+        self.errors_by_reason[error.reason] = self.errors_by_reason.get(error.reason, 0) + 1
+        self.errors.append((rx_ns, str(error)))
 
 
 class FrameSource:
@@ -137,9 +154,8 @@ class FrameSource:
         try:
             head = message_head(payload)
         except DecodeError:
-            cam.received += 1
-            cam.count_undecodable("message")
-            cam.unreadable.append((rx_ns, _decode_error(payload)))
+            cam.count_received(rx_ns)
+            cam.count_undecodable(rx_ns, _decode_error(payload))
             raise
         return self.add(camera, head.seq, head.stamp_ns, rx_ns,
                         RecordedJpeg(payload, rx_ns, cam.width, cam.height))
@@ -151,7 +167,7 @@ class FrameSource:
         cam = self._cameras[camera]
         frame = SourcedFrame(camera, seq, stamp_ns, rx_ns, produce, self)
         cam.frames.append(frame)
-        cam.received += 1
+        cam.count_received(rx_ns)
         return frame
 
     def add_depth(self, camera: str, payload: bytes, rx_ns: int) -> None:
@@ -168,13 +184,16 @@ class FrameSource:
 
     def received_by(self, camera: str, at_ns: int) -> list[SourcedFrame]:
         """The camera's recent frames received by `at_ns`."""
-        return [f for f in self._cameras[camera].frames if f.rx_mono_ns <= at_ns]
+        frames = self._cameras[camera].frames
+        return list(islice(frames, bisect_right(frames, at_ns, key=_rx)))
 
     @staticmethod
     def ring(frames: Iterable[SourcedFrame]) -> tuple[SourcedFrame, ...]:
         """Fusion's ring of `frames` (in the order received): the newest RING_SIZE of
         those not known to be undecodable."""
-        return tuple(f for f in frames if not f.undecodable)[-RING_SIZE:]
+        newest = list(islice((f for f in reversed(list(frames)) if f._error is None),
+                             RING_SIZE))
+        return tuple(reversed(newest))
 
     def feed(self, camera: str, at_ns: int,
              ring: Iterable[SourcedFrame] | None = None) -> FrameFeed:
@@ -182,14 +201,12 @@ class FrameSource:
         received by then), with the decoder's counters of what was received by then."""
         cam = self._cameras[camera]
         frames = self.ring(self.received_by(camera, at_ns)) if ring is None else tuple(ring)
-        later = (sum(1 for f in cam.frames if f.rx_mono_ns > at_ns)
-                 + sum(1 for rx, _ in cam.unreadable if rx > at_ns))
-        error, error_rx = _last_error(cam, at_ns)
-        return FrameFeed(frames, cam.received - later, cam.undecodable,
+        error_rx, error = max(((rx, e) for rx, e in cam.errors if rx <= at_ns),
+                              default=(None, ""))
+        return FrameFeed(frames, cam.received - _later(cam.rx, at_ns), cam.undecodable,
                          last_error=error, last_error_rx_mono_ns=error_rx,
                          corrupt=cam.errors_by_reason.get("corrupt", 0),
-                         depth_received=cam.depth_received - sum(
-                             1 for rx in cam.depth_rx if rx > at_ns),
+                         depth_received=cam.depth_received - _later(cam.depth_rx, at_ns),
                          depth_undecodable=self.depth.unusable.get(camera, 0))
 
     def pixels_of(self, frame: SourcedFrame) -> np.ndarray:
@@ -207,7 +224,7 @@ class FrameSource:
         except FrameError as exc:
             object.__setattr__(frame, "_error", exc)
             self.decode_failed += 1
-            self._cameras[frame.camera].count_undecodable(exc.reason)
+            self._cameras[frame.camera].count_undecodable(frame.rx_mono_ns, exc)
             raise
         self.decoded += 1
         object.__setattr__(frame, "_pixels", pixels)
@@ -218,22 +235,20 @@ class FrameSource:
         return pixels
 
 
-def _decode_error(payload: bytes) -> str:
+def _rx(frame: SourcedFrame) -> int:
+    return frame.rx_mono_ns
+
+
+def _later(rx: deque[int], at_ns: int) -> int:
+    """How many of these receive times (in the order received) are after `at_ns`."""
+    return len(rx) - bisect_right(rx, at_ns)
+
+
+def _decode_error(payload: bytes) -> FrameError:
     """What fusion's decode_frame says of a payload without a readable header."""
     try:
         decode_frame(payload, 0, 0, 0)
     except FrameError as exc:
-        return str(exc)
-    return ""
-
-
-def _last_error(cam: _Camera, at_ns: int) -> tuple[str, int | None]:
-    """The newest frame received by `at_ns` known to be undecodable: its error and
-    receive time (as the decoder's last error), else ("", None)."""
-    known = [(f.rx_mono_ns, str(f._error)) for f in cam.frames
-             if f._error is not None and f.rx_mono_ns <= at_ns]
-    known += [(rx, error) for rx, error in cam.unreadable if rx <= at_ns]
-    if not known:
-        return "", None
-    rx, error = max(known)
-    return error, rx
+        if exc.reason == "message":
+            return exc
+    return FrameError("message", "message header unreadable")
