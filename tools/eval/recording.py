@@ -283,7 +283,7 @@ class _RecordingRois:
         is not recorded; none for this frame, counted; unusable, counted)."""
         if frame.camera not in self.depth_topics.values():
             return None
-        if not self.frames.depth.has(frame.camera, frame.stamp_ns):
+        if not self.frames.has_depth(frame.camera, frame.stamp_ns):
             _bump(self.counters, "frame_without_depth")
             return None
         return frame.depth_m

@@ -15,8 +15,9 @@ holds one. A frame's depth is the recorded DepthFrame of its capture stamp
 (tools/recording/depth.py).
 
 What the live decoder knows and this cannot: frames it dropped behind a backlog, and a
-picture repeated (a frozen camera), which take every frame decoded; `dropped`, `skipped`
-and `unchanged_since_ns` keep their defaults. Undecodable frames are known once read.
+picture repeated (a frozen camera), which take every frame decoded; the feed's `dropped`
+and `unchanged_since_ns` keep their defaults. Undecodable frames (and depth) are known
+once read.
 """
 
 from bisect import bisect_right
@@ -178,6 +179,11 @@ class FrameSource:
         cam.depth_rx.append(rx_ns)
         self.depth.add(camera, payload)
 
+    def has_depth(self, camera: str, stamp_ns: int) -> bool:
+        """Whether a DepthFrame of `camera` captured at `stamp_ns` was added (and is
+        still kept), usable or not."""
+        return self.depth.has(camera, stamp_ns)
+
     def window(self, camera: str) -> tuple[SourcedFrame, ...]:
         """The camera's recent frames, in the order received (the last WINDOW_FRAMES)."""
         return tuple(self._cameras[camera].frames)
@@ -203,7 +209,8 @@ class FrameSource:
         frames = self.ring(self.received_by(camera, at_ns)) if ring is None else tuple(ring)
         error_rx, error = max(((rx, e) for rx, e in cam.errors if rx <= at_ns),
                               default=(None, ""))
-        return FrameFeed(frames, cam.received - _later(cam.rx, at_ns), cam.undecodable,
+        return FrameFeed(frames, received=cam.received - _later(cam.rx, at_ns),
+                         undecodable=cam.undecodable,
                          last_error=error, last_error_rx_mono_ns=error_rx,
                          corrupt=cam.errors_by_reason.get("corrupt", 0),
                          depth_received=cam.depth_received - _later(cam.depth_rx, at_ns),
