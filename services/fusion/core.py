@@ -138,7 +138,7 @@ class FusionCore:
         invalid: list[RadarTrack] = []
         for t in tracks.tracks:
             if t.confirmed:
-                (confirmed if _finite(t) else invalid).append(t)
+                (confirmed if finite_track(t) else invalid).append(t)
         self.invalid_tracks += len(invalid)
         self._moving = self.lateral.update(confirmed) if self.lateral is not None else set()
         age_ns = now_wall_ns - tracks.header.stamp_ns
@@ -364,7 +364,9 @@ def _reasons(views: list[CameraView], track: int | None = None) -> str:
     return "; ".join(f"{v.name}: {v.reason}" for v in missing)
 
 
-def _finite(t: RadarTrack) -> bool:
+def finite_track(t: RadarTrack) -> bool:
+    """Are a track's position, velocity and range all finite numbers? Fusion decides only
+    on confirmed tracks that are; the others it reports as invalid."""
     return all(map(math.isfinite, (t.x_m, t.y_m, t.vx_mps, t.vy_mps, t.range_m,
                                    t.range_rate_mps)))
 

@@ -1,9 +1,10 @@
 """ROIs from a recording, exactly as fusion builds them: for every radar cycle, each
 camera's frame is chosen among the frames fusion would hold at that moment (its ring of
-the last RING_SIZE decoded frames received before the cycle) by fusion's own
-`select_frame`, the tracks are predicted to that frame's capture time and projected by
-fusion's `camera_views` with the ColumnProjector of the fusion configuration (padding,
-clipping), and every confirmed track in the decision's range (3-25 m) becomes a ROI.
+the last RING_SIZE decoded frames received before the cycle, tools/recording/
+frame_source.py) by fusion's own `select_frame`, the tracks are predicted to that frame's
+capture time and projected by fusion's `camera_views` with the ColumnProjector of the
+fusion configuration (padding, clipping), and every confirmed track in the decision's
+range (3-25 m) becomes a ROI.
 
 Frames are decoded only when chosen: a frame that turns out undecodable is dropped from
 the ring (fusion never holds one) and the choice is made again; it is counted.
@@ -18,33 +19,28 @@ depth verifiers not applicable for its ROIs (`frame_without_depth`).
 """
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from common.calibration import Calibration
 from common.config.fusion import FusionSettings
-from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
+from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS, KeySpec
 from common.messages import (
     CameraInfo,
     CompressedFrame,
     DecodeError,
     DepthFrame,
+    RadarTrack,
     RadarTracks,
     decode,
 )
 from common.messages.schema import schema_name
-from services.fusion.cameras import Camera, camera_views
-from services.fusion.core import _finite as finite_track  # fusion's own test of a track
-from services.fusion.frames import (
-    RING_SIZE,
-    DecodedFrame,
-    FrameError,
-    FrameFeed,
-    decode_frame,
-)
+from services.fusion.cameras import Camera, CameraView, camera_views
+from services.fusion.core import finite_track
+from services.fusion.frames import DecodedFrame, FrameError
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation
 from tools.eval import sim_truth
@@ -52,19 +48,14 @@ from tools.eval.adapters.paper_rois import free_rois
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
 from tools.messages import SimWorld
-from tools.recording.depth import RecordedDepth
-from tools.recording.reader import ChannelSummary, Recording, RecordingError
+from tools.recording.frame_source import FrameSource
+from tools.recording.reader import ChannelSummary, Record, Recording, RecordingError
 
 _FRAME = schema_name(CompressedFrame)
 _INFO = schema_name(CameraInfo)
 _DEPTH = schema_name(DepthFrame)
 _TRACKS = schema_name(RadarTracks)
 _WORLD = schema_name(SimWorld)
-
-# Frames kept per camera beyond fusion's ring, so that the ring can be refilled when a
-# chosen frame turns out undecodable.
-_BUFFER = RING_SIZE * 4
-_EMPTY = np.zeros((0, 0), np.uint8)
 
 
 @dataclass(frozen=True)
@@ -77,15 +68,6 @@ class RecordingSettings:
     background_per_object: int = 2            # with ground truth only
     timing: bool = True
     seed: int = 0
-
-
-@dataclass
-class _Stub:
-    seq: int
-    stamp_ns: int
-    log_time_ns: int
-    payload: bytes
-    bad: bool = False
 
 
 def _vehicle(topic: str) -> str:
@@ -104,56 +86,55 @@ def _bump(counters: dict[str, int], key: str, n: int = 1) -> None:
     counters[key] = counters.get(key, 0) + n
 
 
-class _Cameras:
-    """Per camera: its topic, calibration, projector and the frames received so far."""
+@dataclass(frozen=True)
+class _Channels:
+    """The recording's topics ROIs are made from: radar tracks, each camera's frames,
+    CameraInfo and depth, the simulator's ground truth."""
 
-    def __init__(self, recording: Recording, chans: list[ChannelSummary], s: RecordingSettings,
+    tracks: list[str]
+    frames: dict[str, str]
+    infos: dict[str, str]
+    depth: dict[str, str]
+    world: list[str]
+
+    @classmethod
+    def of(cls, recording: Recording) -> "_Channels":
+        chans = [c for c in recording.channels().values() if c.message_encoding == "msgpack"]
+        return cls([c.topic for c in chans if c.schema_name == _TRACKS
+                    and RADAR_TRACKS.match(c.topic, _vehicle(c.topic)) is not None],
+                   _by_camera(chans, CAMERA_JPEG, _FRAME), _by_camera(chans, CAMERA_INFO, _INFO),
+                   _by_camera(chans, CAMERA_DEPTH, _DEPTH),
+                   [c.topic for c in chans if c.schema_name == _WORLD])
+
+
+def _by_camera(chans: list[ChannelSummary], key: KeySpec[Any], schema: str) -> dict[str, str]:
+    """camera -> topic, for the channels of `key` carrying `schema`."""
+    out = {}
+    for ch in chans:
+        got = key.match(ch.topic, _vehicle(ch.topic))
+        if got is not None and ch.schema_name == schema:
+            out[got["camera"]] = ch.topic
+    return out
+
+
+class _Cameras:
+    """The cameras fusion uses that the recording holds: calibration and projector."""
+
+    def __init__(self, recording: Recording, channels: _Channels, s: RecordingSettings,
                  counters: dict[str, int]) -> None:
         wanted = [c.name for c in s.fusion.camera_inputs]
         config_files = {c.name: c.calibration for c in s.fusion.camera_inputs}
-        self.topics: dict[str, str] = {}
-        info_topics: dict[str, str] = {}
-        depth_topics: dict[str, str] = {}
-        for ch in chans:
-            vehicle = _vehicle(ch.topic)
-            got = CAMERA_JPEG.match(ch.topic, vehicle)
-            if got is not None and ch.schema_name == _FRAME:
-                self.topics[got["camera"]] = ch.topic
-            got = CAMERA_INFO.match(ch.topic, vehicle)
-            if got is not None and ch.schema_name == _INFO:
-                info_topics[got["camera"]] = ch.topic
-            got = CAMERA_DEPTH.match(ch.topic, vehicle)
-            if got is not None and ch.schema_name == _DEPTH:
-                depth_topics[got["camera"]] = ch.topic
-        self.names = [n for n in wanted if n in self.topics]
-        missing = [n for n in wanted if n not in self.topics]
+        self.names = [n for n in wanted if n in channels.frames]
+        missing = [n for n in wanted if n not in channels.frames]
         if missing:
             _bump(counters, "camera_not_recorded", len(missing))
         self.calibration_source: dict[str, str] = {}
-        cals: dict[str, Calibration] = {}
-        for name in self.names:
-            cals[name] = self._calibration(recording, name, s, config_files.get(name, ""),
-                                           info_topics.get(name))
+        self.cals = {name: self._calibration(recording, name, s, config_files.get(name, ""),
+                                             channels.infos.get(name))
+                     for name in self.names}
         geometry = ColumnGeometry(s.fusion.roi.column_height_m,
                                   s.fusion.roi.column_half_width_m, s.fusion.roi.padding_px)
-        self.cals = cals
-        self.cameras = [Camera(n, ColumnProjector(cals[n], geometry)) for n in self.names]
-        self.frames: dict[str, deque[_Stub]] = {n: deque(maxlen=_BUFFER) for n in self.names}
-        self.by_topic = {self.topics[n]: n for n in self.names}
-        # Only cameras with a depth topic; raw payloads kept as long as their frames.
-        self.by_depth_topic = {depth_topics[n]: n for n in self.names if n in depth_topics}
-        self.depth = RecordedDepth({n: (cals[n].width, cals[n].height)
-                                    for n in self.by_depth_topic.values()}, _BUFFER, counters)
-
-    def depth_at(self, name: str, stamp_ns: int, counters: dict[str, int]) -> np.ndarray | None:
-        """The camera's depth for the frame captured at `stamp_ns` (metres at the
-        frame's size), or None (no depth recorded for it, or unusable: counted)."""
-        if name not in self.by_depth_topic.values():
-            return None
-        if not self.depth.has(name, stamp_ns):
-            _bump(counters, "frame_without_depth")
-            return None
-        return self.depth.at(name, stamp_ns)
+        self.cameras = [Camera(n, ColumnProjector(self.cals[n], geometry)) for n in self.names]
 
     def _calibration(self, recording: Recording, name: str, s: RecordingSettings, config_file: str,
                      info_topic: str | None) -> Calibration:
@@ -173,145 +154,192 @@ class _Cameras:
         self.calibration_source[name] = config_file
         return Calibration.load(config_file)
 
-    def ring(self, name: str) -> list[_Stub]:
-        """Fusion's ring: the newest RING_SIZE frames not known to be undecodable."""
-        good = [f for f in self.frames[name] if not f.bad]
-        return good[-RING_SIZE:]
-
-
-def _decoded(stub: _Stub, cal: Calibration, cache: dict[tuple[int, int], np.ndarray],
-             counters: dict[str, int]) -> np.ndarray | None:
-    key = (stub.seq, stub.log_time_ns)
-    if key in cache:
-        return cache[key]
-    try:
-        frame = decode_frame(stub.payload, stub.log_time_ns, cal.width, cal.height)
-    except FrameError as exc:
-        stub.bad = True
-        _bump(counters, f"frame_{exc.reason}")
-        return None
-    cache.clear()                 # cycles move forward: one frame per camera is enough
-    cache[key] = frame.gray
-    return frame.gray
-
 
 def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
                       counters: dict[str, int]) -> list[RoiRecord]:
     """Every confirmed track in range, in every camera that sees it, scored by every
     verifier. Raises RecordingError (unreadable file, no radar or camera channel),
     ConfigError (a calibration file)."""
-    recording = Recording.open(path)
-    chans = [c for c in recording.channels().values() if c.message_encoding == "msgpack"]
-    tracks_topics = [c.topic for c in chans if c.schema_name == _TRACKS
-                     and RADAR_TRACKS.match(c.topic, _vehicle(c.topic)) is not None]
-    if not tracks_topics:
-        raise RecordingError(f"{path}: no RadarTracks channel")
-    cams = _Cameras(recording, chans, s, counters)
-    if not cams.names:
-        raise RecordingError(f"{path}: none of the cameras fusion uses "
-                             f"({', '.join(c.name for c in s.fusion.camera_inputs)}) is "
-                             "recorded")
-    world_topics = [c.topic for c in chans if c.schema_name == _WORLD]
-    truth = sim_truth.Truth() if world_topics else None
-    decision = s.fusion.decision
-    max_skew_ns = round(s.fusion.frames.max_skew_s * 1e9)
-    caches: dict[str, dict[tuple[int, int], np.ndarray]] = {n: {} for n in cams.names}
-    rng = np.random.default_rng(s.seed)
-    session = path.stem
+    run = _RecordingRois(path, s, scorer, counters)
     out: list[RoiRecord] = []
-    timed_frames: set[tuple[str, int]] = set()
-    topics = tracks_topics + list(cams.by_topic) + list(cams.by_depth_topic) + world_topics
-    for m in recording.records(topics):
-        if m.topic in cams.by_depth_topic:
-            cams.depth.add(cams.by_depth_topic[m.topic], m.data)
-            continue
-        if m.topic in cams.by_topic:
-            name = cams.by_topic[m.topic]
+    for m in run.recording.records(run.topics):
+        out += run.take(m)
+    counters["rois"] = counters.get("rois", 0) + len(out)
+    return out
+
+
+def _tracks_in_range(cycle: RadarTracks, s: FusionSettings) -> list[RadarTrack]:
+    """The tracks fusion decides on (confirmed, finite) within the decision's range."""
+    decision = s.decision
+    return [t for t in cycle.tracks if t.confirmed and finite_track(t)
+            and decision.min_range_m <= t.range_m <= decision.max_range_m]
+
+
+@dataclass(frozen=True)
+class _Seen:
+    """One camera in one radar cycle: its view, the frame chosen, its pixels and depth,
+    the lighting, the calibration and the ground truth (simulator recordings)."""
+
+    view: CameraView
+    frame: DecodedFrame
+    gray: np.ndarray
+    depth: np.ndarray | None
+    light: tuple[str, float]
+    cal: Calibration
+    world: SimWorld | None
+
+
+class _RecordingRois:
+    """One pass over a recording: its frames fed to fusion's ring as they come, the
+    ROIs of each radar cycle made from it."""
+
+    def __init__(self, path: Path, s: RecordingSettings, scorer: Scorer,
+                 counters: dict[str, int]) -> None:
+        self.recording = Recording.open(path)
+        channels = _Channels.of(self.recording)
+        if not channels.tracks:
+            raise RecordingError(f"{path}: no RadarTracks channel")
+        self.cams = _Cameras(self.recording, channels, s, counters)
+        if not self.cams.names:
+            raise RecordingError(f"{path}: none of the cameras fusion uses "
+                                 f"({', '.join(c.name for c in s.fusion.camera_inputs)}) is "
+                                 "recorded")
+        self.path, self.s, self.scorer, self.counters = path, s, scorer, counters
+        names = self.cams.names
+        self.frame_topics = {channels.frames[n]: n for n in names}
+        self.camera_topics = {n: channels.frames[n] for n in names}
+        # Only cameras with a depth topic: a frame of the others has no depth to miss.
+        self.depth_topics = {channels.depth[n]: n for n in names if n in channels.depth}
+        self.world_topics = set(channels.world)
+        self.topics = [*channels.tracks, *self.frame_topics, *self.depth_topics,
+                       *channels.world]
+        self.frames = FrameSource({n: (c.width, c.height) for n, c in self.cams.cals.items()},
+                                  counters)
+        self.truth = sim_truth.Truth() if channels.world else None
+        self.max_skew_ns = round(s.fusion.frames.max_skew_s * 1e9)
+        self.rng = np.random.default_rng(s.seed)
+        self.timed_frames: set[tuple[str, int]] = set()
+
+    def take(self, m: Record) -> list[RoiRecord]:
+        """The recording's next record; a radar cycle gives its ROIs."""
+        if m.topic in self.depth_topics:
+            self.frames.add_depth(self.depth_topics[m.topic], m.data, m.log_time_ns)
+        elif m.topic in self.frame_topics:
             try:
-                msg = decode(m.data, CompressedFrame)
+                self.frames.add_recorded(self.frame_topics[m.topic], m.data, m.log_time_ns)
             except DecodeError:
-                _bump(counters, "frame_message")
-                continue
-            cams.frames[name].append(_Stub(msg.header.seq, msg.header.stamp_ns,
-                                           m.log_time_ns, m.data))
-            continue
-        if truth is not None and m.topic in world_topics:
-            truth.add(m.data, counters)
-            continue
+                _bump(self.counters, "frame_message")
+        elif m.topic in self.world_topics:
+            if self.truth is not None:
+                self.truth.add(m.data, self.counters)
+        else:
+            return self._cycle(m)
+        return []
+
+    def _cycle(self, m: Record) -> list[RoiRecord]:
         try:
             cycle = decode(m.data, RadarTracks)
         except DecodeError:
-            _bump(counters, "tracks_message")
-            continue
-        _bump(counters, "radar_cycles")
-        tracks = [t for t in cycle.tracks if t.confirmed and finite_track(t)
-                  and decision.min_range_m <= t.range_m <= decision.max_range_m]
+            _bump(self.counters, "tracks_message")
+            return []
+        _bump(self.counters, "radar_cycles")
+        tracks = _tracks_in_range(cycle, self.s.fusion)
         if not tracks:
-            continue
+            return []
         stamp = cycle.header.stamp_ns
-        for cam in cams.cameras:
-            name = cam.name
-            cal = cams.cals[name]
-            while True:
-                ring = cams.ring(name)
-                feed = FrameFeed(tuple(DecodedFrame(name, f.seq, f.stamp_ns, f.log_time_ns,
-                                                    _EMPTY) for f in ring))
-                view = camera_views([cam], [feed], tracks, stamp, max_skew_ns,
-                                    s.fusion.frames.align)[0]
-                if view.frame is None:
-                    gray, stub = None, None
-                    break
-                stub = next(f for f in ring if f.seq == view.frame.seq
-                            and f.log_time_ns == view.frame.rx_mono_ns)
-                gray = _decoded(stub, cal, caches[name], counters)
-                if gray is not None:
-                    break
-            if view.frame is None or gray is None or stub is None:
-                _bump(counters, "cycle_without_frame")
+        out: list[RoiRecord] = []
+        for cam in self.cams.cameras:
+            seen = self._seen(cam, tracks, stamp, m.log_time_ns)
+            if seen is None:
+                _bump(self.counters, "cycle_without_frame")
+            else:
+                out += self._camera_records(seen, tracks, stamp)
+        return out
+
+    def _seen(self, cam: Camera, tracks: list[RadarTrack], stamp: int,
+              at_ns: int) -> _Seen | None:
+        """The camera's frame for the cycle as fusion chooses it, decoded (an
+        undecodable one is counted and the choice made again), or None."""
+        while True:
+            feed = self.frames.feed(cam.name, at_ns)
+            view = camera_views([cam], [feed], tracks, stamp, self.max_skew_ns,
+                                self.s.fusion.frames.align)[0]
+            if view.frame is None:
+                return None
+            try:
+                gray = view.frame.gray
+                break
+            except FrameError as exc:
+                _bump(self.counters, f"frame_{exc.reason}")
+        cal = self.cams.cals[cam.name]
+        depth = self._depth(view.frame)
+        if depth is not None:
+            self.scorer.prepare(cal)
+        world = self.truth.world_at(stamp) if self.truth is not None else None
+        return _Seen(view, view.frame, gray, depth, lighting(gray), cal, world)
+
+    def _depth(self, frame: DecodedFrame) -> np.ndarray | None:
+        """The frame's recorded depth (metres at its size), or None (the camera's depth
+        is not recorded; none for this frame, counted; unusable, counted)."""
+        if frame.camera not in self.depth_topics.values():
+            return None
+        if not self.frames.has_depth(frame.camera, frame.stamp_ns):
+            _bump(self.counters, "frame_without_depth")
+            return None
+        return frame.depth_m
+
+    def _camera_records(self, seen: _Seen, tracks: list[RadarTrack],
+                        stamp: int) -> list[RoiRecord]:
+        """The ROIs of the tracks the camera sees, and with ground truth the background
+        negatives beside its objects."""
+        out = []
+        positives: list[tuple[RoiRecord, tuple[float, float]]] = []
+        for i, track in enumerate(tracks):
+            rec = self._track_record(seen, i, track, stamp)
+            if rec is None:
+                _bump(self.counters, "track_not_visible")
                 continue
-            depth = cams.depth_at(name, stub.stamp_ns, counters)
-            if depth is not None:
-                scorer.prepare(cal)
-            light, median = lighting(gray)
-            world = truth.world_at(stamp) if truth is not None else None
-            positives: list[tuple[RoiRecord, tuple[float, float]]] = []
-            for i, track in enumerate(tracks):
-                roi, column = view.rois[i], view.columns[i]
-                if roi is None or column is None:
-                    _bump(counters, "track_not_visible")
-                    continue
-                x, y = view.xy[i]
-                obs = Observation(gray, roi, column, math.hypot(x, y), depth, cal, (x, y))
-                scores = scorer.score(obs)
-                frame_us = None
-                if s.timing and (name, stub.seq) not in timed_frames:
-                    timed_frames.add((name, stub.seq))
-                    frame_us = scorer.full_frame_us(gray)
-                label, obj_class = (None, "")
-                if world is not None:
-                    label, obj_class = sim_truth.label_track(world, stamp, track.x_m,
-                                                             track.y_m)
-                rec = RoiRecord(
-                    id=f"{session}:{stamp}:{name}:{track.track_id}", source="recording",
-                    session=session, frame=f"{name}:{stub.seq}", t_ns=stamp, camera=name,
-                    image_w=cal.width, image_h=cal.height, roi=roi,
-                    column=column, range_m=track.range_m, kind=KIND_TRACK,
-                    frame_ref=FrameRef("mcap", str(path), cams.topics[name],
-                                       stub.log_time_ns, stub.seq),
-                    ttc_s=(track.range_m / -track.range_rate_mps
-                           if track.range_rate_mps < 0 else None),
-                    track_id=track.track_id, obj_class=obj_class, truth=label,
-                    density=scorer.density(obs, scores), lighting=light,
-                    frame_median=median, has_depth=depth is not None, scores=scores,
-                    frame_canny_us=frame_us)
-                out.append(rec)
-                if label == "YES":
-                    positives.append((rec, (x, y)))
-            if world is not None and positives and s.background_per_object > 0:
-                out += _background(world, view.frame.stamp_ns, cal, gray, depth, positives,
-                                   s, scorer, rng, counters, (light, median))
-    counters["rois"] = counters.get("rois", 0) + len(out)
-    return out
+            out.append(rec)
+            if rec.truth == "YES":
+                x, y = seen.view.xy[i]
+                positives.append((rec, (x, y)))
+        if seen.world is not None and positives and self.s.background_per_object > 0:
+            out += _background(seen.world, seen.frame.stamp_ns, seen.cal, seen.gray,
+                               seen.depth, positives, self.s, self.scorer, self.rng,
+                               self.counters, seen.light)
+        return out
+
+    def _track_record(self, seen: _Seen, i: int, track: RadarTrack,
+                      stamp: int) -> RoiRecord | None:
+        """The `i`-th track's ROI in the camera, scored; None when it does not see it."""
+        view, frame, cal = seen.view, seen.frame, seen.cal
+        roi, column = view.rois[i], view.columns[i]
+        if roi is None or column is None:
+            return None
+        x, y = view.xy[i]
+        obs = Observation(seen.gray, roi, column, math.hypot(x, y), seen.depth, cal, (x, y))
+        scores = self.scorer.score(obs)
+        frame_us = None
+        if self.s.timing and (view.name, frame.seq) not in self.timed_frames:
+            self.timed_frames.add((view.name, frame.seq))
+            frame_us = self.scorer.full_frame_us(seen.gray)
+        label, obj_class = (None, "")
+        if seen.world is not None:
+            label, obj_class = sim_truth.label_track(seen.world, stamp, track.x_m, track.y_m)
+        session = self.path.stem
+        return RoiRecord(
+            id=f"{session}:{stamp}:{view.name}:{track.track_id}", source="recording",
+            session=session, frame=f"{view.name}:{frame.seq}", t_ns=stamp, camera=view.name,
+            image_w=cal.width, image_h=cal.height, roi=roi, column=column,
+            range_m=track.range_m, kind=KIND_TRACK,
+            frame_ref=FrameRef("mcap", str(self.path), self.camera_topics[view.name],
+                               frame.rx_mono_ns, frame.seq),
+            ttc_s=(track.range_m / -track.range_rate_mps
+                   if track.range_rate_mps < 0 else None),
+            track_id=track.track_id, obj_class=obj_class, truth=label,
+            density=self.scorer.density(obs, scores), lighting=seen.light[0],
+            frame_median=seen.light[1], has_depth=seen.depth is not None, scores=scores,
+            frame_canny_us=frame_us)
 
 
 def _background(world: SimWorld, frame_stamp: int, cal: Calibration,

@@ -36,7 +36,8 @@ def message_head(payload: bytes) -> Head:
 class RecordedDepth:
     """`sizes`: each camera's frame size (width, height), the size depth is brought to;
     `keep`: raw DepthFrames kept per camera (the oldest go first); `counters`: rejected
-    payloads by reason (`depth_message`, and decode_depth_frame's reasons)."""
+    payloads by reason (`depth_message`, and decode_depth_frame's reasons); `unusable`:
+    rejected payloads by camera."""
 
     _DECODED_KEPT = 8
 
@@ -45,6 +46,7 @@ class RecordedDepth:
         self.sizes = dict(sizes)
         self.keep = keep
         self.counters = counters
+        self.unusable: dict[str, int] = {}
         self._raw: dict[str, OrderedDict[int, bytes]] = {c: OrderedDict() for c in sizes}
         self._decoded: OrderedDict[tuple[str, int], np.ndarray | None] = OrderedDict()
 
@@ -52,7 +54,7 @@ class RecordedDepth:
         try:
             stamp = message_head(payload).stamp_ns
         except DecodeError:
-            self._count("depth_message")
+            self._count(camera, "depth_message")
             return
         raw = self._raw[camera]
         raw[stamp] = payload
@@ -74,7 +76,7 @@ class RecordedDepth:
         try:
             depth = decode_depth_frame(payload, width, height)[1]
         except FrameError as exc:
-            self._count(exc.reason)
+            self._count(camera, exc.reason)
             depth = None
         self._decoded[key] = depth
         if len(self._decoded) > self._DECODED_KEPT:
@@ -86,5 +88,6 @@ class RecordedDepth:
         raw = self._raw.get(camera)
         return raw is not None and stamp_ns in raw
 
-    def _count(self, reason: str) -> None:
+    def _count(self, camera: str, reason: str) -> None:
         self.counters[reason] = self.counters.get(reason, 0) + 1
+        self.unusable[camera] = self.unusable.get(camera, 0) + 1

@@ -19,19 +19,19 @@ had. What the recording says about them, and so how exact the re-run is:
   its link): the comparison then shows it, typically as another `unavailable_reason`;
 - with several cameras, each camera's frame is named only for the tracks it decided.
 
-Frames are decoded only when the core reads a selected frame's pixels (a cycle that gates
-nothing decodes nothing), each at most once; a recorded frame that does not decode fails
+The rings and their counters are fusion's decoder's as tools/recording/frame_source.py
+keeps them: frames are decoded only when the core reads a selected frame's pixels (a
+cycle that gates nothing decodes nothing); a recorded frame that does not decode fails
 its cycle as the live shell fails one (counted) and is left out after that. The outputs
 are deterministic: the same recording and configuration give the same bytes.
 """
 
-from collections import OrderedDict, deque
-from collections.abc import Callable, Iterator
+from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import msgspec
-import numpy as np
 
 from common.config.fusion import FusionConfig
 from common.keys import CAMERA_DEPTH, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
@@ -44,33 +44,15 @@ from common.messages import (
     decode,
 )
 from services.fusion.core import CycleResult
-from services.fusion.frames import (
-    RING_SIZE,
-    DecodedFrame,
-    FrameError,
-    FrameFeed,
-    decode_frame,
-    select_frame,
-)
+from services.fusion.frames import DecodedFrame, FrameFeed, select_frame
 from services.fusion.main import build_core
-from tools.recording.depth import RecordedDepth, message_head
+from tools.recording.frame_source import FrameSource, SourcedFrame
 from tools.recording.reader import Record, Recording
 
 # A cycle is re-run once the recording is this far past it: its frames and recorded
 # outputs have arrived by then (the recorder gets them from separate subscriptions).
 LOOKAHEAD_NS = 1_000_000_000
-# Recent frames kept per camera (undecoded), to build rings from.
-WINDOW_FRAMES = 64
-_DECODED_KEPT = 8
 _EARLY_KEPT = 64
-
-
-@dataclass(frozen=True, slots=True)
-class FrameRef:
-    seq: int
-    stamp_ns: int
-    log_ns: int
-    payload: bytes
 
 
 @dataclass
@@ -114,11 +96,7 @@ class FusionRerun:
         self.sizes = {name: (cal.width, cal.height) for name, cal in cals.items()}
         self.cameras = [c.name for c in self.s.camera_inputs]
         self.stats = RerunStats()
-        self._frames: dict[str, deque[FrameRef]] = {c: deque(maxlen=WINDOW_FRAMES)
-                                                    for c in self.cameras}
-        self._received: dict[str, int] = dict.fromkeys(self.cameras, 0)
-        self._decoded: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
-        self._bad: set[tuple[str, int]] = set()
+        self.frames = FrameSource(self.sizes, self.stats.undecodable)
         self._early: dict[tuple[int, int], tuple[BrakeCommand | None, VerifiedTargets | None,
                                                  int | None]] = {}
         self._skew_ns = round(self.s.frames.max_skew_s * 1e9)
@@ -127,7 +105,6 @@ class FusionRerun:
         self._targets_topic = FUSION_TARGETS.key(vehicle, instance=self.instance)
         self._frame_topics = {CAMERA_JPEG.key(vehicle, camera=c): c for c in self.cameras}
         self._depth_topics = {CAMERA_DEPTH.key(vehicle, camera=c): c for c in self.cameras}
-        self._depth = RecordedDepth(self.sizes, 2 * WINDOW_FRAMES, self.stats.undecodable)
 
     @property
     def topics(self) -> list[str]:
@@ -155,12 +132,10 @@ class FusionRerun:
         camera = self._frame_topics.get(topic)
         try:
             if topic in self._depth_topics:
-                self._depth.add(self._depth_topics[topic], rec.data)
+                self.frames.add_depth(self._depth_topics[topic], rec.data, rec.log_time_ns)
             elif camera is not None:
                 self.stats.frames_in_recording += 1
-                head = message_head(rec.data)
-                self._frames[camera].append(FrameRef(head.seq, head.stamp_ns,
-                                                     rec.log_time_ns, rec.data))
+                self.frames.add_recorded(camera, rec.data, rec.log_time_ns)
             elif topic == self._tracks_topic:
                 tracks = decode(rec.data, RadarTracks)
                 cycle = Cycle(tracks, rec.log_time_ns)
@@ -219,6 +194,8 @@ class FusionRerun:
             self.stats.failed_cycles += 1
             result = self.core.failed_cycle(tracks, repr(exc), now_wall, now_mono)
         self.stats.cycles += 1
+        self.stats.frames_decoded = self.frames.decoded
+        self.stats.frames_undecodable = self.frames.decode_failed
         cycle.result = result
         return cycle
 
@@ -232,101 +209,41 @@ class FusionRerun:
         return None
 
     def _feed(self, camera: str, radar_stamp_ns: int, cycle: Cycle) -> FrameFeed:
-        frames = self._frames[camera]
+        frames = self.frames.window(camera)
         pinned = self._pinned_seq(camera, cycle.recorded)
-        if pinned is not None and any(f.seq == pinned for f in frames):
+        chosen = next((f for f in frames if f.seq == pinned), None)
+        if chosen is not None:
             self.stats.frames_pinned += 1
-            chosen = next(f for f in frames if f.seq == pinned)
             gap = abs(chosen.stamp_ns - radar_stamp_ns)
-            ring = [f for f in frames if f.seq <= pinned
-                    and (f is chosen or abs(f.stamp_ns - radar_stamp_ns) > gap)]
+            ring = self.frames.ring(f for f in frames if f.seq <= chosen.seq and (
+                f is chosen or abs(f.stamp_ns - radar_stamp_ns) > gap))
         else:
-            ring = [f for f in frames if f.log_ns <= cycle.log_ns]
-        ring = [f for f in ring if (camera, f.seq) not in self._bad][-RING_SIZE:]
-        received = sum(1 for f in frames if f.log_ns <= cycle.log_ns)
-        lazy = [LazyFrame(camera, f, self._decode, self._depth.at) for f in ring]
+            ring = self.frames.ring(self.frames.received_by(camera, cycle.log_ns))
         recorded = cycle.recorded
         if pinned is None and recorded is not None:
-            lazy = self._as_recorded(camera, lazy, frames, cycle, recorded)
-        return FrameFeed(tuple(lazy), received, self.stats.frames_undecodable)
+            ring = self._as_recorded(camera, ring, frames, cycle, recorded)
+        return self.frames.feed(camera, cycle.log_ns, ring)
 
-    def _as_recorded(self, camera: str, lazy: list["LazyFrame"], frames: deque[FrameRef],
-                     cycle: Cycle, recorded: VerifiedTargets) -> list["LazyFrame"]:
+    def _as_recorded(self, camera: str, ring: tuple[SourcedFrame, ...],
+                     frames: tuple[SourcedFrame, ...], cycle: Cycle,
+                     recorded: VerifiedTargets) -> tuple[SourcedFrame, ...]:
         """A ring that agrees with what the recorded cycle says of the camera, where no
         frame is named: none usable (those the recorder had in time had not reached
         fusion yet), or one usable (it reached fusion before it reached the recorder)."""
         stamp = cycle.tracks.header.stamp_ns
 
-        def usable(ring: list[LazyFrame]) -> DecodedFrame | None:
-            return select_frame(tuple(ring), stamp, self._skew_ns, self.s.frames.align)
+        def usable(ring: tuple[SourcedFrame, ...]) -> DecodedFrame | None:
+            return select_frame(ring, stamp, self._skew_ns, self.s.frames.align)
 
         if camera in recorded.cameras_unavailable:
-            while (late := usable(lazy)) is not None:
-                lazy = [f for f in lazy if f is not late]
-        elif recorded.verifier_status is VerifierStatus.OK and usable(lazy) is None:
-            for ref in (f for f in frames if f.log_ns > cycle.log_ns):
-                lazy = [*lazy, LazyFrame(camera, ref, self._decode,
-                                         self._depth.at)][-RING_SIZE:]
-                if usable(lazy) is not None:
+            while (late := usable(ring)) is not None:
+                ring = tuple(f for f in ring if f is not late)
+        elif recorded.verifier_status is VerifierStatus.OK and usable(ring) is None:
+            for later in (f for f in frames if f.rx_mono_ns > cycle.log_ns):
+                ring = self.frames.ring((*ring, later))
+                if usable(ring) is not None:
                     break
-        return lazy
-
-    def _decode(self, camera: str, ref: FrameRef) -> np.ndarray:
-        """A frame's pixels, on the first use by the core (each frame decoded once).
-        Raises FrameError, and the frame is then left out of later rings (the live
-        decoder never put it in its ring)."""
-        key = (camera, ref.seq)
-        gray = self._decoded.get(key)
-        if gray is not None:
-            self._decoded.move_to_end(key)
-            return gray
-        width, height = self.sizes[camera]
-        try:
-            gray = decode_frame(ref.payload, ref.log_ns, width, height).gray
-        except FrameError:
-            self.stats.frames_undecodable += 1
-            self._bad.add(key)
-            raise
-        self.stats.frames_decoded += 1
-        self._decoded[key] = gray
-        if len(self._decoded) > _DECODED_KEPT:
-            self._decoded.popitem(last=False)
-        return gray
-
-
-
-class LazyFrame(DecodedFrame):
-    """A recorded frame the core sees as decoded: times at once, pixels decoded when the
-    core first reads `gray` (a cycle that gates nothing in this camera decodes nothing),
-    depth (the recorded DepthFrame with the frame's capture stamp, if any) when it first
-    reads `depth_m`. The receive time is the recorder's (`rx_mono_ns` orders frames for
-    the paper's "newest frame" policy)."""
-
-    __slots__ = ("_load", "_load_depth", "_pixels", "_ref")
-    _load: Callable[[str, FrameRef], np.ndarray]
-    _load_depth: Callable[[str, int], np.ndarray | None]
-    _pixels: np.ndarray | None
-    _ref: FrameRef
-
-    def __init__(self, camera: str, ref: FrameRef,
-                 load: Callable[[str, FrameRef], np.ndarray],
-                 load_depth: Callable[[str, int], np.ndarray | None]) -> None:
-        for name, value in (("camera", camera), ("seq", ref.seq), ("stamp_ns", ref.stamp_ns),
-                            ("rx_mono_ns", ref.log_ns), ("_ref", ref), ("_load", load),
-                            ("_load_depth", load_depth), ("_pixels", None)):
-            object.__setattr__(self, name, value)
-
-    @property
-    def depth_m(self) -> np.ndarray | None:
-        return self._load_depth(self.camera, self.stamp_ns)
-
-    @property
-    def gray(self) -> np.ndarray:
-        pixels: np.ndarray | None = self._pixels
-        if pixels is None:
-            pixels = self._load(self.camera, self._ref)
-            object.__setattr__(self, "_pixels", pixels)
-        return pixels
+        return ring
 
 
 def normalised(result: CycleResult) -> CycleResult:
