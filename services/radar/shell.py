@@ -22,14 +22,12 @@ from common.counters import ReasonCounter
 from common.log import RateLimitedLog, kv
 from common.messages.header import Header
 from common.messages.radar import (
-    CAN_ERROR,
-    CAN_EXTENDED,
-    CAN_REMOTE,
     BusState,
     CanFrame,
     RadarStatus,
     RadarTracks,
     RawCanFrames,
+    can_frame,
 )
 from common.messages.vehicle import EgoMotion
 from common.systemd import Watchdog
@@ -237,11 +235,7 @@ class RadarShell:
 
     def _on_message(self, msg: can.Message, wall: int, mono: int) -> None:
         if self._raw_sink is not None:
-            self._raw.append(CanFrame(
-                msg.timestamp, wall, mono, msg.arbitration_id, bytes(msg.data),
-                (CAN_EXTENDED if msg.is_extended_id else 0)
-                | (CAN_REMOTE if msg.is_remote_frame else 0)
-                | (CAN_ERROR if msg.is_error_frame else 0)))
+            self._raw.append(can_frame(msg, wall, mono))
         if msg.is_error_frame:
             self.bus_rejected.add("error_frame")
             self._error_until = mono + int(self.settings.can.error_hold_s * NS_PER_S)
