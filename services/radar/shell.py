@@ -40,9 +40,10 @@ from services.radar.ports import CanPort, describe, open_port
 _log = logging.getLogger("radar")
 
 # Timeouts, status, 0x200 re-sends and bus state are looked at every 10 ms while frames
-# flow; an idle bus wakes the loop at least every 50 ms for them.
-_HOUSEKEEPING_NS = 10_000_000
-_RECEIVE_TIMEOUT_S = 0.05
+# flow; an idle bus wakes the loop at least every 50 ms for them. Public: a re-run
+# (tools/recording/rerun_radar.py) keeps house on the same schedule.
+HOUSEKEEPING_NS = 10_000_000
+RECEIVE_TIMEOUT_NS = 50_000_000
 # Raw frames not followed by a cycle (other traffic, a radar that stopped) still go out
 # once the oldest is one radar cycle old.
 _RAW_BATCH_MAX_AGE_NS = 75_000_000
@@ -182,7 +183,7 @@ class RadarShell:
         next_housekeeping = 0
         # The schedule of tools/recording/rerun_radar.py, which re-plays this loop.
         while not stop.is_set():
-            msg = port.recv(_RECEIVE_TIMEOUT_S)
+            msg = port.recv(RECEIVE_TIMEOUT_NS / NS_PER_S)
             mono, wall = mono_ns(), wall_ns()
             if msg is not None:
                 self._on_message(msg, wall, mono)
@@ -191,7 +192,7 @@ class RadarShell:
             if mono >= next_housekeeping:
                 self._count_port_errors(port)
                 self._housekeeping(mono, wall)
-                next_housekeeping = mono + _HOUSEKEEPING_NS
+                next_housekeeping = mono + HOUSEKEEPING_NS
         return False
 
     def _count_port_errors(self, port: CanPort) -> None:

@@ -24,12 +24,9 @@ from common.config.radar import RadarSettings
 from common.keys import RADAR_CAN, RADAR_TRACKS
 from common.messages import DecodeError, RadarStatus, RadarTracks, RawCanFrames, decode
 from common.messages.radar import can_message
-from services.radar.shell import RadarShell
+from services.radar.shell import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, RadarShell
 from tools.recording.compare import Comparison
 from tools.recording.reader import Recording
-
-HOUSEKEEPING_NS = 10_000_000     # as services/radar/shell.py
-IDLE_WAKE_NS = 50_000_000
 
 
 class _Collect:
@@ -91,8 +88,8 @@ class RadarRerun:
             last_seq = batch.header.seq
             for f in batch.frames:
                 # The live loop woke every 50 ms without a frame, and kept house then.
-                while last_mono is not None and f.rx_mono_ns - last_mono > IDLE_WAKE_NS:
-                    last_mono += IDLE_WAKE_NS
+                while last_mono is not None and f.rx_mono_ns - last_mono > RECEIVE_TIMEOUT_NS:
+                    last_mono += RECEIVE_TIMEOUT_NS
                     if last_mono >= next_tick:
                         shell.tick(last_mono, f.rx_wall_ns)
                         next_tick = last_mono + HOUSEKEEPING_NS
