@@ -64,18 +64,26 @@ def first_unusable_number(value: Any, where: str = "$") -> tuple[str, float] | N
     return None
 
 
-def load_config(path: str | Path, config_type: type[T]) -> T:
-    """Read and validate a TOML file; relative paths in it are resolved against its
-    folder. Raises ConfigError (missing file, bad TOML, bad field)."""
+def read_toml(path: str | Path, what: str = "configuration") -> dict[str, Any]:
+    """A TOML file's tables, not validated. Raises ConfigError naming the file: for one
+    that cannot be read ("cannot read <what>") and for bad TOML."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read configuration: {exc.strerror}") from exc
+        raise ConfigError(f"{p}: cannot read {what}: {exc.strerror}") from exc
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+
+
+def load_config(path: str | Path, config_type: type[T], what: str = "configuration") -> T:
+    """Read and validate a TOML file (`what` it holds names it in errors); relative paths
+    in it are resolved against its folder. Raises ConfigError (missing file, bad TOML,
+    bad field)."""
+    p = Path(path)
+    data = read_toml(p, what)
     return resolve_paths(parse_config(data, config_type, str(p)), p.resolve().parent)
 
 

@@ -31,7 +31,7 @@ from typing import Any, TypeVar
 import msgspec
 
 from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, parse_config
+from common.config.loader import ConfigError, parse_config, read_toml
 from common.config.paths import resolve_paths
 from common.config.radar import RadarConfig
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
@@ -54,12 +54,7 @@ def load_with_overrides(path: str | Path, config_type: type[C], sets: list[str])
     folder, as for the services. Raises ConfigError."""
     data: dict[str, Any] = {}
     if path:
-        try:
-            data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ConfigError(f"{path}: cannot read configuration: {exc.strerror}") from exc
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+        data = read_toml(path)
     for item in sets:
         name, sep, raw = item.partition("=")
         if not sep or not name:

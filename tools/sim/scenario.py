@@ -7,13 +7,12 @@ road, 90: across it). See docs/simulator.md for the format.
 """
 
 import enum
-import tomllib
 from pathlib import Path
 from typing import Annotated
 
 import msgspec
 
-from common.config.loader import ConfigError, parse_config
+from common.config.loader import ConfigError, load_config
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -154,14 +153,7 @@ class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file. Raises ConfigError naming the file and field."""
-    p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read scenario: {exc.strerror}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
-    return parse_config(data, Scenario, str(p))
+    return load_config(path, Scenario, "scenario")
 
 
 def find_scenario(name_or_path: str) -> Path:
