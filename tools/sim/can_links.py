@@ -48,6 +48,7 @@ from typing import Self
 import can
 
 from services.radar.ars408.codec import Frame
+from tools.arrivals import Arrivals
 
 FrameCallback = Callable[[Frame], None]
 
@@ -63,17 +64,14 @@ class _Link:
 
     def __init__(self, on_frame: FrameCallback | None) -> None:
         self._on_frame = on_frame
-        self._frames: list[Frame] = []
-        self._cond = threading.Condition()
+        self._frames: Arrivals[Frame] = Arrivals()
         self._stop = threading.Event()
         self._opened = threading.Event()
         self.commands: list[str] = []
         self.callback_errors = 0
 
     def _got(self, frame: Frame) -> None:
-        with self._cond:
-            self._frames.append(frame)
-            self._cond.notify_all()
+        self._frames.add(frame)
         if self._on_frame is not None:
             try:
                 self._on_frame(frame)
@@ -84,23 +82,11 @@ class _Link:
 
     def received(self) -> list[Frame]:
         """Every frame the service wrote so far."""
-        with self._cond:
-            return list(self._frames)
+        return self._frames.items
 
     def wait_frame(self, predicate: Callable[[Frame], bool], timeout_s: float) -> Frame:
         """The first received frame matching `predicate`. Raises TimeoutError."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            seen = 0
-            while True:
-                for f in self._frames[seen:]:
-                    if predicate(f):
-                        return f
-                seen = len(self._frames)
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise TimeoutError(f"no matching frame among {len(self._frames)} received")
-                self._cond.wait(left)
+        return self._frames.wait(predicate, timeout_s, what="matching frame")[1]
 
     def wait_open(self, timeout_s: float) -> None:
         """Until the service opened the channel. Raises TimeoutError."""
