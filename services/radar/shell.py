@@ -31,9 +31,9 @@ from common.messages.radar import (
 )
 from common.messages.vehicle import EgoMotion
 from common.systemd import Watchdog
-from services.radar.ars408.codec import Frame
+from services.radar.ars408.codec import RadarFrame
 from services.radar.ars408.table import classify
-from services.radar.core import CycleResult, RadarCore
+from services.radar.core import RadarCore, TrackedCycle
 from services.radar.ego import EgoMotionForwarder
 from services.radar.ports import CanPort, describe, open_port
 
@@ -291,7 +291,7 @@ class RadarShell:
             bus=raw.bus, interface=self.interface, channel=self.channel,
             frames=tuple(frames)))
 
-    def _publish_results(self, core: RadarCore, results: list[CycleResult],
+    def _publish_results(self, core: RadarCore, results: list[TrackedCycle],
                          processing_ns: int) -> None:
         name = core.sensor.name
         sid = core.sensor.sensor_id
@@ -319,7 +319,7 @@ class RadarShell:
 
     # -- writing ------------------------------------------------------------------------
 
-    def _send_frames(self, frames: list[Frame]) -> int:
+    def _send_frames(self, frames: list[RadarFrame]) -> int:
         """Write frames if the bus is open; returns how many went out."""
         sent = 0
         with self._send_lock:

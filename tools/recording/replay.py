@@ -176,7 +176,7 @@ class CanOut:
     def pty(cls, stop: threading.Event, path_file: str = "") -> tuple["CanOut", Callable[[], None]]:
         """A pty acting as an slcan adapter (SIMULATION of the wire); waits until a
         service opened it."""
-        from services.radar.ars408.codec import Frame
+        from services.radar.ars408.codec import RadarFrame
         from tools.sim.can_links import SlcanPtyLink
 
         link = SlcanPtyLink()
@@ -189,7 +189,7 @@ class CanOut:
             stop.wait(0.05)
 
         def send(frames: list[CanFrame]) -> None:
-            link.send(Frame(f.arb_id, f.data) for f in frames if not f.flags)
+            link.send(RadarFrame(f.arb_id, f.data) for f in frames if not f.flags)
 
         return cls(send), link.close
 

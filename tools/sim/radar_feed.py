@@ -26,10 +26,10 @@ from services.radar.ars408 import (
     RMS_CODE_VALUES,
     ClusterGeneral,
     ClusterQuality,
-    Frame,
     ObjectExtended,
     ObjectGeneral,
     ObjectQuality,
+    RadarFrame,
     RadarStateFrame,
     Version,
     cluster_cycle_frames,
@@ -59,7 +59,7 @@ _yield_cpu: Callable[[], None] = getattr(os, "sched_yield", lambda: None)
 
 
 class FrameSink(Protocol):
-    def send(self, frames: Sequence[Frame]) -> None: ...
+    def send(self, frames: Sequence[RadarFrame]) -> None: ...
 
 
 class PythonCanSink:
@@ -68,7 +68,7 @@ class PythonCanSink:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
 
-    def send(self, frames: Sequence[Frame]) -> None:
+    def send(self, frames: Sequence[RadarFrame]) -> None:
         for f in frames:
             self.bus.send(can.Message(arbitration_id=f.arb_id, data=f.data,
                                       is_extended_id=False))
@@ -87,7 +87,7 @@ def rms_code(sigma: float) -> int:
 
 
 def object_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
-                  sensor_id: int = 0) -> list[Frame]:
+                  sensor_id: int = 0) -> list[RadarFrame]:
     """One object-mode cycle with quality and extended messages."""
     general, quality, extended = [], [], []
     for r in returns:
@@ -106,7 +106,7 @@ def object_frames(returns: Sequence[RadarReturn], meas_counter: int, look: Radar
 
 
 def cluster_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
-                   sensor_id: int = 0) -> list[Frame]:
+                   sensor_id: int = 0) -> list[RadarFrame]:
     """One cluster-mode cycle with quality messages (all clusters in the near scan)."""
     general, quality = [], []
     for r in returns:
@@ -121,7 +121,7 @@ def cluster_frames(returns: Sequence[RadarReturn], meas_counter: int, look: Rada
     return cluster_cycle_frames(general, meas_counter, quality, sensor_id=sensor_id)
 
 
-def state_frames(look: RadarLook, sensor_id: int = 0) -> list[Frame]:
+def state_frames(look: RadarLook, sensor_id: int = 0) -> list[RadarFrame]:
     """0x201 (no error, configuration as simulated) and 0x700."""
     state = RadarStateFrame(
         nvm_read_ok=1, max_distance_m=196, persistent_error=0, interference=0,
@@ -169,7 +169,7 @@ class RadarFeed:
         self.errors = 0
         # Called on the caller's thread after every cycle with what was sent and its frames
         # (e.g. a benchmark replaying the same frames elsewhere); keep it short.
-        self.on_cycle: Callable[[CycleSent, Sequence[Frame]], None] | None = None
+        self.on_cycle: Callable[[CycleSent, Sequence[RadarFrame]], None] | None = None
 
     def reset(self, look: RadarLook, seed: int) -> None:
         """A new scene: a fresh model (IDs, ghosts, noise) with the scenario's radar look."""
@@ -198,13 +198,13 @@ class RadarFeed:
             self.on_cycle(sent, frames)
         return sent
 
-    def send_paced(self, frames: Sequence[Frame]) -> tuple[int, int]:
+    def send_paced(self, frames: Sequence[RadarFrame]) -> tuple[int, int]:
         """Write frames at the bus rate, as a cycle's are; returns the monotonic times
         before the first and after the last write. Raises what the sink raises."""
         first = self._clock()
         return first, self._send_paced(frames, first)
 
-    def _send_paced(self, frames: Sequence[Frame], start_ns: int) -> int:
+    def _send_paced(self, frames: Sequence[RadarFrame], start_ns: int) -> int:
         """The time right after the last write (before this thread lets others run: the
         reader may well be quicker than this thread's next instruction)."""
         if self.frame_time_s <= 0:
@@ -218,7 +218,7 @@ class RadarFeed:
             last = self._write(frames[i:i + BURST_FRAMES])
         return last
 
-    def _write(self, frames: Sequence[Frame]) -> int:
+    def _write(self, frames: Sequence[RadarFrame]) -> int:
         """Write, stamp, let the reader run; the stamp."""
         with fifo_for(self.write_priority):
             self.sink.send(frames)
