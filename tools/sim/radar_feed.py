@@ -86,19 +86,27 @@ def rms_code(sigma: float) -> int:
     return len(RMS_CODE_VALUES) - 1
 
 
+def _general(r: RadarReturn, lateral_m: float) -> tuple[float, float, float, float, int, float]:
+    """A return's general-message fields after its ID, within what the signals carry
+    (the lateral distance's range differs between objects and clusters)."""
+    return (_clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -lateral_m, lateral_m),
+            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
+            _clamp(r.rcs_dbsm, -64.0, 63.5))
+
+
+def _rms_codes(look: RadarLook) -> tuple[int, int, int, int]:
+    """The quality message's standard deviations: distance long, lat, velocity long, lat."""
+    return (rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
+            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps))
+
+
 def object_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
                   sensor_id: int = 0) -> list[RadarFrame]:
     """One object-mode cycle with quality and extended messages."""
     general, quality, extended = [], [], []
     for r in returns:
-        general.append(ObjectGeneral(
-            r.id, _clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -204.6, 204.6),
-            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
-            _clamp(r.rcs_dbsm, -64.0, 63.5)))
-        quality.append(ObjectQuality(
-            r.id, rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
-            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps), r.meas_state,
-            r.prob_of_exist))
+        general.append(ObjectGeneral(r.id, *_general(r, 204.6)))
+        quality.append(ObjectQuality(r.id, *_rms_codes(look), r.meas_state, r.prob_of_exist))
         extended.append(ObjectExtended(
             r.id, 0.0, 0.0, r.obj_class, _clamp(r.orientation_deg, -180.0, 180.0),
             _clamp(r.length_m, 0.0, 50.0), _clamp(r.width_m, 0.0, 50.0)))
@@ -110,14 +118,8 @@ def cluster_frames(returns: Sequence[RadarReturn], meas_counter: int, look: Rada
     """One cluster-mode cycle with quality messages (all clusters in the near scan)."""
     general, quality = [], []
     for r in returns:
-        general.append(ClusterGeneral(
-            r.id, _clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -102.3, 102.3),
-            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
-            _clamp(r.rcs_dbsm, -64.0, 63.5)))
-        quality.append(ClusterQuality(
-            r.id, rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
-            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps),
-            3 if r.source >= 0 else 5, 3, 0))
+        general.append(ClusterGeneral(r.id, *_general(r, 102.3)))
+        quality.append(ClusterQuality(r.id, *_rms_codes(look), 3 if r.source >= 0 else 5, 3, 0))
     return cluster_cycle_frames(general, meas_counter, quality, sensor_id=sensor_id)
 
 
