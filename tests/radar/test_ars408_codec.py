@@ -51,6 +51,14 @@ OBJECT_GENERAL = {
     "rcs_dbsm": lambda b: b[7] * 0.5 - 64,
 }
 
+QUALITY_RMS = {
+        "id": lambda b: b[0],
+        "dist_long_rms": lambda b: b[1] >> 3,
+        "dist_lat_rms": lambda b: (b[1] & 7) << 2 | b[2] >> 6,
+        "vrel_long_rms": lambda b: (b[2] >> 1) & 0x1F,
+        "vrel_lat_rms": lambda b: (b[2] & 1) << 4 | b[3] >> 4,
+}
+
 SPEC = {
     "Obj_0_Status": {
         "n_objects": lambda b: b[0],
@@ -59,11 +67,7 @@ SPEC = {
     },
     "Obj_1_General": OBJECT_GENERAL,
     "Obj_2_Quality": {
-        "id": lambda b: b[0],
-        "dist_long_rms": lambda b: b[1] >> 3,
-        "dist_lat_rms": lambda b: (b[1] & 7) << 2 | b[2] >> 6,
-        "vrel_long_rms": lambda b: (b[2] >> 1) & 0x1F,
-        "vrel_lat_rms": lambda b: (b[2] & 1) << 4 | b[3] >> 4,
+        **QUALITY_RMS,
         "meas_state": lambda b: (b[6] >> 2) & 7,
         "prob_of_exist": lambda b: b[6] >> 5,
     },
@@ -88,11 +92,8 @@ SPEC = {
         "dist_lat_m": lambda b: ((b[2] & 3) << 8 | b[3]) * 0.2 - 102.3,
     },
     "Cluster_2_Quality": {
-        "id": lambda b: b[0],
-        "dist_long_rms": lambda b: b[1] >> 3,
-        "dist_lat_rms": lambda b: (b[1] & 7) << 2 | b[2] >> 6,
-        "vrel_long_rms": lambda b: (b[2] >> 1) & 0x1F,
-        "vrel_lat_rms": lambda b: (b[2] & 1) << 4 | b[3] >> 4,
+        # The deviations as 0x60C's.
+        **QUALITY_RMS,
         "pdh0": lambda b: b[3] & 7,
         "ambig_state": lambda b: b[4] & 7,
         "invalid_state": lambda b: b[4] >> 3,
