@@ -14,6 +14,7 @@ from common.messages.codec import DecodeError, decode
 from tools.arrivals import Arrivals
 
 T = TypeVar("T")
+M = TypeVar("M", BrakeStatus, VerifiedTargets, BrakeCommand)
 HISTORY = 4000
 
 
@@ -73,34 +74,27 @@ class Observer:
         self.forged_seen = 0      # harness's own publications that came back (ignored)
 
     def _on_status(self, payload: bytes, key: str, rx_ns: int) -> None:
-        try:
-            msg = decode(payload, BrakeStatus)
-        except DecodeError:
-            return
-        if msg.header.source != self._brake_source:
-            self.forged_seen += 1
-            return
-        self.status.add(Seen(rx_ns, msg))
+        self._keep(payload, rx_ns, BrakeStatus, self._brake_source, self.status)
 
     def _on_targets(self, payload: bytes, key: str, rx_ns: int) -> None:
-        try:
-            msg = decode(payload, VerifiedTargets)
-        except DecodeError:
-            return
-        if msg.header.source != self._fusion_source:
-            self.forged_seen += 1
-            return
-        self.targets.add(Seen(rx_ns, msg))
+        self._keep(payload, rx_ns, VerifiedTargets, self._fusion_source, self.targets)
 
     def _on_command(self, payload: bytes, key: str, rx_ns: int) -> None:
+        self._keep(payload, rx_ns, BrakeCommand, self._fusion_source, self.commands,
+                   lambda msg: not mac_problem(payload, msg, self._keys))
+
+    def _keep(self, payload: bytes, rx_ns: int, msg_type: type[M], source: str,
+              stream: Stream[M], authentic: Callable[[M], bool] = lambda msg: True) -> None:
+        """Into `stream` when it decodes, comes from `source` and is `authentic`; what
+        decodes but is not is one of the harness's own floods come back (counted)."""
         try:
-            msg = decode(payload, BrakeCommand)
+            msg = decode(payload, msg_type)
         except DecodeError:
             return
-        if msg.header.source != self._fusion_source or mac_problem(payload, msg, self._keys):
+        if msg.header.source != source or not authentic(msg):
             self.forged_seen += 1
             return
-        self.commands.add(Seen(rx_ns, msg))
+        stream.add(Seen(rx_ns, msg))
 
     def _on_frame(self, payload: bytes, key: str, rx_ns: int) -> None:
         self.frame_payload = payload
