@@ -17,6 +17,7 @@ from common.config.radar import RadarSettings
 from common.resources import ARS408_RECORDING
 from services.radar.ars408 import RadarFrame, classify
 from services.radar.core import RadarCore, TrackedCycle
+from services.radar.ports import radar_frame
 
 RECORDING = ARS408_RECORDING
 RECORDING_CYCLES = 515
@@ -41,8 +42,7 @@ def feed(core: RadarCore, frames: Iterable[tuple[RadarFrame, float]], mono_start
 
 
 def recording_frames() -> list[tuple[RadarFrame, float]]:
-    return [(RadarFrame(m.arbitration_id, bytes(m.data)), m.timestamp)
-            for m in recording_messages()]
+    return [(radar_frame(m), m.timestamp) for m in recording_messages()]
 
 
 def run_recording(settings: RadarSettings | None = None) -> tuple[RadarCore, list[TrackedCycle]]:

@@ -35,7 +35,7 @@ from services.radar.ars408.codec import RadarFrame
 from services.radar.ars408.table import classify
 from services.radar.core import RadarCore, TrackedCycle
 from services.radar.ego import EgoMotionForwarder
-from services.radar.ports import CanPort, describe, open_port
+from services.radar.ports import CanPort, describe, open_port, radar_message
 
 _log = logging.getLogger("radar")
 
@@ -330,8 +330,7 @@ class RadarShell:
                 return 0
             for f in frames:
                 try:
-                    port.send(can.Message(arbitration_id=f.arb_id, data=f.data,
-                                          is_extended_id=False))
+                    port.send(radar_message(f))
                     sent += 1
                 except (can.CanError, OSError) as exc:
                     self.bus_rejected.add("send_failed")

@@ -6,6 +6,7 @@ import can
 import pytest
 
 from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
+from services.radar.ports import radar_frame
 from tests.can_support import RECORDING, RECORDING_FRAMES
 from tools.sim.can_links import (
     SlcanPtyLink,
@@ -24,7 +25,7 @@ def recv_all(bus: can.BusABC, n: int) -> list[RadarFrame]:
     while len(out) < n:
         m = bus.recv(10)
         assert m is not None, f"received {len(out)} of {n} frames"
-        out.append(RadarFrame(m.arbitration_id, bytes(m.data)))
+        out.append(radar_frame(m))
     return out
 
 

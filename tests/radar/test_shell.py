@@ -34,6 +34,7 @@ from services.radar.ars408 import (
     encode,
     object_cycle_frames,
 )
+from services.radar.ports import radar_message
 from services.radar.shell import RadarShell
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.support import Collector, wait_for
@@ -79,9 +80,8 @@ def cycle_messages(k: int, sensor_id: int = 0, x: float = 12.0) -> list[can.Mess
     return [msg(f, t=100.0 + 0.075 * k) for f in frames]
 
 
-def msg(f: RadarFrame, t: float = 0.0, **kw) -> can.Message:
-    return can.Message(arbitration_id=f.arb_id, data=f.data, is_extended_id=False,
-                       timestamp=t, **kw)
+def msg(f: RadarFrame, t: float = 0.0) -> can.Message:
+    return radar_message(f, t)
 
 
 class ScriptedPort:

@@ -11,7 +11,7 @@ import pytest
 
 from common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
 from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
-from services.radar.ports import open_port
+from services.radar.ports import open_port, radar_frame
 from services.radar.shell import RadarShell
 from services.radar.slcan_bulk import MAX_LINE, BulkSlcanBus
 from tests.radar.test_shell import Output, running  # noqa: F401 (fixture)
@@ -42,7 +42,7 @@ def recv_all(bus: can.BusABC, n: int, timeout_s: float = 5.0) -> list[can.Messag
 
 
 def frames_of(msgs: list[can.Message]) -> list[RadarFrame]:
-    return [RadarFrame(m.arbitration_id, bytes(m.data)) for m in msgs]
+    return [radar_frame(m) for m in msgs]
 
 
 def test_a_whole_cycle_written_at_once_comes_out_complete_and_in_order(link_bus):

@@ -48,6 +48,7 @@ from typing import Self
 import can
 
 from services.radar.ars408.codec import RadarFrame
+from services.radar.ports import radar_frame
 from tools.arrivals import Arrivals
 
 FrameCallback = Callable[[RadarFrame], None]
@@ -294,16 +295,6 @@ class SocketcandServer(_Link):
         self._thread.join(timeout=2)
 
 
-def bus_sink(bus: can.BusABC) -> Callable[[Iterable[RadarFrame]], None]:
-    """`send`-compatible function writing frames to a python-can bus (vcan, real CAN)."""
-
-    def send(frames: Iterable[RadarFrame]) -> None:
-        for f in frames:
-            bus.send(can.Message(arbitration_id=f.arb_id, data=f.data, is_extended_id=False))
-
-    return send
-
-
 def replay_log(
     path: str,
     send: Callable[[Iterable[RadarFrame]], None],
@@ -341,7 +332,7 @@ def replay_log(
                                 return sent
                         else:
                             time.sleep(wait)
-                send([RadarFrame(msg.arbitration_id, bytes(msg.data))])
+                send([radar_frame(msg)])
                 sent += 1
                 last = t
         if not loop or first is None:

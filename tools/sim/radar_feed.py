@@ -14,7 +14,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -36,6 +36,7 @@ from services.radar.ars408 import (
     encode,
     object_cycle_frames,
 )
+from services.radar.ports import radar_message
 from tools.sim.radar_model import RadarModel, RadarReturn
 from tools.sim.scenario import RadarLook
 from tools.sim.world import Body
@@ -68,10 +69,9 @@ class PythonCanSink:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
 
-    def send(self, frames: Sequence[RadarFrame]) -> None:
+    def send(self, frames: Iterable[RadarFrame]) -> None:
         for f in frames:
-            self.bus.send(can.Message(arbitration_id=f.arb_id, data=f.data,
-                                      is_extended_id=False))
+            self.bus.send(radar_message(f))
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:
