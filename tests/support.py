@@ -3,7 +3,6 @@ captured logs, and polling with deadlines (never fixed sleeps as synchronisation
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -15,7 +14,7 @@ from typing import Any, TypeVar
 
 from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
-from common.net import free_port
+from common.net import free_port, port_open
 from tools.arrivals import Arrivals
 
 REPO = Path(__file__).resolve().parent.parent
@@ -37,14 +36,6 @@ def wait_for(
         if time.monotonic() > deadline:
             raise TimeoutError(f"timed out after {timeout_s} s waiting for {what or predicate}")
         time.sleep(interval_s)
-
-
-def port_open(port: int, host: str = "127.0.0.1") -> bool:
-    try:
-        with socket.create_connection((host, port), timeout=0.2):
-            return True
-    except OSError:
-        return False
 
 
 class ServiceProcess:
