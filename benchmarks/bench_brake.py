@@ -23,17 +23,14 @@ under --out.
 """
 
 import argparse
-import contextlib
 import json
 import os
 import select
-import socket
 import subprocess
 import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,7 +42,7 @@ from common.command_auth import CommandSigner, new_key, write_key
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, Decision, Header, VerifierStatus
-from common.net import free_port
+from common.net import free_port, wait_listening
 from services.brake.shell import TIMER_PERIOD_S
 from tools.sim.actuator import SimActuator
 from tools.sim.pty_pair import PtyPair
@@ -63,20 +60,6 @@ class Row:
     def pct(self, q: float) -> float:
         v = sorted(self.values_us)
         return v[min(len(v) - 1, round(q * (len(v) - 1)))]
-
-
-def _wait(pred: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not pred():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"timed out waiting for {what}")
-        time.sleep(0.02)
-
-
-def _port_open(port: int) -> bool:
-    with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), 0.2):
-        return True
-    return False
 
 
 def _command(seq: int, instance: str, level: float) -> BrakeCommand:
@@ -206,7 +189,7 @@ def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
     try:
         procs.append(subprocess.Popen([sys.executable, "-m", "common.router", "--listen",
                                        endpoint], stdout=log, stderr=log))
-        _wait(lambda: _port_open(port), 60, "router")
+        wait_listening(port, 60)
         config = work / "brake.toml"
         write_key(work / "primary.key", KEY)
         config.write_text(f'[brake]\ndeadline_ms = 1000.0\nmax_age_ms = 1000.0\n'

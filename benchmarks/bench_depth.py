@@ -38,7 +38,7 @@ from services.fusion.frames import decode_depth_frame
 from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.verifiers import Observation, create
 from tools.eval.depth import box_scene_depth, car_box
-from tools.sim.scenario import ObjectKind
+from tools.messages import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
 
 RESOLUTIONS = {"848x480": 1, "424x240": 2}

@@ -43,9 +43,9 @@ from common.messages import (
 from tools.eval.recording import RecordingSettings
 from tools.eval.runner import Task, execute, run_task
 from tools.eval.scoring import default_specs
+from tools.messages import ObjectKind
 from tools.recording.reader import Recording
 from tools.recording.writer import RecordingWriter
-from tools.sim.scenario import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"

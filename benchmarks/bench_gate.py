@@ -39,7 +39,7 @@ from common.imaging import decode_bgr, decode_gray, encode_jpeg
 from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation, create
-from tools.sim.scenario import ObjectKind
+from tools.messages import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, labelled_frames, render
 
 CALIBRATION = str(EXAMPLE_CALIBRATION)

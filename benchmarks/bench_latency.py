@@ -73,7 +73,7 @@ from common.cpu_latency import CpuLatencyRefused, cpu_latency
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
 from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
-from services.radar.ars408 import Frame
+from services.radar.ars408 import RadarFrame
 from tools.machine import machine_info
 from tools.sim.can_links import SlcanPtyLink
 from tools.sim.pty_pair import PtyPair
@@ -155,7 +155,7 @@ class FloorFeed:
         self._pacer = RadarFeed(link, RadarLook())
         self._pacer.write_priority = write_priority
         self._offset_ns = round(offset_s * 1e9)
-        self._pending: deque[tuple[int, int, list[Frame]]] = deque(maxlen=8)
+        self._pending: deque[tuple[int, int, list[RadarFrame]]] = deque(maxlen=8)
         self._cond = threading.Condition()
         self._stop = False
         self.written: dict[int, int] = {}
@@ -163,7 +163,7 @@ class FloorFeed:
         self._thread = threading.Thread(target=self._run, name="floor-feed", daemon=True)
         self._thread.start()
 
-    def on_cycle(self, sent: CycleSent, frames: Sequence[Frame]) -> None:
+    def on_cycle(self, sent: CycleSent, frames: Sequence[RadarFrame]) -> None:
         """RadarFeed.on_cycle: called on the simulator's loop thread."""
         with self._cond:
             self._pending.append((sent.last_write_mono_ns, sent.meas_counter, list(frames)))

@@ -53,10 +53,10 @@ from common.resources import ARS408_RECORDING
 from services.radar.ars408 import (
     ClusterGeneral,
     ClusterQuality,
-    Frame,
     ObjectExtended,
     ObjectGeneral,
     ObjectQuality,
+    RadarFrame,
     classify,
     cluster_cycle_frames,
     decode,
@@ -122,7 +122,7 @@ def scene_cycles(scene: Scene, cycles: int, seed: int = 1) -> list[Classified]:
     return out
 
 
-def _spec(f: Frame) -> MessageSpec:
+def _spec(f: RadarFrame) -> MessageSpec:
     found = classify(f.arb_id)
     assert found is not None
     return found[0]
@@ -133,7 +133,7 @@ def _q(v: float, step: float) -> float:
 
 
 def _frames(mode: OutputMode, k: int, x: np.ndarray, y: np.ndarray, vx: np.ndarray,
-            vy: np.ndarray, rcs: np.ndarray) -> list[Frame]:
+            vy: np.ndarray, rcs: np.ndarray) -> list[RadarFrame]:
     rows = list(zip(x.tolist(), y.tolist(), vx.tolist(), vy.tolist(), rcs.tolist(),
                     strict=True))
     if mode is OutputMode.OBJECTS:

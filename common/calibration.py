@@ -12,7 +12,6 @@ See docs/calibration.md for the format and deploy/calibration/ for an example.
 """
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated
 
@@ -20,7 +19,7 @@ import cv2
 import msgspec
 import numpy as np
 
-from common.config.loader import ConfigError, parse_config
+from common.config.loader import load_config, parse_config
 
 # Ground frame axes (x fwd, y left, z up) expressed in the optical frame (x right, y down, z fwd).
 GROUND_TO_OPTICAL = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
@@ -160,13 +159,7 @@ class Calibration:
     def load(cls, path: str | Path) -> "Calibration":
         """Load and validate a calibration TOML. Raises ConfigError naming the field."""
         p = Path(path)
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ConfigError(f"{p}: cannot read calibration: {exc.strerror}") from exc
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
-        return cls(parse_config(data, CalibrationFile, str(p)), str(p))
+        return cls(load_config(p, CalibrationFile, what="calibration"), str(p))
 
     @classmethod
     def from_matrices(cls, width: int, height: int, k: np.ndarray, dist: np.ndarray,

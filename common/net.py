@@ -2,6 +2,7 @@
 endpoints, no scouting: each run picks its own)."""
 
 import socket
+import time
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -15,3 +16,22 @@ def free_port(host: str = "127.0.0.1") -> int:
 def free_endpoint(host: str = "127.0.0.1") -> str:
     """A Zenoh TCP endpoint on a free loopback port: ``tcp/127.0.0.1:<port>``."""
     return f"tcp/{host}:{free_port(host)}"
+
+
+def port_open(port: int, host: str = "127.0.0.1") -> bool:
+    """Whether something accepts TCP connections on `host`:`port` now."""
+    try:
+        with socket.create_connection((host, port), timeout=0.2):
+            return True
+    except OSError:
+        return False
+
+
+def wait_listening(port: int, timeout_s: float, host: str = "127.0.0.1") -> None:
+    """Until something accepts TCP connections on `host`:`port` (a router just started).
+    Raises TimeoutError after `timeout_s`."""
+    deadline = time.monotonic() + timeout_s
+    while not port_open(port, host):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"nothing listens on {host}:{port} after {timeout_s:g} s")
+        time.sleep(0.05)

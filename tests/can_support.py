@@ -15,8 +15,9 @@ import can
 
 from common.config.radar import RadarSettings
 from common.resources import ARS408_RECORDING
-from services.radar.ars408 import Frame, classify
-from services.radar.core import CycleResult, RadarCore
+from services.radar.ars408 import RadarFrame, classify
+from services.radar.core import RadarCore, TrackedCycle
+from services.radar.ports import radar_frame
 
 RECORDING = ARS408_RECORDING
 RECORDING_CYCLES = 515
@@ -29,10 +30,10 @@ def recording_messages() -> tuple[can.Message, ...]:
     return tuple(can.LogReader(str(RECORDING)))
 
 
-def feed(core: RadarCore, frames: Iterable[tuple[Frame, float]], mono_start: int = 0
-         ) -> list[CycleResult]:
+def feed(core: RadarCore, frames: Iterable[tuple[RadarFrame, float]], mono_start: int = 0
+         ) -> list[TrackedCycle]:
     """Frames (with their source time in s) through a core; mono time advances 1 us a frame."""
-    out: list[CycleResult] = []
+    out: list[TrackedCycle] = []
     for k, (frame, t_s) in enumerate(frames):
         found = classify(frame.arb_id)
         assert found is not None, f"test fed a non-ARS408 ID 0x{frame.arb_id:X}"
@@ -40,11 +41,11 @@ def feed(core: RadarCore, frames: Iterable[tuple[Frame, float]], mono_start: int
     return out
 
 
-def recording_frames() -> list[tuple[Frame, float]]:
-    return [(Frame(m.arbitration_id, bytes(m.data)), m.timestamp) for m in recording_messages()]
+def recording_frames() -> list[tuple[RadarFrame, float]]:
+    return [(radar_frame(m), m.timestamp) for m in recording_messages()]
 
 
-def run_recording(settings: RadarSettings | None = None) -> tuple[RadarCore, list[CycleResult]]:
+def run_recording(settings: RadarSettings | None = None) -> tuple[RadarCore, list[TrackedCycle]]:
     """The whole recording through one core, flushed at the end."""
     s = settings or RadarSettings()
     core = RadarCore(s.sensors[0], s)

@@ -3,7 +3,6 @@ captured logs, and polling with deadlines (never fixed sleeps as synchronisation
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -15,7 +14,8 @@ from typing import Any, TypeVar
 
 from common.bus import Bus
 from common.config.base import ZenohMode, ZenohSettings
-from common.net import free_port
+from common.net import free_port, port_open
+from tools.arrivals import Arrivals
 
 REPO = Path(__file__).resolve().parent.parent
 T = TypeVar("T")
@@ -36,14 +36,6 @@ def wait_for(
         if time.monotonic() > deadline:
             raise TimeoutError(f"timed out after {timeout_s} s waiting for {what or predicate}")
         time.sleep(interval_s)
-
-
-def port_open(port: int, host: str = "127.0.0.1") -> bool:
-    try:
-        with socket.create_connection((host, port), timeout=0.2):
-            return True
-    except OSError:
-        return False
 
 
 class ServiceProcess:
@@ -118,46 +110,33 @@ def open_bus(endpoint: str, vehicle: str = "ego", source: str = "test") -> Bus:
 
 
 class Collector:
-    """Collects decoded messages from a subscription; thread-safe waiting."""
+    """Collects decoded messages from a subscription, each with its key; thread-safe
+    waiting."""
 
     def __init__(self) -> None:
-        self.items: list[tuple[Any, str]] = []
-        self._cond = threading.Condition()
+        self._arrivals: Arrivals[tuple[Any, str]] = Arrivals()
 
     def __call__(self, msg: Any, key: str) -> None:
-        with self._cond:
-            self.items.append((msg, key))
-            self._cond.notify_all()
+        self._arrivals.add((msg, key))
+
+    @property
+    def items(self) -> list[tuple[Any, str]]:
+        return self._arrivals.items
 
     @property
     def messages(self) -> list[Any]:
-        with self._cond:
-            return [m for m, _ in self.items]
+        return [m for m, _ in self._arrivals.items]
 
     def wait_count(self, n: int, timeout_s: float) -> list[Any]:
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while len(self.items) < n:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise TimeoutError(f"got {len(self.items)} messages, wanted {n}")
-                self._cond.wait(left)
-            return [m for m, _ in self.items]
+        """Every message, once there are at least `n`. Raises TimeoutError."""
+        if n > 0:
+            self._arrivals.wait(lambda _: True, timeout_s, n - 1, f"message #{n}")
+        return self.messages
 
     def wait_until(self, predicate: Callable[[Any], bool], timeout_s: float) -> Any:
-        """The first message satisfying `predicate`."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            seen = 0
-            while True:
-                for msg, _ in self.items[seen:]:
-                    if predicate(msg):
-                        return msg
-                seen = len(self.items)
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise TimeoutError(f"no matching message among {len(self.items)}")
-                self._cond.wait(left)
+        """The first message satisfying `predicate`. Raises TimeoutError."""
+        return self._arrivals.wait(lambda item: predicate(item[0]), timeout_s,
+                                   what="matching message")[1][0]
 
 
 class HealthWatch:

@@ -7,17 +7,43 @@ tools/sim/camera_source.py) renders frames from it; `aeb monitor` and `aeb demo`
 beside what the stack perceived.
 """
 
+import enum
+
 import msgspec
 
 from common.messages.header import Header
 
 
+class ObjectKind(enum.Enum):
+    CAR = "car"
+    BOX = "box"                # e.g. the paper's cardboard box
+    PEDESTRIAN = "pedestrian"
+    BICYCLE = "bicycle"        # with its rider
+    # Radar false targets: the radar reports them, but nothing stands in the camera's
+    # view and nothing is hit (the ego drives over a plate, under a sign, and follows
+    # the road past a rail).
+    PLATE = "plate"            # a metal plate or manhole cover, flat on the road
+    SIGN = "sign"              # an overhead sign on a gantry, `z_m` above the road
+    GUARD_RAIL = "guard_rail"  # one straight segment of a roadside guard rail
+    GHOST = "ghost"            # a multipath ghost: a persistent return where nothing is
+
+    @property
+    def is_obstacle(self) -> bool:
+        """Whether the ego can hit it (false targets are driven over, under or past)."""
+        return self not in FALSE_TARGETS
+
+
+FALSE_TARGETS = frozenset({ObjectKind.PLATE, ObjectKind.SIGN, ObjectKind.GUARD_RAIL,
+                           ObjectKind.GHOST})
+
+
 class SimObject(msgspec.Struct, frozen=True):
     """One scenario object in the world frame (x along the road, y left, origin on the
-    ground below the ego's radar at the start of the run)."""
+    ground below the ego's radar at the start of the run); the simulator's own objects
+    are these (tools/sim/world.py's Body adds their geometry)."""
 
     index: int
-    kind: str                  # car | box | pedestrian | bicycle | plate | sign | guard_rail
+    kind: ObjectKind           # as its value on the wire: "car", "box", ...
     x_m: float                 # centre of the footprint
     y_m: float
     yaw_deg: float

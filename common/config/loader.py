@@ -67,13 +67,14 @@ def first_unusable_number(value: Any, where: str = "$") -> tuple[str, float] | N
     return None
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """The tables of a TOML file. Raises ConfigError (missing file, bad TOML)."""
+def read_toml(path: str | Path, what: str = "configuration") -> dict[str, Any]:
+    """A TOML file's tables, not validated. Raises ConfigError naming the file: for one
+    that cannot be read ("cannot read <what>") and for bad TOML."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read configuration: {exc.strerror}") from exc
+        raise ConfigError(f"{p}: cannot read {what}: {exc.strerror}") from exc
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -81,11 +82,12 @@ def read_toml(path: str | Path) -> dict[str, Any]:
 
 
 def load_config(path: str | Path | None, config_type: type[T],
-                overrides: Sequence[Override] = ()) -> T:
+                overrides: Sequence[Override] = (), *, what: str = "configuration") -> T:
     """Read and validate a TOML file (None: the defaults) with `overrides` set in it;
-    relative paths in the file are resolved against its folder. Raises ConfigError
-    (missing file, bad TOML, bad field, an override naming no setting)."""
-    data = {} if path is None else read_toml(path)
+    `what` it holds names it in errors; relative paths in the file are resolved against
+    its folder. Raises ConfigError (missing file, bad TOML, bad field, an override naming
+    no setting)."""
+    data = {} if path is None else read_toml(path, what)
     origin = "<defaults>" if path is None else str(path)
     if overrides:
         try:

@@ -1,10 +1,14 @@
 """Messages published by the radar service."""
 
 import enum
+from typing import TYPE_CHECKING
 
 import msgspec
 
 from common.messages.header import Header
+
+if TYPE_CHECKING:
+    import can
 
 
 class OutputMode(enum.Enum):
@@ -140,3 +144,24 @@ class RawCanFrames(msgspec.Struct, frozen=True):
     interface: str             # python-can interface name, or "replay"
     channel: str
     frames: tuple[CanFrame, ...]
+
+
+def can_frame(msg: "can.Message", rx_wall_ns: int, rx_mono_ns: int) -> CanFrame:
+    """A python-can message as a CanFrame, received at the given host times."""
+    return CanFrame(timestamp_s=msg.timestamp, rx_wall_ns=rx_wall_ns, rx_mono_ns=rx_mono_ns,
+                    arb_id=msg.arbitration_id, data=bytes(msg.data),
+                    flags=(CAN_EXTENDED if msg.is_extended_id else 0)
+                    | (CAN_REMOTE if msg.is_remote_frame else 0)
+                    | (CAN_ERROR if msg.is_error_frame else 0))
+
+
+def can_message(frame: CanFrame, timestamp_s: float | None = None) -> "can.Message":
+    """A CanFrame as a python-can message, stamped `timestamp_s` (default: the
+    interface's time, `frame.timestamp_s`)."""
+    import can  # here: most users of the message types never touch a CAN bus
+
+    return can.Message(timestamp=frame.timestamp_s if timestamp_s is None else timestamp_s,
+                       arbitration_id=frame.arb_id, data=frame.data,
+                       is_extended_id=bool(frame.flags & CAN_EXTENDED),
+                       is_remote_frame=bool(frame.flags & CAN_REMOTE),
+                       is_error_frame=bool(frame.flags & CAN_ERROR))

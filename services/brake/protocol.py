@@ -101,7 +101,8 @@ class Nak:
     reason: BadLine
 
 
-Frame = Command | Ack | Fault | Nak
+# What one line of the protocol carries, parsed (either direction).
+SerialFrame = Command | Ack | Fault | Nak
 
 # Fault codes of version 1 (docs/actuator-protocol.md); 100..999 are vendor-specific.
 FAULT_WATCHDOG = 1
@@ -136,7 +137,7 @@ def level_to_wire(level_pct: float) -> int:
     return min(100, math.ceil(level_pct - 1e-9))
 
 
-def encode(frame: Frame) -> bytes:
+def encode(frame: SerialFrame) -> bytes:
     """The line for a frame, terminator included. Raises ValueError on an out-of-range
     field (a programming error: never put on the line)."""
     if isinstance(frame, Command):
@@ -171,7 +172,7 @@ def _fields(fields: list[str], n: int) -> list[str]:
     return fields
 
 
-def decode(line: bytes, accept: frozenset[str] = frozenset("CAFN")) -> Frame:
+def decode(line: bytes, accept: frozenset[str] = frozenset("CAFN")) -> SerialFrame:
     """Parse one line (from '$' to the CRC; a trailing '\\r' is ignored).
 
     `accept` lists the frame types this side receives (the host: "AFN", the actuator:

@@ -9,7 +9,7 @@ the fields that differ. A later 0x201 that differs again makes the radar not rea
 import enum
 
 from common.config.radar import OutputTypeCfg, RadarWriteSettings
-from services.radar.ars408.codec import Frame, encode
+from services.radar.ars408.codec import RadarFrame, encode
 from services.radar.ars408.records import RadarConfigFrame, RadarStateFrame
 
 OUTPUT_TYPE_CODE = {OutputTypeCfg.OBJECTS: 1, OutputTypeCfg.CLUSTERS: 2}
@@ -70,10 +70,10 @@ class ConfigWriter:
         self._timeout_ns = int(settings.confirm_timeout_s * 1e9)
         self._last_diff: list[str] = []
 
-    def frame(self) -> Frame:
+    def frame(self) -> RadarFrame:
         return encode(config_frame_record(self.settings, self.sensor_id), self.sensor_id)
 
-    def start(self, mono_ns: int) -> list[Frame]:
+    def start(self, mono_ns: int) -> list[RadarFrame]:
         """Frames to send when the bus (re)opens: the first write, if enabled."""
         if not self.settings.enabled:
             return []
@@ -81,7 +81,7 @@ class ConfigWriter:
         self.attempt = 0
         return self._send(mono_ns)
 
-    def _send(self, mono_ns: int) -> list[Frame]:
+    def _send(self, mono_ns: int) -> list[RadarFrame]:
         self.attempt += 1
         self.frames_sent += 1
         self._deadline_ns = mono_ns + self._timeout_ns
@@ -96,7 +96,7 @@ class ConfigWriter:
         elif self.state is WriteState.CONFIRMED:
             self.state = WriteState.FAILED   # the radar changed after confirming
 
-    def poll(self, mono_ns: int) -> list[Frame]:
+    def poll(self, mono_ns: int) -> list[RadarFrame]:
         """Frames to re-send when the confirmation is late."""
         if self.state is not WriteState.WAITING or mono_ns < self._deadline_ns:
             return []

@@ -18,7 +18,7 @@ from common.config.radar import RadarSettings, SensorSettings
 from common.counters import ReasonCounter
 from common.messages.header import Header
 from common.messages.radar import BusState, OutputMode, RadarState, RadarStatus, RadarTrack
-from services.radar.ars408.codec import Frame, FrameError, decode
+from services.radar.ars408.codec import RadarFrame, RadarFrameError, decode
 from services.radar.ars408.records import (
     ClusterListStatus,
     ObjectListStatus,
@@ -79,7 +79,7 @@ class _Tracked:
 
 
 @dataclass(frozen=True)
-class CycleResult:
+class TrackedCycle:
     """One finished cycle: what RadarTracks is built from (the shell adds header and timing)."""
 
     mode: OutputMode
@@ -138,7 +138,7 @@ class RadarCore:
 
     def on_frame(
         self, spec: MessageSpec, data: bytes, t_s: float, wall_ns: int, mono_ns: int
-    ) -> list[CycleResult]:
+    ) -> list[TrackedCycle]:
         """One frame of this radar. `t_s` is the frame's source time (seconds; the log's
         time in a replay), `wall_ns` / `mono_ns` the host's receive times."""
         self.frames_total += 1
@@ -153,7 +153,7 @@ class RadarCore:
             return [self.process(c) for c in done] if done else []
         try:
             record = decode(spec, data)
-        except FrameError as exc:
+        except RadarFrameError as exc:
             self.rejected.add(f"{exc.reason}:{spec.dbc_name}")
             return []
         if isinstance(record, ObjectListStatus):
@@ -174,7 +174,7 @@ class RadarCore:
     def _status(
         self, mode: OutputMode, announced: int, counter: int, t_s: float, wall_ns: int,
         mono_ns: int,
-    ) -> list[CycleResult]:
+    ) -> list[TrackedCycle]:
         self._count_gaps(counter)
         if self._last_status_t is not None:
             period = t_s - self._last_status_t
@@ -198,19 +198,19 @@ class RadarCore:
         if step <= 100 * self._counter_step:     # larger: a restart or a replay loop
             self.meas_counter_gaps += step // self._counter_step - 1
 
-    def poll(self, mono_ns: int) -> list[CycleResult]:
+    def poll(self, mono_ns: int) -> list[TrackedCycle]:
         return self._finish(self.assembler.poll(mono_ns))
 
-    def flush(self) -> list[CycleResult]:
+    def flush(self) -> list[TrackedCycle]:
         return self._finish(self.assembler.flush())
 
-    def config_frames(self, mono_ns: int, start: bool = False) -> list[Frame]:
+    def config_frames(self, mono_ns: int, start: bool = False) -> list[RadarFrame]:
         """0x200 frames to send now (at bus open with `start`, else re-sends when late)."""
         return self.writer.start(mono_ns) if start else self.writer.poll(mono_ns)
 
     # -- cycles -------------------------------------------------------------------------
 
-    def _finish(self, cycles: list[RawCycle]) -> list[CycleResult]:
+    def _finish(self, cycles: list[RawCycle]) -> list[TrackedCycle]:
         return [self.process(c) for c in cycles]
 
     def _list_in(self, cycle: RawCycle, role: int) -> None:
@@ -234,7 +234,7 @@ class RadarCore:
         self.tracker.step(merge(kept, self.settings.merge), cycle.t_s)
         return _Tracked(cycle, g, len(kept), attached)
 
-    def process(self, cycle: RawCycle) -> CycleResult:
+    def process(self, cycle: RawCycle) -> TrackedCycle:
         """A finished cycle: tracked (now, or earlier when its general frames were in),
         its extra frames decoded, its result built."""
         tracked, self._tracked = self._tracked, None
@@ -254,7 +254,7 @@ class RadarCore:
         self.cycles_total += 1
         self.cycles_incomplete += not complete
         self.last_cycle_mono_ns = cycle.last_frame_mono_ns
-        return CycleResult(
+        return TrackedCycle(
             mode=cycle.mode, meas_counter=cycle.meas_counter, complete=complete,
             closed_by=cycle.closed_by, n_detections=len(g.det),
             n_prefiltered=done.n_prefiltered, stamp_wall_ns=cycle.stamp_wall_ns,

@@ -8,7 +8,7 @@ positions and velocities do not depend on them.
 from common.config.radar import EgoMotionSettings
 from common.counters import ReasonCounter
 from common.messages.vehicle import EgoMotion
-from services.radar.ars408.codec import EncodeError, Frame
+from services.radar.ars408.codec import EncodeError, RadarFrame
 from services.radar.ars408.transmissions import ego_motion_frames
 
 
@@ -24,7 +24,7 @@ class EgoMotionForwarder:
         self._max_age_ns = int(settings.max_age_s * 1e9)
         self._interval_ns = int(settings.min_interval_s * 1e9)
 
-    def on_motion(self, msg: EgoMotion, now_wall_ns: int, now_mono_ns: int) -> list[Frame]:
+    def on_motion(self, msg: EgoMotion, now_wall_ns: int, now_mono_ns: int) -> list[RadarFrame]:
         if not self.settings.forward:
             return []
         if now_wall_ns - msg.header.stamp_ns > self._max_age_ns:
@@ -33,7 +33,7 @@ class EgoMotionForwarder:
         if self._last_mono_ns is not None and now_mono_ns - self._last_mono_ns < self._interval_ns:
             self.rejected.add("throttled")
             return []
-        frames: list[Frame] = []
+        frames: list[RadarFrame] = []
         try:
             for sid in self.sensor_ids:
                 frames += ego_motion_frames(msg.speed_mps, msg.yaw_rate_dps, sid)

@@ -15,6 +15,7 @@ from can.io.canutils import CanutilsLogReader
 from common.config.radar import CanSettings, Pace, ReplaySettings
 from common.counters import ReasonCounter
 from common.log import RateLimitedLog
+from services.radar.ars408.codec import RadarFrame
 from services.radar.slcan_bulk import BulkSlcanBus
 
 REPLAY = "replay"
@@ -33,6 +34,17 @@ class CanPort(Protocol):
     def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
 
     def shutdown(self) -> None: ...
+
+
+def radar_message(frame: RadarFrame, timestamp_s: float = 0.0) -> can.Message:
+    """A radar frame as python-can's message (a standard 11-bit ID)."""
+    return can.Message(timestamp=timestamp_s, arbitration_id=frame.arb_id, data=frame.data,
+                       is_extended_id=False)
+
+
+def radar_frame(msg: can.Message) -> RadarFrame:
+    """A python-can message's ID and data as a radar frame."""
+    return RadarFrame(msg.arbitration_id, bytes(msg.data))
 
 
 class ConfigurationError(ValueError):

@@ -22,29 +22,28 @@ from common.counters import ReasonCounter
 from common.log import RateLimitedLog, kv
 from common.messages.header import Header
 from common.messages.radar import (
-    CAN_ERROR,
-    CAN_EXTENDED,
-    CAN_REMOTE,
     BusState,
     CanFrame,
     RadarStatus,
     RadarTracks,
     RawCanFrames,
+    can_frame,
 )
 from common.messages.vehicle import EgoMotion
 from common.systemd import Watchdog
-from services.radar.ars408.codec import Frame
+from services.radar.ars408.codec import RadarFrame
 from services.radar.ars408.table import classify
-from services.radar.core import CycleResult, RadarCore
+from services.radar.core import RadarCore, TrackedCycle
 from services.radar.ego import EgoMotionForwarder
-from services.radar.ports import CanPort, describe, open_port
+from services.radar.ports import CanPort, describe, open_port, radar_message
 
 _log = logging.getLogger("radar")
 
 # Timeouts, status, 0x200 re-sends and bus state are looked at every 10 ms while frames
-# flow; an idle bus wakes the loop at least every 50 ms for them.
-_HOUSEKEEPING_NS = 10_000_000
-_RECEIVE_TIMEOUT_S = 0.05
+# flow; an idle bus wakes the loop at least every 50 ms for them. Public: a re-run
+# (tools/recording/rerun_radar.py) keeps house on the same schedule.
+HOUSEKEEPING_NS = 10_000_000
+RECEIVE_TIMEOUT_NS = 50_000_000
 # Raw frames not followed by a cycle (other traffic, a radar that stopped) still go out
 # once the oldest is one radar cycle old.
 _RAW_BATCH_MAX_AGE_NS = 75_000_000
@@ -184,7 +183,7 @@ class RadarShell:
         next_housekeeping = 0
         # The schedule of tools/recording/rerun_radar.py, which re-plays this loop.
         while not stop.is_set():
-            msg = port.recv(_RECEIVE_TIMEOUT_S)
+            msg = port.recv(RECEIVE_TIMEOUT_NS / NS_PER_S)
             mono, wall = mono_ns(), wall_ns()
             if msg is not None:
                 self._on_message(msg, wall, mono)
@@ -193,7 +192,7 @@ class RadarShell:
             if mono >= next_housekeeping:
                 self._count_port_errors(port)
                 self._housekeeping(mono, wall)
-                next_housekeeping = mono + _HOUSEKEEPING_NS
+                next_housekeeping = mono + HOUSEKEEPING_NS
         return False
 
     def _count_port_errors(self, port: CanPort) -> None:
@@ -237,12 +236,7 @@ class RadarShell:
 
     def _on_message(self, msg: can.Message, wall: int, mono: int) -> None:
         if self._raw_sink is not None:
-            self._raw.append(CanFrame(
-                timestamp_s=msg.timestamp, rx_wall_ns=wall, rx_mono_ns=mono,
-                arb_id=msg.arbitration_id, data=bytes(msg.data),
-                flags=(CAN_EXTENDED if msg.is_extended_id else 0)
-                | (CAN_REMOTE if msg.is_remote_frame else 0)
-                | (CAN_ERROR if msg.is_error_frame else 0)))
+            self._raw.append(can_frame(msg, wall, mono))
         if msg.is_error_frame:
             self.bus_rejected.add("error_frame")
             self._error_until = mono + int(self.settings.can.error_hold_s * NS_PER_S)
@@ -297,7 +291,7 @@ class RadarShell:
             bus=raw.bus, interface=self.interface, channel=self.channel,
             frames=tuple(frames)))
 
-    def _publish_results(self, core: RadarCore, results: list[CycleResult],
+    def _publish_results(self, core: RadarCore, results: list[TrackedCycle],
                          processing_ns: int) -> None:
         name = core.sensor.name
         sid = core.sensor.sensor_id
@@ -325,7 +319,7 @@ class RadarShell:
 
     # -- writing ------------------------------------------------------------------------
 
-    def _send_frames(self, frames: list[Frame]) -> int:
+    def _send_frames(self, frames: list[RadarFrame]) -> int:
         """Write frames if the bus is open; returns how many went out."""
         sent = 0
         with self._send_lock:
@@ -336,8 +330,7 @@ class RadarShell:
                 return 0
             for f in frames:
                 try:
-                    port.send(can.Message(arbitration_id=f.arb_id, data=f.data,
-                                          is_extended_id=False))
+                    port.send(radar_message(f))
                     sent += 1
                 except (can.CanError, OSError) as exc:
                     self.bus_rejected.add("send_failed")

@@ -25,6 +25,7 @@ from tests.support import (
     python_module,
     router_process,
 )
+from tools.arrivals import Arrivals
 from tools.sim.actuator import SimActuator
 from tools.sim.pty_pair import PtyPair
 
@@ -54,39 +55,28 @@ class Log:
     that start from an index so that long trial runs stay linear."""
 
     def __init__(self) -> None:
-        self.items: list[tuple[int, Any]] = []
-        self._cond = threading.Condition()
+        self._arrivals: Arrivals[tuple[int, Any]] = Arrivals()
 
     def __call__(self, msg: Any, key: str) -> None:
-        with self._cond:
-            self.items.append((time.monotonic_ns(), msg))
-            self._cond.notify_all()
+        self._arrivals.add((time.monotonic_ns(), msg))
 
     def __len__(self) -> int:
-        with self._cond:
-            return len(self.items)
+        return len(self._arrivals)
+
+    @property
+    def items(self) -> list[tuple[int, Any]]:
+        return self._arrivals.items
 
     def wait(self, pred: Callable[[Any], bool], timeout_s: float, start: int = 0,
              what: str = "") -> tuple[int, Any]:
-        """(index, message) of the first message from `start` on that satisfies `pred`."""
-        deadline = time.monotonic() + timeout_s
-        i = start
-        with self._cond:
-            while True:
-                while i < len(self.items):
-                    if pred(self.items[i][1]):
-                        return i, self.items[i][1]
-                    i += 1
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    last = self.items[-1][1] if self.items else None
-                    raise TimeoutError(f"no {what or 'matching message'} in {timeout_s} s; "
-                                       f"last: {last}")
-                self._cond.wait(left)
+        """(index, message) of the first message from `start` on that satisfies `pred`.
+        Raises TimeoutError."""
+        i, (_, msg) = self._arrivals.wait(lambda item: pred(item[1]), timeout_s, start,
+                                          what or "matching message")
+        return i, msg
 
     def since(self, start: int) -> list[Any]:
-        with self._cond:
-            return [m for _, m in self.items[start:]]
+        return [m for _, m in self._arrivals.since(start)]
 
 
 @dataclass

@@ -23,9 +23,9 @@ from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
 from tests.fusion.helpers import CAL, T0, cycle, track
 from tools.eval.depth import box_scene_depth
 from tools.keys import SIM_WORLD
-from tools.messages import SimObject, SimWorld
+from tools.messages import ObjectKind, SimObject, SimWorld
 from tools.recording.writer import RecordingWriter
-from tools.sim.scenario import DEFAULT_SIZE, ObjectKind
+from tools.sim.scenario import DEFAULT_SIZE
 from tools.sim.scenes import Obstacle, Scene, render
 
 MS = 1_000_000
@@ -52,7 +52,7 @@ def camera_info(cal: Calibration, stamp_ns: int) -> CameraInfo:
 def world(stamp_ns: int, seq: int) -> SimWorld:
     length, width, height = DEFAULT_SIZE[ObjectKind.BOX]
     x = box_face_x(stamp_ns) + length / 2
-    box = SimObject(0, "box", x, 0.0, 0.0, length, width, height, -BOX_SPEED, 0.0)
+    box = SimObject(0, ObjectKind.BOX, x, 0.0, 0.0, length, width, height, -BOX_SPEED, 0.0)
     return SimWorld(header=Header(seq, "sim", stamp_ns, 0), scenario="test", run=1,
                     active=True, t_s=(stamp_ns - T0) / 1e9, ego_x_m=0.0, ego_speed_mps=0.0,
                     ego_accel_mps2=0.0, gap_m=None, ttc_s=None, objects=(box,), seed=3,

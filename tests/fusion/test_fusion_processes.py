@@ -26,6 +26,7 @@ from common.messages import (
     VerifierStatus,
 )
 from services.fusion.roi import Roi
+from tests.camera.helpers import folder_config
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
 from tools.sim.rig import rig_calibration_toml
@@ -44,21 +45,7 @@ def write_inputs(tmp: Path, endpoint: str) -> tuple[Path, Path]:
     scene = render(CAL, Scene(obstacles=(Obstacle(*BOX),), seed=4))
     for i in range(2):
         cv2.imwrite(str(frames / f"f{i}.png"), scene)
-    camera = tmp / "camera.toml"
-    camera.write_text(f"""
-[zenoh]
-connect = ["{endpoint}"]
-[camera]
-name = "front"
-calibration = "{CALIBRATION}"
-fps = 30.0
-jpeg_quality = 80
-stats_period_s = 0
-[camera.source]
-kind = "folder"
-path = "{frames}"
-loop = true
-""")
+    camera = folder_config(tmp / "camera.toml", endpoint, frames, extra="jpeg_quality = 80")
     fusion = tmp / "fusion.toml"
     fusion.write_text(f"""
 [zenoh]

@@ -17,8 +17,8 @@ from services.fusion.verifiers import (
     create,
 )
 from tests.fusion.helpers import CAL, T0, feed, frame, make_core, observe, run, track
+from tools.messages import ObjectKind
 from tools.sim.render import Light
-from tools.sim.scenario import ObjectKind
 from tools.sim.scenes import Obstacle, Scene, render
 
 PROJECTOR = ColumnProjector(CAL, ColumnGeometry())

@@ -16,14 +16,14 @@ from services.radar.ars408 import (
     ClusterListStatus,
     ClusterQuality,
     EncodeError,
-    Frame,
-    FrameError,
     Kind,
     ObjectExtended,
     ObjectGeneral,
     ObjectListStatus,
     ObjectQuality,
     RadarConfigFrame,
+    RadarFrame,
+    RadarFrameError,
     RadarStateFrame,
     SpeedInformation,
     Version,
@@ -51,6 +51,14 @@ OBJECT_GENERAL = {
     "rcs_dbsm": lambda b: b[7] * 0.5 - 64,
 }
 
+QUALITY_RMS = {
+        "id": lambda b: b[0],
+        "dist_long_rms": lambda b: b[1] >> 3,
+        "dist_lat_rms": lambda b: (b[1] & 7) << 2 | b[2] >> 6,
+        "vrel_long_rms": lambda b: (b[2] >> 1) & 0x1F,
+        "vrel_lat_rms": lambda b: (b[2] & 1) << 4 | b[3] >> 4,
+}
+
 SPEC = {
     "Obj_0_Status": {
         "n_objects": lambda b: b[0],
@@ -59,11 +67,7 @@ SPEC = {
     },
     "Obj_1_General": OBJECT_GENERAL,
     "Obj_2_Quality": {
-        "id": lambda b: b[0],
-        "dist_long_rms": lambda b: b[1] >> 3,
-        "dist_lat_rms": lambda b: (b[1] & 7) << 2 | b[2] >> 6,
-        "vrel_long_rms": lambda b: (b[2] >> 1) & 0x1F,
-        "vrel_lat_rms": lambda b: (b[2] & 1) << 4 | b[3] >> 4,
+        **QUALITY_RMS,
         "meas_state": lambda b: (b[6] >> 2) & 7,
         "prob_of_exist": lambda b: b[6] >> 5,
     },
@@ -88,11 +92,8 @@ SPEC = {
         "dist_lat_m": lambda b: ((b[2] & 3) << 8 | b[3]) * 0.2 - 102.3,
     },
     "Cluster_2_Quality": {
-        "id": lambda b: b[0],
-        "dist_long_rms": lambda b: b[1] >> 3,
-        "dist_lat_rms": lambda b: (b[1] & 7) << 2 | b[2] >> 6,
-        "vrel_long_rms": lambda b: (b[2] >> 1) & 0x1F,
-        "vrel_lat_rms": lambda b: (b[2] & 1) << 4 | b[3] >> 4,
+        # The deviations as 0x60C's.
+        **QUALITY_RMS,
         "pdh0": lambda b: b[3] & 7,
         "ambig_state": lambda b: b[4] & 7,
         "invalid_state": lambda b: b[4] >> 3,
@@ -173,7 +174,7 @@ def test_every_signal_matches_the_spec_on_random_payloads(spec):
             for attr, expr in SPEC[spec.dbc_name].items():
                 assert getattr(record, attr) == pytest.approx(expr(p), abs=1e-9)
         else:
-            with pytest.raises(FrameError) as err:
+            with pytest.raises(RadarFrameError) as err:
                 decode(spec, p)
             assert err.value.reason == "out_of_range"
 
@@ -286,7 +287,7 @@ def test_encoder_refuses_unrepresentable_values():
         encode(ObjectExtended(1, 0.0, 0.0, 7, 0.0, 1.0, 1.0))
     # On purpose (fault injection): the frame is built, and the decoder rejects it.
     bad = encode(ObjectGeneral(1, -50.0, 0.0, 0.0, 0.0, 0, 0.0), validate=False)
-    with pytest.raises(FrameError, match="Obj_DistLong"):
+    with pytest.raises(RadarFrameError, match="Obj_DistLong"):
         decode_frame(*bad)
     with pytest.raises(EncodeError):
         object_cycle_frames([ObjectGeneral(i % 256, 5.0, 0.0, 0.0, 0.0, 0, 0.0)
@@ -294,16 +295,16 @@ def test_encoder_refuses_unrepresentable_values():
 
 
 def test_bad_frames_are_errors_with_a_reason():
-    with pytest.raises(FrameError) as err:
+    with pytest.raises(RadarFrameError) as err:
         decode_frame(0x60B, bytes(7))
     assert err.value.reason == "wrong_dlc"
-    with pytest.raises(FrameError) as err:
+    with pytest.raises(RadarFrameError) as err:
         decode_frame(0x60B, bytes(9))
     assert err.value.reason == "wrong_dlc"
-    with pytest.raises(FrameError) as err:
+    with pytest.raises(RadarFrameError) as err:
         decode_frame(0x60B, bytes(8))             # DistLong raw 0 = -500 m
     assert err.value.reason == "out_of_range" and "Obj_DistLong" in str(err.value)
-    with pytest.raises(FrameError) as err:
+    with pytest.raises(RadarFrameError) as err:
         decode_frame(0x123, bytes(8))
     assert err.value.reason == "unknown_id"
     # Longer-than-needed frames of short messages still decode (DLC 7 quality in 8 bytes).
@@ -349,7 +350,7 @@ def test_shipped_dbc_is_generated_from_the_table():
 
 
 def test_frame_type_is_a_plain_tuple():
-    f = Frame(0x60B, b"\x00" * 8)
+    f = RadarFrame(0x60B, b"\x00" * 8)
     assert f == (0x60B, b"\x00" * 8) and BY_KIND[Kind.OBJECT_GENERAL].base_id == 0x60B
 
 
@@ -372,7 +373,7 @@ def test_short_lists_decode_as_their_frames_one_by_one(spec):
         for k, data in enumerate(datas):
             try:
                 record = decode(spec, data)
-            except FrameError as exc:
+            except RadarFrameError as exc:
                 assert exc.reason == "out_of_range" and not cols.valid[k]
                 key = "out_of_range:" + str(exc).split(": ", 1)[1].split("=")[0]
                 rejected[key] = rejected.get(key, 0) + 1

@@ -5,7 +5,8 @@ import threading
 import can
 import pytest
 
-from services.radar.ars408 import Frame, ObjectGeneral, object_cycle_frames
+from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
+from services.radar.ports import radar_frame
 from tests.can_support import RECORDING, RECORDING_FRAMES
 from tools.sim.can_links import (
     SlcanPtyLink,
@@ -19,12 +20,12 @@ from tools.sim.can_links import (
 CYCLE = object_cycle_frames([ObjectGeneral(1, 12.0, 0.4, -3.0, 0.0, 0, 10.0)], 7)
 
 
-def recv_all(bus: can.BusABC, n: int) -> list[Frame]:
-    out: list[Frame] = []
+def recv_all(bus: can.BusABC, n: int) -> list[RadarFrame]:
+    out: list[RadarFrame] = []
     while len(out) < n:
         m = bus.recv(10)
         assert m is not None, f"received {len(out)} of {n} frames"
-        out.append(Frame(m.arbitration_id, bytes(m.data)))
+        out.append(radar_frame(m))
     return out
 
 
@@ -34,8 +35,8 @@ def test_slcan_pty_link_both_directions():
         bus = can.Bus(interface="slcan", channel=link.path, bitrate=500000, sleep_after_open=0)
         try:
             link.wait_open(10)
-            link.send([*CYCLE, Frame(0x123, b"")])
-            assert recv_all(bus, 3) == [*CYCLE, Frame(0x123, b"")]
+            link.send([*CYCLE, RadarFrame(0x123, b"")])
+            assert recv_all(bus, 3) == [*CYCLE, RadarFrame(0x123, b"")]
             bus.send(can.Message(arbitration_id=0x200, data=bytes(range(8)),
                                  is_extended_id=False))
             assert link.wait_frame(lambda f: f.arb_id == 0x200, 10).data == bytes(range(8))
@@ -61,21 +62,21 @@ def test_socketcand_server_both_directions():
 
 
 def test_replay_log_fast_sends_every_frame():
-    sent: list[Frame] = []
+    sent: list[RadarFrame] = []
     assert replay_log(str(RECORDING), sent.extend, pace="fast") == RECORDING_FRAMES
-    assert sent[0] == Frame(0x60A, bytes.fromhex("03FBF710"))
-    limited: list[Frame] = []
+    assert sent[0] == RadarFrame(0x60A, bytes.fromhex("03FBF710"))
+    limited: list[RadarFrame] = []
     n = replay_log(str(RECORDING), limited.extend, pace="fast", loop=True,
                    max_duration_s=60.0)
     assert n > RECORDING_FRAMES                  # 37.9 s of log, looped to 60 s
 
 
 def test_wire_formats():
-    assert slcan_line(Frame(0x60B, bytes.fromhex("204FEC00802001B4"))) == \
+    assert slcan_line(RadarFrame(0x60B, bytes.fromhex("204FEC00802001B4"))) == \
         b"t60B8204FEC00802001B4\r"
-    assert parse_slcan_frame("t2008" + "00" * 8) == Frame(0x200, bytes(8))
+    assert parse_slcan_frame("t2008" + "00" * 8) == RadarFrame(0x200, bytes(8))
     assert parse_slcan_frame("S6") is None and parse_slcan_frame("tXYZ1") is None
-    assert parse_socketcand_send("< send 2a0 3 b 4a e0 >") == Frame(0x2A0, b"\x0b\x4a\xe0")
+    assert parse_socketcand_send("< send 2a0 3 b 4a e0 >") == RadarFrame(0x2A0, b"\x0b\x4a\xe0")
     assert parse_socketcand_send("< open can0 >") is None
 
 

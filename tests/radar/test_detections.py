@@ -189,7 +189,7 @@ def test_general_frames_decode_as_their_frames_one_by_one(mode, n):
     """Each valid frame a detection, in order; out-of-range frames dropped and counted;
     in object mode a repeated ID is a fault (the first frame of the ID wins, even a
     rejected one), in cluster mode a detection."""
-    from services.radar.ars408 import FrameError, decode
+    from services.radar.ars408 import RadarFrameError, decode
     from services.radar.detections import decode_general
 
     rng = np.random.default_rng(4 + n)
@@ -212,7 +212,7 @@ def test_general_frames_decode_as_their_frames_one_by_one(mode, n):
             seen.add(d[0])                          # the ID byte
             try:
                 r = decode(spec, d)
-            except FrameError as exc:
+            except RadarFrameError as exc:
                 key = f"{exc.reason}:{spec.signals[1].dbc_name}"
                 rejected[key] = rejected.get(key, 0) + 1
                 continue

@@ -19,7 +19,8 @@ from common.messages import RadarTracks, decode
 from services.radar.ars408 import decode_frame
 from tests.can_support import RECORDING, VcanUnavailable, vcan_interface
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
-from tools.sim.can_links import SlcanPtyLink, bus_sink, replay_log
+from tools.sim.can_links import SlcanPtyLink, replay_log
+from tools.sim.radar_feed import PythonCanSink
 
 pytestmark = pytest.mark.slow
 
@@ -137,7 +138,7 @@ def vcan_name():
 def test_service_process_over_vcan(vcan_name, tmp_path, router):
     with can.Bus(interface="socketcan", channel=vcan_name) as sender:
         def feed(stop: threading.Event) -> None:
-            replay_log(str(RECORDING), bus_sink(sender), pace="realtime", stop=stop,
+            replay_log(str(RECORDING), PythonCanSink(sender).send, pace="realtime", stop=stop,
                        max_duration_s=REPLAY_S)
 
         can_table = f"""[radar.can]

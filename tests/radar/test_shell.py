@@ -26,14 +26,15 @@ from common.messages.header import Header
 from common.messages.radar import BusState
 from common.messages.vehicle import EgoMotion
 from services.radar.ars408 import (
-    Frame,
     ObjectGeneral,
+    RadarFrame,
     RadarStateFrame,
     SpeedInformation,
     decode_frame,
     encode,
     object_cycle_frames,
 )
+from services.radar.ports import radar_message
 from services.radar.shell import RadarShell
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.support import Collector, wait_for
@@ -79,9 +80,8 @@ def cycle_messages(k: int, sensor_id: int = 0, x: float = 12.0) -> list[can.Mess
     return [msg(f, t=100.0 + 0.075 * k) for f in frames]
 
 
-def msg(f: Frame, t: float = 0.0, **kw) -> can.Message:
-    return can.Message(arbitration_id=f.arb_id, data=f.data, is_extended_id=False,
-                       timestamp=t, **kw)
+def msg(f: RadarFrame, t: float = 0.0) -> can.Message:
+    return radar_message(f, t)
 
 
 class ScriptedPort:
@@ -150,12 +150,12 @@ def test_bad_input_is_counted_and_never_stops_the_service(running):
         can.Message(is_error_frame=True, timestamp=1.0),
         can.Message(arbitration_id=0x60B, data=bytes(8), is_extended_id=True),
         can.Message(arbitration_id=0x60B, is_remote_frame=True, is_extended_id=False),
-        msg(Frame(0x123, b"\x01")),
-        msg(Frame(0x61A, b"\x01\x00\x00\x10")),              # sensor 1: not configured
-        msg(Frame(0x300, b"\x40\x00")),                       # another host's speed frame
+        msg(RadarFrame(0x123, b"\x01")),
+        msg(RadarFrame(0x61A, b"\x01\x00\x00\x10")),              # sensor 1: not configured
+        msg(RadarFrame(0x300, b"\x40\x00")),                       # another host's speed frame
     ]
-    broken_cycle = [msg(Frame(0x60A, b"\x02\x00\x05\x10"), t=100.1),
-                    msg(Frame(0x60B, b"\x01\x02\x03"), t=100.1),   # wrong DLC
+    broken_cycle = [msg(RadarFrame(0x60A, b"\x02\x00\x05\x10"), t=100.1),
+                    msg(RadarFrame(0x60B, b"\x01\x02\x03"), t=100.1),   # wrong DLC
                     msg(encode(ObjectGeneral(2, 12.0, 0.0, 0.0, 0.0, 0, 5.0)), t=100.1)]
     script = cycle_messages(0) + bad + broken_cycle + cycle_messages(2) + cycle_messages(3)
     out = Output()
@@ -218,7 +218,7 @@ def test_two_radars_on_one_bus_publish_under_their_own_names(running):
     assert wait_for(lambda: out.last_status("left"), 10).sensor_id == 1
 
 
-def state_frame(output_type: int, temperature_error: int = 0) -> Frame:
+def state_frame(output_type: int, temperature_error: int = 0) -> RadarFrame:
     return encode(RadarStateFrame(1, 200, 0, 0, temperature_error, 0, 0, 0, 1, 0, 1, 1,
                                   output_type, 0))
 
@@ -234,7 +234,7 @@ class PtyRadar:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._cycles, daemon=True)
 
-    def on_frame(self, f: Frame) -> None:
+    def on_frame(self, f: RadarFrame) -> None:
         if f.arb_id == 0x200 and self.answer is not None:
             self.link.send([state_frame(self.answer, self.temperature_error)])
 

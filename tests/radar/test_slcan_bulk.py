@@ -10,8 +10,8 @@ import can
 import pytest
 
 from common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
-from services.radar.ars408 import Frame, ObjectGeneral, object_cycle_frames
-from services.radar.ports import open_port
+from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
+from services.radar.ports import open_port, radar_frame
 from services.radar.shell import RadarShell
 from services.radar.slcan_bulk import MAX_LINE, BulkSlcanBus
 from tests.radar.test_shell import Output, running  # noqa: F401 (fixture)
@@ -41,8 +41,8 @@ def recv_all(bus: can.BusABC, n: int, timeout_s: float = 5.0) -> list[can.Messag
     return out
 
 
-def frames_of(msgs: list[can.Message]) -> list[Frame]:
-    return [Frame(m.arbitration_id, bytes(m.data)) for m in msgs]
+def frames_of(msgs: list[can.Message]) -> list[RadarFrame]:
+    return [radar_frame(m) for m in msgs]
 
 
 def test_a_whole_cycle_written_at_once_comes_out_complete_and_in_order(link_bus):
@@ -58,7 +58,7 @@ def test_a_whole_cycle_written_at_once_comes_out_complete_and_in_order(link_bus)
 
 def test_a_line_cut_in_two_waits_for_its_second_half(link_bus):
     link, bus = link_bus
-    line = slcan_line(Frame(0x60B, bytes(range(8))))
+    line = slcan_line(RadarFrame(0x60B, bytes(range(8))))
     link.send_raw(line[:9])
     assert bus.recv(0.1) is None
     link.send_raw(line[9:])
@@ -68,7 +68,7 @@ def test_a_line_cut_in_two_waits_for_its_second_half(link_bus):
 
 def test_noise_is_counted_and_skipped_and_replies_are_not_noise(link_bus):
     link, bus = link_bus
-    good = Frame(0x60A, b"\x01\x00\x07\x10")
+    good = RadarFrame(0x60A, b"\x01\x00\x07\x10")
     link.send_raw(b"\r" + b"z\r"                 # adapter replies: ignored, not counted
                   + b"tXYZ8001122334455667\r"    # bad hex
                   + b"t60B8AABB\r"               # DLC 8, one byte of data

@@ -8,7 +8,7 @@ import can
 import pytest
 
 from common.resources import ARS408_RECORDING
-from services.radar.ars408 import FrameError, decode_frame
+from services.radar.ars408 import RadarFrameError, decode_frame
 from tests.can_support import RECORDING_FRAMES, recording_messages
 from tests.extras_support import run_without
 from tools.can_export import LONG_HEAD, main
@@ -71,7 +71,7 @@ def test_another_sensor_id_and_what_cannot_be_exported_is_counted(tmp_path, caps
     _, _, record = decode_frame(0x60B, general.data)
     assert float(rows[0]["Obj_1_General.Obj_DistLong"]) == pytest.approx(record.dist_long_m)
     assert "1 Obj_1_General:" in err and "1 id 0x123 not in the DBC" in err
-    with pytest.raises(FrameError):
+    with pytest.raises(RadarFrameError):
         decode_frame(0x60B, short.data)           # the service rejects it too
     _, err = export(capsys, log)                   # as SensorID 0: none of them is known
     assert "0 frames exported" in err and "2 id 0x61B not in the DBC" in err

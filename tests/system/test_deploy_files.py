@@ -51,29 +51,42 @@ def _conf(path: Path, **values: object) -> zenoh.Config:
     return conf
 
 
+TLS = "transport/link/tls/"
+
+
+def _secure_router(certs: Path, endpoint: str) -> zenoh.Session:
+    """The shipped secure router on `endpoint`, with the certificates in `certs`."""
+    return zenoh.open(_conf(DEPLOY / "zenoh/secure/router.json5", **{
+        "listen/endpoints": [endpoint],
+        TLS + "root_ca_certificate": str(certs / "ca.pem"),
+        TLS + "listen_certificate": str(certs / "router.pem"),
+        TLS + "listen_private_key": str(certs / "router-key.pem"),
+    }))
+
+
+def _secure_client(name: str, endpoint: str, ca: Path, cert: Path,
+                   **values: object) -> zenoh.Config:
+    """The shipped client file of `name`, trusting the CA in folder `ca`, presenting
+    `cert` (its path without ``.pem``)."""
+    return _conf(DEPLOY / f"zenoh/secure/client-{name}.json5", **{
+        "connect/endpoints": [endpoint],
+        TLS + "root_ca_certificate": str(ca / "ca.pem"),
+        TLS + "connect_certificate": f"{cert}.pem",
+        TLS + "connect_private_key": f"{cert}-key.pem",
+        **values,
+    })
+
+
 @pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl is not installed")
 def test_secure_profile_mutual_tls_and_access_control(tmp_path):
     certs = tmp_path / "certs"
     subprocess.run(["sh", str(DEPLOY / "zenoh/secure/make-certs.sh"), str(certs)],
                    check=True, capture_output=True, timeout=120)
-    port = free_port()
-    endpoint = f"tls/127.0.0.1:{port}"
-    tls = "transport/link/tls/"
-    router = zenoh.open(_conf(DEPLOY / "zenoh/secure/router.json5", **{
-        "listen/endpoints": [endpoint],
-        tls + "root_ca_certificate": str(certs / "ca.pem"),
-        tls + "listen_certificate": str(certs / "router.pem"),
-        tls + "listen_private_key": str(certs / "router-key.pem"),
-    }))
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    router = _secure_router(certs, endpoint)
 
     def client(name: str, cert: str | None = None) -> zenoh.Session:
-        cert = cert or name
-        return zenoh.open(_conf(DEPLOY / f"zenoh/secure/client-{name}.json5", **{
-            "connect/endpoints": [endpoint],
-            tls + "root_ca_certificate": str(certs / "ca.pem"),
-            tls + "connect_certificate": str(certs / f"{cert}.pem"),
-            tls + "connect_private_key": str(certs / f"{cert}-key.pem"),
-        }))
+        return zenoh.open(_secure_client(name, endpoint, certs, certs / (cert or name)))
 
     sessions: list[zenoh.Session] = []
     try:
@@ -198,31 +211,15 @@ def test_secure_router_refuses_a_client_without_a_certificate_of_its_ca(tmp_path
         subprocess.run(["sh", str(DEPLOY / "zenoh/secure/make-certs.sh"), str(folder)],
                        check=True, capture_output=True, timeout=120)
     endpoint = f"tls/127.0.0.1:{free_port()}"
-    tls = "transport/link/tls/"
-    router = zenoh.open(_conf(DEPLOY / "zenoh/secure/router.json5", **{
-        "listen/endpoints": [endpoint],
-        tls + "root_ca_certificate": str(ours / "ca.pem"),
-        tls + "listen_certificate": str(ours / "router.pem"),
-        tls + "listen_private_key": str(ours / "router-key.pem"),
-    }))
+    router = _secure_router(ours, endpoint)
     try:
-        for name, certs in (("fusion-primary", theirs), ("brake", theirs)):
-            conf = _conf(DEPLOY / "zenoh/secure/client-brake.json5", **{
-                "connect/endpoints": [endpoint], "connect/timeout_ms": 3000,
-                "connect/exit_on_failure": True,
-                tls + "root_ca_certificate": str(ours / "ca.pem"),
-                tls + "connect_certificate": str(certs / f"{name}.pem"),
-                tls + "connect_private_key": str(certs / f"{name}-key.pem"),
-            })
+        for name in ("fusion-primary", "brake"):
+            conf = _secure_client("brake", endpoint, ours, theirs / name,
+                                  **{"connect/timeout_ms": 3000, "connect/exit_on_failure": True})
             with pytest.raises(zenoh.ZError):
                 zenoh.open(conf).close()
         # the same client with our CA's certificate connects: the refusal was the identity
-        zenoh.open(_conf(DEPLOY / "zenoh/secure/client-brake.json5", **{
-            "connect/endpoints": [endpoint], "connect/timeout_ms": 10000,
-            "connect/exit_on_failure": True,
-            tls + "root_ca_certificate": str(ours / "ca.pem"),
-            tls + "connect_certificate": str(ours / "brake.pem"),
-            tls + "connect_private_key": str(ours / "brake-key.pem"),
-        })).close()
+        zenoh.open(_secure_client("brake", endpoint, ours, ours / "brake", **{
+            "connect/timeout_ms": 10000, "connect/exit_on_failure": True})).close()
     finally:
         router.close()

@@ -11,7 +11,7 @@ from common.calibration import Calibration
 from common.messages import Header
 from services.camera.plugin import PluginContext, make_plugin_source
 from services.camera.source import FrameSource, SourceConfigError, SourceError
-from tools.messages import SimObject, SimWorld
+from tools.messages import ObjectKind, SimObject, SimWorld
 from tools.sim.camera_source import SimCameraSource, bodies_at
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
@@ -19,7 +19,7 @@ S = 1_000_000_000
 
 
 def world(stamp_ns: int, speed: float = 10.0, accel: float = 0.0, run: int = 1) -> SimWorld:
-    ped = SimObject(0, "pedestrian", 20.0, -2.0, 90.0, 0.35, 0.55, 1.75, 0.0, 1.5)
+    ped = SimObject(0, ObjectKind.PEDESTRIAN, 20.0, -2.0, 90.0, 0.35, 0.55, 1.75, 0.0, 1.5)
     return SimWorld(header=Header(1, "sim", stamp_ns, 0), scenario="t", run=run, active=True,
                     t_s=1.0, ego_x_m=5.0, ego_speed_mps=speed, ego_accel_mps2=accel,
                     gap_m=None, ttc_s=None, objects=(ped,), seed=3, brightness=1.0, noise=0.0)

@@ -13,16 +13,11 @@ from common.calibration import Calibration
 from common.config.radar import RadarSettings
 from services.radar.core import RadarCore
 from tests.can_support import feed
+from tools.messages import FALSE_TARGETS, ObjectKind
 from tools.sim.radar_feed import cluster_frames, object_frames
 from tools.sim.radar_model import RadarModel
 from tools.sim.render import BACKDROP_M, Renderer
-from tools.sim.scenario import (
-    FALSE_TARGETS,
-    ObjectKind,
-    ScenarioKind,
-    find_scenario,
-    load_scenario,
-)
+from tools.sim.scenario import ScenarioKind, find_scenario, load_scenario
 from tools.sim.texture_density import survey
 from tools.sim.world import Body, World
 
@@ -209,9 +204,9 @@ def test_the_evaluation_labels_a_false_target_track_as_a_negative():
     from tools.eval.sim_truth import label_track
     from tools.messages import SimObject, SimWorld
 
-    objects = (SimObject(0, "plate", 20.0, 0.0, 0.0, 0.8, 0.8, 0.02, 0.0, 0.0),
-               SimObject(1, "box", 30.3, 0.0, 0.0, 0.6, 0.6, 0.6, 0.0, 0.0),
-               SimObject(2, "sign", 40.1, 0.0, 0.0, 0.2, 9.0, 1.6, 0.0, 0.0, 5.0))
+    objects = (SimObject(0, ObjectKind.PLATE, 20.0, 0.0, 0.0, 0.8, 0.8, 0.02, 0.0, 0.0),
+               SimObject(1, ObjectKind.BOX, 30.3, 0.0, 0.0, 0.6, 0.6, 0.6, 0.0, 0.0),
+               SimObject(2, ObjectKind.SIGN, 40.1, 0.0, 0.0, 0.2, 9.0, 1.6, 0.0, 0.0, 5.0))
     world = SimWorld(header=Header(0, "sim", 1_000, 1_000), scenario="t", run=1, active=True,
                      t_s=0.0, ego_x_m=0.0, ego_speed_mps=0.0, ego_accel_mps2=0.0, gap_m=None,
                      ttc_s=None, objects=objects, seed=0, brightness=1.0, noise=0.0)

@@ -10,9 +10,10 @@ import pytest
 
 from common.calibration import Calibration
 from common.imaging import decode_gray, encode_jpeg
+from tools.messages import ObjectKind
 from tools.sim.radar_model import OBJ_CLASS, DynProp, RadarModel, in_field_of_view
 from tools.sim.render import Renderer
-from tools.sim.scenario import DEFAULT_SIZE, CameraLook, ObjectKind, RadarLook
+from tools.sim.scenario import DEFAULT_SIZE, CameraLook, RadarLook
 from tools.sim.world import Body
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"

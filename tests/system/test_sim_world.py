@@ -7,10 +7,10 @@ import msgspec
 import pytest
 
 from common.config.loader import ConfigError, parse_config
+from tools.messages import ObjectKind
 from tools.sim.scenario import (
     EgoSpec,
     Motion,
-    ObjectKind,
     Scenario,
     ScenarioKind,
     SceneObject,

@@ -17,7 +17,7 @@ TOOLS = Path(__file__).resolve().parents[2] / "tools"
 
 # Bottom to top.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("bus", "commands", "machine", "messages"),     # import nothing of tools/
+    ("arrivals", "bus", "commands", "machine", "messages"),   # import nothing of tools/
     ("keys",),                                      # the registry plus the simulator's key
     # commands on the bus and on files
     ("calib", "can_export", "init", "keygen", "monitor", "schemas", "topics"),

@@ -2,22 +2,27 @@
 
 Both instances run on the same radar cycles, so their outputs pair up by radar sequence
 number (VerifiedTargets by sensor and radar_seq, BrakeCommand by radar_seq). For every
-cycle both published, the comparison records where they disagreed: the command's
-decision, and per track the verification and decision (with both densities, to see how
-far apart the verifiers were). Consecutive disagreeing cycles of the same kind are
-grouped into episodes. Cycles only one instance published are counted, not compared.
+cycle both published, the comparison (the re-run's, tools/recording/compare.py, on
+`COMMAND_FIELDS` and `TRACK_FIELDS`) finds where they disagreed: the command's
+decision, and per track the verification and decision (reported with both densities,
+to see how far apart the verifiers were). Consecutive disagreeing cycles of the same
+kind are grouped into episodes. Cycles only one instance published are counted, not
+compared.
 """
 
 from collections import Counter
 from dataclasses import dataclass, field
 
 from common.messages import BrakeCommand, VerifiedTarget, VerifiedTargets
+from tools.recording.compare import Comparison
 
 PENDING_CYCLES = 50    # a cycle still unpaired after this many newer ones is unmatched
+COMMAND_FIELDS = ("decision",)
+TRACK_FIELDS = ("verification", "decision")
 
 
 @dataclass(frozen=True)
-class Difference:
+class Disagreement:
     radar_seq: int
     what: str                 # "command", "track"
     track_id: int             # -1 for the command
@@ -79,6 +84,8 @@ class Comparator:
         self._report = Report(primary, candidate)
         self._open: dict[tuple[str, int], Episode] = {}
         self._newest = -1
+        self._comparison = Comparison(command_fields=COMMAND_FIELDS, cycle_fields=(),
+                                      track_fields=TRACK_FIELDS, keep_differences=False)
 
     def add_targets(self, msg: VerifiedTargets) -> None:
         if msg.instance not in self._targets:
@@ -122,7 +129,7 @@ class Comparator:
             for seq_ in [s for s in pending_cmd if s < edge]:
                 del pending_cmd[seq_]
 
-    def _note(self, diff: Difference | None, seq: int, kind_key: tuple[str, int]) -> None:
+    def _note(self, diff: Disagreement | None, seq: int, kind_key: tuple[str, int]) -> None:
         """Extend or close the episode of `kind_key` (what, track) at cycle `seq`."""
         episode = self._open.get(kind_key)
         if diff is None:
@@ -142,29 +149,32 @@ class Comparator:
         r = self._report
         r.commands_compared += 1
         diff = None
-        if p.decision != c.decision:
+        if self._comparison.add_command(p.radar_seq, p.header.stamp_ns, p, c):
             r.commands_disagreed += 1
-            diff = Difference(p.radar_seq, "command", -1, p.decision.value, c.decision.value,
-                              f"primary: {p.reason} | candidate: {c.reason}")
+            diff = Disagreement(p.radar_seq, "command", -1, p.decision.value,
+                                c.decision.value, f"primary: {p.reason} | candidate: {c.reason}")
         self._note(diff, p.radar_seq, ("command", -1))
 
     def _compare_targets(self, p: VerifiedTargets, c: VerifiedTargets) -> None:
         r = self._report
         r.cycles_compared += 1
+        found = self._comparison.add_targets(p.radar_seq, p.header.stamp_ns, p, c)
+        r.tracks_only_in_one += sum(d.field == "present" for d in found)
+        differing = {d.track_id for d in found if d.field != "present"}
         ps = {t.track_id: t for t in p.targets}
         cs = {t.track_id: t for t in c.targets}
-        r.tracks_only_in_one += len(ps.keys() ^ cs.keys())
         for tid in sorted(ps.keys() & cs.keys()):
             tp, tc = ps[tid], cs[tid]
             r.tracks_compared += 1
             r.verification[(tp.verification.value, tc.verification.value)] += 1
             diff = None
-            if (tp.verification, tp.decision) != (tc.verification, tc.decision):
+            if tid in differing:
                 r.tracks_disagreed += 1
-                diff = Difference(p.radar_seq, "track", tid, _track_label(tp), _track_label(tc),
-                                  f"track {tid} at {tp.range_m:.1f} m, y {tp.y_m:+.1f} m: "
-                                  f"density {_density(tp)} ({p.verifier}) vs {_density(tc)} "
-                                  f"({c.verifier})")
+                diff = Disagreement(p.radar_seq, "track", tid, _track_label(tp),
+                                    _track_label(tc),
+                                    f"track {tid} at {tp.range_m:.1f} m, y {tp.y_m:+.1f} m: "
+                                    f"density {_density(tp)} ({p.verifier}) vs "
+                                    f"{_density(tc)} ({c.verifier})")
             self._note(diff, p.radar_seq, ("track", tid))
 
     def report(self) -> Report:

@@ -14,9 +14,8 @@ import numpy as np
 from common.calibration import Calibration
 from common.messages import DecodeError, decode
 from tools.eval.adapters.paper_rois import Box2D, footprint_distance
-from tools.messages import SimWorld
+from tools.messages import ObjectKind, SimWorld
 from tools.sim.camera_source import bodies_at
-from tools.sim.scenario import ObjectKind
 
 # A track this close to an object's footprint is that object: the simulated radar's
 # position noise (0.1-0.15 m) and its split returns on large objects stay well inside.

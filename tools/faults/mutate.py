@@ -60,18 +60,25 @@ def _leaves(obj: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
     return out
 
 
+def _pick(rng: random.Random, tree: Any) -> tuple[Any, Any] | None:
+    """A random node of `tree` as (its parent, its key or index); None for the root."""
+    path = rng.choice(_leaves(tree))
+    if not path:
+        return None
+    parent = tree
+    for p in path[:-1]:
+        parent = parent[p]
+    return parent, path[-1]
+
+
 def mutate_tree(rng: random.Random, obj: Any) -> Any:
     """A deep copy of a plain tree (dicts, lists, scalars) with one node replaced by an
     extreme value, deleted, or given an unknown sibling."""
     tree = msgspec.json.decode(msgspec.json.encode(obj))
-    paths = _leaves(tree)
-    path = rng.choice(paths)
-    if not path:
+    picked = _pick(rng, tree)
+    if picked is None:
         return rng.choice(EXTREMES)
-    parent = tree
-    for p in path[:-1]:
-        parent = parent[p]
-    last = path[-1]
+    parent, last = picked
     op = rng.randrange(10)
     if op == 0 and isinstance(parent, dict):
         del parent[last]
@@ -95,12 +102,9 @@ def mutate_msgpack(rng: random.Random, payload: bytes) -> bytes:
 
 def _mutate_any(rng: random.Random, tree: Any) -> Any:
     # msgpack trees may hold bytes and non-finite floats, which JSON cannot carry
-    paths = _leaves(tree)
-    path = rng.choice(paths)
-    if not path:
+    picked = _pick(rng, tree)
+    if picked is None:
         return rng.choice(EXTREMES)
-    parent = tree
-    for p in path[:-1]:
-        parent = parent[p]
-    parent[path[-1]] = rng.choice(EXTREMES)
+    parent, last = picked
+    parent[last] = rng.choice(EXTREMES)
     return tree

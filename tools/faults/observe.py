@@ -2,8 +2,6 @@
 targets and commands, the camera's newest frame (from the bus, each with its receipt
 time on this host's monotonic clock) and the simulated actuator's events."""
 
-import threading
-import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
@@ -13,8 +11,10 @@ from common.command_auth import CommandKey, mac_problem
 from common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
 from common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
 from common.messages.codec import DecodeError, decode
+from tools.arrivals import Arrivals
 
 T = TypeVar("T")
+M = TypeVar("M", BrakeStatus, VerifiedTargets, BrakeCommand)
 HISTORY = 4000
 
 
@@ -27,48 +27,26 @@ class Seen(Generic[T]):
 class Stream(Generic[T]):
     """A bounded history of received messages, with a wait on a predicate."""
 
-    def __init__(self, cond: threading.Condition) -> None:
-        self._cond = cond
-        self.items: list[Seen[T]] = []
-        self.total = 0
+    def __init__(self) -> None:
+        self._arrivals: Arrivals[Seen[T]] = Arrivals(keep=HISTORY)
 
     def add(self, item: Seen[T]) -> None:
-        with self._cond:
-            self.items.append(item)
-            self.total += 1
-            if len(self.items) > HISTORY:
-                del self.items[:HISTORY // 2]
-            self._cond.notify_all()
+        self._arrivals.add(item)
 
     def mark(self) -> int:
         """A position: `wait` looks only at what arrives after it."""
-        with self._cond:
-            return self.total
+        return len(self._arrivals)
 
     def since(self, mark: int) -> list[Seen[T]]:
-        with self._cond:
-            start = len(self.items) - (self.total - mark)
-            return list(self.items[max(start, 0):])
+        return self._arrivals.since(mark)
 
     def wait(self, pred: Callable[[T], bool], mark: int, timeout_s: float) -> Seen[T] | None:
         """The first message after `mark` for which `pred` holds, or None at the timeout."""
-        deadline = time.monotonic() + timeout_s
-        checked = mark
-        with self._cond:
-            while True:
-                start = len(self.items) - (self.total - checked)
-                for item in self.items[max(start, 0):]:
-                    if pred(item.msg):
-                        return item
-                checked = self.total
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return None
-                self._cond.wait(min(left, 0.1))
+        found = self._arrivals.first(lambda seen: pred(seen.msg), timeout_s, mark)
+        return None if found is None else found[1]
 
     def last(self) -> Seen[T] | None:
-        with self._cond:
-            return self.items[-1] if self.items else None
+        return self._arrivals.last()
 
 
 class Observer:
@@ -78,11 +56,10 @@ class Observer:
 
     def __init__(self, bus: Bus, actuator: Any, keys: Mapping[str, CommandKey],
                  brake_source: str = "brake/main", fusion_instance: str = "primary") -> None:
-        cond = threading.Condition()
-        self.status: Stream[BrakeStatus] = Stream(cond)
-        self.targets: Stream[VerifiedTargets] = Stream(cond)
-        self.commands: Stream[BrakeCommand] = Stream(cond)
-        self.actuator_events: Stream[Any] = Stream(cond)
+        self.status: Stream[BrakeStatus] = Stream()
+        self.targets: Stream[VerifiedTargets] = Stream()
+        self.commands: Stream[BrakeCommand] = Stream()
+        self.actuator_events: Stream[Any] = Stream()
         self.frame_payload: bytes | None = None
         self._brake_source = brake_source
         self._fusion_source = f"fusion/{fusion_instance}"
@@ -97,34 +74,27 @@ class Observer:
         self.forged_seen = 0      # harness's own publications that came back (ignored)
 
     def _on_status(self, payload: bytes, key: str, rx_ns: int) -> None:
-        try:
-            msg = decode(payload, BrakeStatus)
-        except DecodeError:
-            return
-        if msg.header.source != self._brake_source:
-            self.forged_seen += 1
-            return
-        self.status.add(Seen(rx_ns, msg))
+        self._keep(payload, rx_ns, BrakeStatus, self._brake_source, self.status)
 
     def _on_targets(self, payload: bytes, key: str, rx_ns: int) -> None:
-        try:
-            msg = decode(payload, VerifiedTargets)
-        except DecodeError:
-            return
-        if msg.header.source != self._fusion_source:
-            self.forged_seen += 1
-            return
-        self.targets.add(Seen(rx_ns, msg))
+        self._keep(payload, rx_ns, VerifiedTargets, self._fusion_source, self.targets)
 
     def _on_command(self, payload: bytes, key: str, rx_ns: int) -> None:
+        self._keep(payload, rx_ns, BrakeCommand, self._fusion_source, self.commands,
+                   lambda msg: not mac_problem(payload, msg, self._keys))
+
+    def _keep(self, payload: bytes, rx_ns: int, msg_type: type[M], source: str,
+              stream: Stream[M], authentic: Callable[[M], bool] = lambda msg: True) -> None:
+        """Into `stream` when it decodes, comes from `source` and is `authentic`; what
+        decodes but is not is one of the harness's own floods come back (counted)."""
         try:
-            msg = decode(payload, BrakeCommand)
+            msg = decode(payload, msg_type)
         except DecodeError:
             return
-        if msg.header.source != self._fusion_source or mac_problem(payload, msg, self._keys):
+        if msg.header.source != source or not authentic(msg):
             self.forged_seen += 1
             return
-        self.commands.add(Seen(rx_ns, msg))
+        stream.add(Seen(rx_ns, msg))
 
     def _on_frame(self, payload: bytes, key: str, rx_ns: int) -> None:
         self.frame_payload = payload

@@ -9,14 +9,13 @@ directory. See docs/deploy.md for the format.
 import re
 import shutil
 import sys
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
 import msgspec
 
-from common.config.loader import ConfigError, parse_config
+from common.config.loader import ConfigError, load_config
 from tools.commands import COMMANDS
 from tools.launch.restart import Backoff, RestartMode
 
@@ -124,13 +123,7 @@ def load_table(path: str | Path) -> tuple[ProcessTable, Path]:
     Raises ConfigError naming the file and the field, or the missing file.
     """
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read process table: {exc.strerror}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
-    table = parse_config(data, ProcessTable, str(p))
+    table = load_config(p, ProcessTable, what="process table")
     workdir = (p.resolve().parent / table.workdir).resolve()
     if not workdir.is_dir():
         raise ConfigError(f"{p}: workdir {table.workdir!r} is not a directory ({workdir})")

@@ -13,7 +13,7 @@ from common.clock import mono_ns, wall_ns
 from common.keys import RADAR_CAN
 from common.messages import CanFrame, Header, RawCanFrames
 from common.messages import encode as encode_msg
-from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
+from common.messages.radar import can_frame
 
 BATCH_S = 0.075
 _log = logging.getLogger("record.can")
@@ -75,12 +75,7 @@ class CanReader:
             if msg is not None:
                 if not batch:
                     started = mono
-                batch.append(CanFrame(
-                    timestamp_s=msg.timestamp, rx_wall_ns=wall_ns(), rx_mono_ns=mono,
-                    arb_id=msg.arbitration_id, data=bytes(msg.data),
-                    flags=(CAN_EXTENDED if msg.is_extended_id else 0)
-                    | (CAN_REMOTE if msg.is_remote_frame else 0)
-                    | (CAN_ERROR if msg.is_error_frame else 0)))
+                batch.append(can_frame(msg, wall_ns(), mono))
             if batch and (msg is None or mono - started >= BATCH_S * 1e9):
                 self._flush(batch)
                 batch = []

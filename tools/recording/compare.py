@@ -1,4 +1,6 @@
-"""A re-run's outputs against the recorded ones, cycle by cycle (pure).
+"""Two fusion outputs of the same radar cycles, cycle by cycle (pure): a re-run's against
+the recorded ones (`aeb rerun --compare`), and a candidate instance's against the
+primary's (`aeb ab-report`, which compares only the decisions and verifications).
 
 Cycles pair up by the radar cycle (sequence number and stamp). Compared: every field of
 the command but its header, the cycle's verifier and camera status, and every field of
@@ -101,6 +103,11 @@ class Comparison:
     differences: list[Difference] = field(default_factory=list)
     verifiers: Counter[tuple[str, str]] = field(default_factory=Counter)  # (recorded, re-run)
     exact: bool = False              # floats bit for bit instead of to REL_TOLERANCE
+    # what is compared (by default everything that is behaviour)
+    command_fields: tuple[str, ...] = COMMAND_FIELDS
+    cycle_fields: tuple[str, ...] = CYCLE_FIELDS
+    track_fields: tuple[str, ...] = TRACK_FIELDS
+    keep_differences: bool = True    # False: differences counted and returned, not kept
 
     def add(self, seq: int, stamp_ns: int, recorded_cmd: BrakeCommand | None,
             rerun_cmd: BrakeCommand, recorded: VerifiedTargets | None,
@@ -112,20 +119,34 @@ class Comparison:
         self.cycles += 1
         found: list[Difference] = []
         if recorded_cmd is not None:
-            self.compared["commands"] += 1
-            found += _fields(seq, stamp_ns, "command", -1, recorded_cmd, rerun_cmd,
-                             COMMAND_FIELDS, self.exact)
-            self.differing["commands"] += bool(found)
+            found += self.add_command(seq, stamp_ns, recorded_cmd, rerun_cmd)
         if recorded is not None:
-            self.verifiers[(_verifier(recorded), _verifier(rerun))] += 1
-            self.compared["cycles"] += 1
-            cycle = _fields(seq, stamp_ns, "cycle", -1, recorded, rerun, CYCLE_FIELDS, self.exact)
-            self.differing["cycles"] += bool(cycle)
-            found += cycle + self._tracks(seq, stamp_ns, recorded, rerun)
+            found += self.add_targets(seq, stamp_ns, recorded, rerun)
         self.cycles_differing += bool(found)
+        return found
+
+    def add_command(self, seq: int, stamp_ns: int, a: BrakeCommand,
+                    b: BrakeCommand) -> list[Difference]:
+        """Compare the commands of one cycle (`a` recorded, `b` re-run)."""
+        self.compared["commands"] += 1
+        found = _fields(seq, stamp_ns, "command", -1, a, b, self.command_fields, self.exact)
+        self.differing["commands"] += bool(found)
+        return self._keep(found)
+
+    def add_targets(self, seq: int, stamp_ns: int, a: VerifiedTargets,
+                    b: VerifiedTargets) -> list[Difference]:
+        """Compare the targets of one cycle (`a` recorded, `b` re-run)."""
+        self.verifiers[(_verifier(a), _verifier(b))] += 1
+        self.compared["cycles"] += 1
+        cycle = _fields(seq, stamp_ns, "cycle", -1, a, b, self.cycle_fields, self.exact)
+        self.differing["cycles"] += bool(cycle)
+        return self._keep(cycle + self._tracks(seq, stamp_ns, a, b))
+
+    def _keep(self, found: list[Difference]) -> list[Difference]:
         for d in found:
             self.fields[f"{d.group}.{d.field}"] += 1
-        self.differences += found
+        if self.keep_differences:
+            self.differences += found
         return found
 
     def add_tracks(self, seq: int, stamp_ns: int, recorded: RadarTracks | None,
@@ -151,10 +172,7 @@ class Comparison:
             self.differing["tracks"] += bool(diffs)
             found += diffs
         self.cycles_differing += bool(found)
-        for d in found:
-            self.fields[f"{d.group}.{d.field}"] += 1
-        self.differences += found
-        return found
+        return self._keep(found)
 
     def _tracks(self, seq: int, stamp_ns: int, recorded: VerifiedTargets,
                 rerun: VerifiedTargets) -> list[Difference]:
@@ -170,7 +188,7 @@ class Comparison:
                                         ta is not None, tb is not None))
                 self.differing["tracks"] += 1
                 continue
-            diffs = _fields(seq, stamp_ns, "track", tid, ta, tb, TRACK_FIELDS, self.exact)
+            diffs = _fields(seq, stamp_ns, "track", tid, ta, tb, self.track_fields, self.exact)
             for g in ("decisions", "densities", "tracks"):
                 self.differing[g] += any(d.group == g for d in diffs)
             found += diffs

@@ -60,7 +60,7 @@ from common.messages import (
     VerifiedTarget,
     VerifiedTargets,
 )
-from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
+from common.messages.radar import can_message
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
 from tools.recording.foxglove_views import (
@@ -313,11 +313,7 @@ class EvidenceCollector:
         writer = can.CanutilsLogWriter(str(folder / "can.log"), channel=frames[0][0].bus)
         try:
             for _, f in frames:
-                writer.on_message_received(can.Message(
-                    timestamp=f.rx_wall_ns / 1e9, arbitration_id=f.arb_id, data=f.data,
-                    is_extended_id=bool(f.flags & CAN_EXTENDED),
-                    is_remote_frame=bool(f.flags & CAN_REMOTE),
-                    is_error_frame=bool(f.flags & CAN_ERROR)))
+                writer.on_message_received(can_message(f, f.rx_wall_ns / 1e9))
         finally:
             writer.stop()
         return len(frames)

@@ -49,7 +49,7 @@ from common.messages import (
     decode,
     encode,
 )
-from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
+from common.messages.radar import CAN_ERROR, CanFrame, can_message
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus
 from tools.keys import MESSAGE_KEYS
@@ -152,7 +152,7 @@ class ReplayStats:
 class CanOut:
     """Raw CAN frames to a CAN interface at their recorded times."""
 
-    def __init__(self, send: Callable[[list[tuple[int, bytes, int]]], None]) -> None:
+    def __init__(self, send: Callable[[list[CanFrame]], None]) -> None:
         self.send = send
 
     @classmethod
@@ -166,11 +166,9 @@ class CanOut:
         except can.CanError as exc:
             raise OSError(f"--can-bus {spec}: {exc}") from exc
 
-        def send(frames: list[tuple[int, bytes, int]]) -> None:
-            for arb_id, data, flags in frames:
-                bus.send(can.Message(arbitration_id=arb_id, data=data,
-                                     is_extended_id=bool(flags & CAN_EXTENDED),
-                                     is_remote_frame=bool(flags & CAN_REMOTE)))
+        def send(frames: list[CanFrame]) -> None:
+            for f in frames:
+                bus.send(can_message(f))
 
         return cls(send), bus.shutdown
 
@@ -178,7 +176,7 @@ class CanOut:
     def pty(cls, stop: threading.Event, path_file: str = "") -> tuple["CanOut", Callable[[], None]]:
         """A pty acting as an slcan adapter (SIMULATION of the wire); waits until a
         service opened it."""
-        from services.radar.ars408.codec import Frame
+        from services.radar.ars408.codec import RadarFrame
         from tools.sim.can_links import SlcanPtyLink
 
         link = SlcanPtyLink()
@@ -190,8 +188,8 @@ class CanOut:
         while not stop.is_set() and not link.opened:
             stop.wait(0.05)
 
-        def send(frames: list[tuple[int, bytes, int]]) -> None:
-            link.send(Frame(a, d) for a, d, flags in frames if not flags)
+        def send(frames: list[CanFrame]) -> None:
+            link.send(RadarFrame(f.arb_id, f.data) for f in frames if not f.flags)
 
         return cls(send), link.close
 
@@ -279,14 +277,14 @@ class Replayer:
         # The batch follows its frames: send them at their recorded spacing from now.
         base = frames[0].rx_mono_ns
         start = mono_ns()
-        group: list[tuple[int, bytes, int]] = []
+        group: list[CanFrame] = []
         for f in frames:
             due = start + (f.rx_mono_ns - base) / self.rate
             if due - mono_ns() > 1_000_000 and group:
                 self.can_out.send(group)
                 group = []
                 time.sleep(max(0.0, (due - mono_ns()) / 1e9))
-            group.append((f.arb_id, f.data, f.flags))
+            group.append(f)
         if group:
             self.can_out.send(group)
         self.stats.can_frames += len(frames)

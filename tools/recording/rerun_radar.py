@@ -17,21 +17,16 @@ batches' sequence numbers show.
 """
 
 from collections.abc import Iterator
-from typing import Any
 
-import can
 import msgspec
 
 from common.config.radar import RadarSettings
 from common.keys import RADAR_CAN, RADAR_TRACKS
 from common.messages import DecodeError, RadarStatus, RadarTracks, RawCanFrames, decode
-from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE
-from services.radar.shell import RadarShell
+from common.messages.radar import can_message
+from services.radar.shell import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, RadarShell
 from tools.recording.compare import Comparison
 from tools.recording.reader import Recording
-
-HOUSEKEEPING_NS = 10_000_000     # as services/radar/shell.py
-IDLE_WAKE_NS = 50_000_000
 
 
 class _Collect:
@@ -93,12 +88,12 @@ class RadarRerun:
             last_seq = batch.header.seq
             for f in batch.frames:
                 # The live loop woke every 50 ms without a frame, and kept house then.
-                while last_mono is not None and f.rx_mono_ns - last_mono > IDLE_WAKE_NS:
-                    last_mono += IDLE_WAKE_NS
+                while last_mono is not None and f.rx_mono_ns - last_mono > RECEIVE_TIMEOUT_NS:
+                    last_mono += RECEIVE_TIMEOUT_NS
                     if last_mono >= next_tick:
                         shell.tick(last_mono, f.rx_wall_ns)
                         next_tick = last_mono + HOUSEKEEPING_NS
-                shell.receive(_message(f), f.rx_wall_ns, f.rx_mono_ns)
+                shell.receive(can_message(f), f.rx_wall_ns, f.rx_mono_ns)
                 self.frames += 1
                 last_mono = f.rx_mono_ns
                 if f.rx_mono_ns >= next_tick:
@@ -126,10 +121,3 @@ def normalised(msg: RadarTracks) -> RadarTracks:
     return msgspec.structs.replace(
         msg, processing_ns=0,
         header=msgspec.structs.replace(msg.header, pub_mono_ns=msg.last_frame_mono_ns))
-
-
-def _message(f: Any) -> can.Message:
-    return can.Message(timestamp=f.timestamp_s, arbitration_id=f.arb_id, data=f.data,
-                       is_extended_id=bool(f.flags & CAN_EXTENDED),
-                       is_remote_frame=bool(f.flags & CAN_REMOTE),
-                       is_error_frame=bool(f.flags & CAN_ERROR))

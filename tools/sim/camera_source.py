@@ -36,7 +36,7 @@ from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError,
 from tools.keys import SIM_WORLD
 from tools.messages import SimWorld
 from tools.sim.render import Renderer
-from tools.sim.scenario import CameraLook, ObjectKind
+from tools.sim.scenario import CameraLook
 from tools.sim.world import Body
 
 MAX_EXTRAPOLATION_S = 0.25
@@ -51,9 +51,7 @@ def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
         ego_x = world.ego_x_m + v * v / (-2 * a)
     else:
         ego_x = world.ego_x_m + v * dt + 0.5 * a * dt * dt
-    bodies = [Body(o.index, ObjectKind(o.kind), o.x_m, o.y_m, o.yaw_deg, o.length_m,
-                   o.width_m, o.height_m, o.vx_mps, o.vy_mps, o.z_m).shifted(dt)
-              for o in world.objects]
+    bodies = [Body.of(o).shifted(dt) for o in world.objects]
     return bodies, ego_x
 
 

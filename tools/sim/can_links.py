@@ -47,9 +47,11 @@ from typing import Self
 
 import can
 
-from services.radar.ars408.codec import Frame
+from services.radar.ars408.codec import RadarFrame
+from services.radar.ports import radar_frame
+from tools.arrivals import Arrivals
 
-FrameCallback = Callable[[Frame], None]
+FrameCallback = Callable[[RadarFrame], None]
 
 _log = logging.getLogger("sim.can_links")
 
@@ -63,17 +65,14 @@ class _Link:
 
     def __init__(self, on_frame: FrameCallback | None) -> None:
         self._on_frame = on_frame
-        self._frames: list[Frame] = []
-        self._cond = threading.Condition()
+        self._frames: Arrivals[RadarFrame] = Arrivals()
         self._stop = threading.Event()
         self._opened = threading.Event()
         self.commands: list[str] = []
         self.callback_errors = 0
 
-    def _got(self, frame: Frame) -> None:
-        with self._cond:
-            self._frames.append(frame)
-            self._cond.notify_all()
+    def _got(self, frame: RadarFrame) -> None:
+        self._frames.add(frame)
         if self._on_frame is not None:
             try:
                 self._on_frame(frame)
@@ -82,25 +81,13 @@ class _Link:
                 self.callback_errors += 1
                 _log.exception("can link: on_frame failed for 0x%03X", frame.arb_id)
 
-    def received(self) -> list[Frame]:
+    def received(self) -> list[RadarFrame]:
         """Every frame the service wrote so far."""
-        with self._cond:
-            return list(self._frames)
+        return self._frames.items
 
-    def wait_frame(self, predicate: Callable[[Frame], bool], timeout_s: float) -> Frame:
+    def wait_frame(self, predicate: Callable[[RadarFrame], bool], timeout_s: float) -> RadarFrame:
         """The first received frame matching `predicate`. Raises TimeoutError."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            seen = 0
-            while True:
-                for f in self._frames[seen:]:
-                    if predicate(f):
-                        return f
-                seen = len(self._frames)
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise TimeoutError(f"no matching frame among {len(self._frames)} received")
-                self._cond.wait(left)
+        return self._frames.wait(predicate, timeout_s, what="matching frame")[1]
 
     def wait_open(self, timeout_s: float) -> None:
         """Until the service opened the channel. Raises TimeoutError."""
@@ -121,18 +108,18 @@ class _Link:
         self.close()
 
 
-def slcan_line(frame: Frame) -> bytes:
+def slcan_line(frame: RadarFrame) -> bytes:
     """`tIIIL<data>\\r`: one standard frame as an slcan adapter forwards it."""
     return f"t{frame.arb_id:03X}{len(frame.data)}{frame.data.hex().upper()}\r".encode()
 
 
-def parse_slcan_frame(line: str) -> Frame | None:
-    """A `tIIIL<data>` line (without the CR) as a Frame; None if it is not one."""
+def parse_slcan_frame(line: str) -> RadarFrame | None:
+    """A `tIIIL<data>` line (without the CR) as a RadarFrame; None if it is not one."""
     if len(line) < 5 or line[0] != "t":
         return None
     try:
         dlc = int(line[4])
-        return Frame(int(line[1:4], 16), bytes.fromhex(line[5:5 + 2 * dlc]))
+        return RadarFrame(int(line[1:4], 16), bytes.fromhex(line[5:5 + 2 * dlc]))
     except ValueError:
         return None
 
@@ -150,7 +137,7 @@ class SlcanPtyLink(_Link):
         self._thread = threading.Thread(target=self._read_loop, name="slcan-link", daemon=True)
         self._thread.start()
 
-    def send(self, frames: Iterable[Frame]) -> None:
+    def send(self, frames: Iterable[RadarFrame]) -> None:
         """Write radar -> service frames. Raises OSError once the link is closed."""
         self.send_raw(b"".join(slcan_line(f) for f in frames))
 
@@ -203,19 +190,19 @@ class SlcanPtyLink(_Link):
                 os.close(fd)
 
 
-def socketcand_frame(frame: Frame, timestamp_s: float) -> bytes:
+def socketcand_frame(frame: RadarFrame, timestamp_s: float) -> bytes:
     """`< frame ID SECS.USECS DATA >` as socketcand sends a received frame."""
     return f"< frame {frame.arb_id:03X} {timestamp_s:.6f} {frame.data.hex().upper()} >".encode()
 
 
-def parse_socketcand_send(message: str) -> Frame | None:
-    """`< send ID DLC B0 B1 ... >` (what python-can writes) as a Frame; None otherwise."""
+def parse_socketcand_send(message: str) -> RadarFrame | None:
+    """`< send ID DLC B0 B1 ... >` (what python-can writes) as a RadarFrame; None otherwise."""
     parts = message.strip("<> ").split()
     if len(parts) < 3 or parts[0] != "send":
         return None
     try:
         dlc = int(parts[2], 16)
-        return Frame(int(parts[1], 16), bytes(int(b, 16) for b in parts[3:3 + dlc]))
+        return RadarFrame(int(parts[1], 16), bytes(int(b, 16) for b in parts[3:3 + dlc]))
     except ValueError:
         return None
 
@@ -235,7 +222,7 @@ class SocketcandServer(_Link):
                                         daemon=True)
         self._thread.start()
 
-    def send(self, frames: Iterable[Frame]) -> None:
+    def send(self, frames: Iterable[RadarFrame]) -> None:
         """Write radar -> service frames. Raises ConnectionError when no client is in
         raw mode."""
         now = time.time()
@@ -308,19 +295,9 @@ class SocketcandServer(_Link):
         self._thread.join(timeout=2)
 
 
-def bus_sink(bus: can.BusABC) -> Callable[[Iterable[Frame]], None]:
-    """`send`-compatible function writing frames to a python-can bus (vcan, real CAN)."""
-
-    def send(frames: Iterable[Frame]) -> None:
-        for f in frames:
-            bus.send(can.Message(arbitration_id=f.arb_id, data=f.data, is_extended_id=False))
-
-    return send
-
-
 def replay_log(
     path: str,
-    send: Callable[[Iterable[Frame]], None],
+    send: Callable[[Iterable[RadarFrame]], None],
     pace: str = "realtime",
     loop: bool = False,
     stop: threading.Event | None = None,
@@ -355,7 +332,7 @@ def replay_log(
                                 return sent
                         else:
                             time.sleep(wait)
-                send([Frame(msg.arbitration_id, bytes(msg.data))])
+                send([radar_frame(msg)])
                 sent += 1
                 last = t
         if not loop or first is None:

@@ -21,8 +21,9 @@ from common.calibration import Calibration
 from common.clock import wall_ns
 from services.camera.plugin import PluginContext
 from services.camera.source import EndOfStream, Frame, FrameSource, Pacer, SourceConfigError
+from tools.messages import ObjectKind
 from tools.sim.render import Renderer
-from tools.sim.scenario import DEFAULT_SIZE, CameraLook, ObjectKind
+from tools.sim.scenario import DEFAULT_SIZE, CameraLook
 from tools.sim.world import Body
 
 # The box goes this far to either side of the lane's centre line.

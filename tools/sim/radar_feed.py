@@ -14,7 +14,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -26,16 +26,17 @@ from services.radar.ars408 import (
     RMS_CODE_VALUES,
     ClusterGeneral,
     ClusterQuality,
-    Frame,
     ObjectExtended,
     ObjectGeneral,
     ObjectQuality,
+    RadarFrame,
     RadarStateFrame,
     Version,
     cluster_cycle_frames,
     encode,
     object_cycle_frames,
 )
+from services.radar.ports import radar_message
 from tools.sim.radar_model import RadarModel, RadarReturn
 from tools.sim.scenario import RadarLook
 from tools.sim.world import Body
@@ -59,7 +60,7 @@ _yield_cpu: Callable[[], None] = getattr(os, "sched_yield", lambda: None)
 
 
 class FrameSink(Protocol):
-    def send(self, frames: Sequence[Frame]) -> None: ...
+    def send(self, frames: Sequence[RadarFrame]) -> None: ...
 
 
 class PythonCanSink:
@@ -68,10 +69,9 @@ class PythonCanSink:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
 
-    def send(self, frames: Sequence[Frame]) -> None:
+    def send(self, frames: Iterable[RadarFrame]) -> None:
         for f in frames:
-            self.bus.send(can.Message(arbitration_id=f.arb_id, data=f.data,
-                                      is_extended_id=False))
+            self.bus.send(radar_message(f))
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:
@@ -86,19 +86,27 @@ def rms_code(sigma: float) -> int:
     return len(RMS_CODE_VALUES) - 1
 
 
+def _general(r: RadarReturn, lateral_m: float) -> tuple[float, float, float, float, int, float]:
+    """A return's general-message fields after its ID, within what the signals carry
+    (the lateral distance's range differs between objects and clusters)."""
+    return (_clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -lateral_m, lateral_m),
+            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
+            _clamp(r.rcs_dbsm, -64.0, 63.5))
+
+
+def _rms_codes(look: RadarLook) -> tuple[int, int, int, int]:
+    """The quality message's standard deviations: distance long, lat, velocity long, lat."""
+    return (rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
+            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps))
+
+
 def object_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
-                  sensor_id: int = 0) -> list[Frame]:
+                  sensor_id: int = 0) -> list[RadarFrame]:
     """One object-mode cycle with quality and extended messages."""
     general, quality, extended = [], [], []
     for r in returns:
-        general.append(ObjectGeneral(
-            r.id, _clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -204.6, 204.6),
-            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
-            _clamp(r.rcs_dbsm, -64.0, 63.5)))
-        quality.append(ObjectQuality(
-            r.id, rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
-            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps), r.meas_state,
-            r.prob_of_exist))
+        general.append(ObjectGeneral(r.id, *_general(r, 204.6)))
+        quality.append(ObjectQuality(r.id, *_rms_codes(look), r.meas_state, r.prob_of_exist))
         extended.append(ObjectExtended(
             r.id, 0.0, 0.0, r.obj_class, _clamp(r.orientation_deg, -180.0, 180.0),
             _clamp(r.length_m, 0.0, 50.0), _clamp(r.width_m, 0.0, 50.0)))
@@ -106,22 +114,16 @@ def object_frames(returns: Sequence[RadarReturn], meas_counter: int, look: Radar
 
 
 def cluster_frames(returns: Sequence[RadarReturn], meas_counter: int, look: RadarLook,
-                   sensor_id: int = 0) -> list[Frame]:
+                   sensor_id: int = 0) -> list[RadarFrame]:
     """One cluster-mode cycle with quality messages (all clusters in the near scan)."""
     general, quality = [], []
     for r in returns:
-        general.append(ClusterGeneral(
-            r.id, _clamp(r.x_m, -500.0, 1138.0), _clamp(r.y_m, -102.3, 102.3),
-            _clamp(r.vx_mps, -128.0, 127.75), _clamp(r.vy_mps, -64.0, 63.75), r.dyn_prop,
-            _clamp(r.rcs_dbsm, -64.0, 63.5)))
-        quality.append(ClusterQuality(
-            r.id, rms_code(look.range_sigma_m), rms_code(look.lateral_sigma_m),
-            rms_code(look.velocity_sigma_mps), rms_code(look.velocity_sigma_mps),
-            3 if r.source >= 0 else 5, 3, 0))
+        general.append(ClusterGeneral(r.id, *_general(r, 102.3)))
+        quality.append(ClusterQuality(r.id, *_rms_codes(look), 3 if r.source >= 0 else 5, 3, 0))
     return cluster_cycle_frames(general, meas_counter, quality, sensor_id=sensor_id)
 
 
-def state_frames(look: RadarLook, sensor_id: int = 0) -> list[Frame]:
+def state_frames(look: RadarLook, sensor_id: int = 0) -> list[RadarFrame]:
     """0x201 (no error, configuration as simulated) and 0x700."""
     state = RadarStateFrame(
         nvm_read_ok=1, max_distance_m=196, persistent_error=0, interference=0,
@@ -169,7 +171,7 @@ class RadarFeed:
         self.errors = 0
         # Called on the caller's thread after every cycle with what was sent and its frames
         # (e.g. a benchmark replaying the same frames elsewhere); keep it short.
-        self.on_cycle: Callable[[CycleSent, Sequence[Frame]], None] | None = None
+        self.on_cycle: Callable[[CycleSent, Sequence[RadarFrame]], None] | None = None
 
     def reset(self, look: RadarLook, seed: int) -> None:
         """A new scene: a fresh model (IDs, ghosts, noise) with the scenario's radar look."""
@@ -198,13 +200,13 @@ class RadarFeed:
             self.on_cycle(sent, frames)
         return sent
 
-    def send_paced(self, frames: Sequence[Frame]) -> tuple[int, int]:
+    def send_paced(self, frames: Sequence[RadarFrame]) -> tuple[int, int]:
         """Write frames at the bus rate, as a cycle's are; returns the monotonic times
         before the first and after the last write. Raises what the sink raises."""
         first = self._clock()
         return first, self._send_paced(frames, first)
 
-    def _send_paced(self, frames: Sequence[Frame], start_ns: int) -> int:
+    def _send_paced(self, frames: Sequence[RadarFrame], start_ns: int) -> int:
         """The time right after the last write (before this thread lets others run: the
         reader may well be quicker than this thread's next instruction)."""
         if self.frame_time_s <= 0:
@@ -218,7 +220,7 @@ class RadarFeed:
             last = self._write(frames[i:i + BURST_FRAMES])
         return last
 
-    def _write(self, frames: Sequence[Frame]) -> int:
+    def _write(self, frames: Sequence[RadarFrame]) -> int:
         """Write, stamp, let the reader run; the stamp."""
         with fifo_for(self.write_priority):
             self.sink.send(frames)

@@ -20,7 +20,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tools.sim.scenario import ObjectKind, RadarLook
+from tools.messages import ObjectKind
+from tools.sim.scenario import RadarLook
 from tools.sim.world import Body, nearest_point
 
 # Field of view of the ARS408-21: near scan 0.2..70 m within +-60 deg (narrowing with

@@ -43,8 +43,9 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.depth_image import to_units
+from tools.messages import ObjectKind
 from tools.sim import sprites
-from tools.sim.scenario import CameraLook, ObjectKind
+from tools.sim.scenario import CameraLook
 from tools.sim.world import Body
 
 MAX_GROUND_M = 250.0

@@ -227,9 +227,7 @@ class Simulator:
         else:
             w = run.world
             threat = w.threat()
-            objects = tuple(SimObject(b.index, b.kind.value, b.x_m, b.y_m, b.yaw_deg, b.length_m,
-                                      b.width_m, b.height_m, b.vx_mps, b.vy_mps, b.z_m)
-                            for b in w.bodies())
+            objects: tuple[SimObject, ...] = tuple(w.bodies())
             speed = w.ego.speed_mps
             world = SimWorld(
                 header=Header(seq, "sim", stamp, mono), scenario=run.scenario.name,

@@ -7,13 +7,13 @@ road, 90: across it). See docs/simulator.md for the format.
 """
 
 import enum
-import tomllib
 from pathlib import Path
 from typing import Annotated
 
 import msgspec
 
-from common.config.loader import ConfigError, parse_config
+from common.config.loader import ConfigError, load_config
+from tools.messages import ObjectKind
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -25,28 +25,6 @@ class ScenarioKind(enum.Enum):
     THREAT = "threat"          # a brake is needed: pass iff no collision
     NO_THREAT = "no_threat"    # no brake is needed: pass iff no brake was applied
 
-
-class ObjectKind(enum.Enum):
-    CAR = "car"
-    BOX = "box"                # e.g. the paper's cardboard box
-    PEDESTRIAN = "pedestrian"
-    BICYCLE = "bicycle"        # with its rider
-    # Radar false targets: the radar reports them, but nothing stands in the camera's
-    # view and nothing is hit (the ego drives over a plate, under a sign, and follows
-    # the road past a rail).
-    PLATE = "plate"            # a metal plate or manhole cover, flat on the road
-    SIGN = "sign"              # an overhead sign on a gantry, `z_m` above the road
-    GUARD_RAIL = "guard_rail"  # one straight segment of a roadside guard rail
-    GHOST = "ghost"            # a multipath ghost: a persistent return where nothing is
-
-    @property
-    def is_obstacle(self) -> bool:
-        """Whether the ego can hit it (false targets are driven over, under or past)."""
-        return self not in FALSE_TARGETS
-
-
-FALSE_TARGETS = frozenset({ObjectKind.PLATE, ObjectKind.SIGN, ObjectKind.GUARD_RAIL,
-                           ObjectKind.GHOST})
 
 # length (along the body), width, height in metres
 DEFAULT_SIZE: dict[ObjectKind, tuple[float, float, float]] = {
@@ -154,14 +132,7 @@ class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file. Raises ConfigError naming the file and field."""
-    p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read scenario: {exc.strerror}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
-    return parse_config(data, Scenario, str(p))
+    return load_config(path, Scenario, what="scenario")
 
 
 def find_scenario(name_or_path: str) -> Path:

@@ -14,8 +14,9 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.imaging import encode_jpeg
+from tools.messages import ObjectKind
 from tools.sim.render import Light, Renderer
-from tools.sim.scenario import DEFAULT_SIZE, CameraLook, ObjectKind
+from tools.sim.scenario import DEFAULT_SIZE, CameraLook
 from tools.sim.world import Body
 
 # Light at night without the ego's headlights, relative to day.

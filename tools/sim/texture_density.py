@@ -21,8 +21,9 @@ from common.imaging import decode_gray, encode_jpeg
 from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.verifiers import Observation, create
+from tools.messages import ObjectKind
 from tools.sim.render import Renderer
-from tools.sim.scenario import DEFAULT_SIZE, ObjectKind
+from tools.sim.scenario import DEFAULT_SIZE
 from tools.sim.world import Body
 
 PAPER_COLUMN = ColumnGeometry(height_m=2.2, half_width_m=0.54, padding_px=22)

@@ -9,26 +9,20 @@ steers, so radar = world shifted by the ego's x).
 import math
 from dataclasses import dataclass, field
 
+import msgspec
 import numpy as np
 
-from tools.sim.scenario import ObjectKind, Scenario, SceneObject
+from tools.messages import ObjectKind, SimObject
+from tools.sim.scenario import Scenario, SceneObject
 
 
-@dataclass(frozen=True)
-class Body:
-    """An object at one instant, in the world frame."""
+class Body(SimObject, frozen=True):
+    """An object at one instant, in the world frame: the published SimObject (its
+    fields), with its geometry."""
 
-    index: int
-    kind: ObjectKind
-    x_m: float
-    y_m: float
-    yaw_deg: float
-    length_m: float
-    width_m: float
-    height_m: float
-    vx_mps: float
-    vy_mps: float
-    z_m: float = 0.0            # bottom above the road (an overhead sign's clearance)
+    @classmethod
+    def of(cls, obj: SimObject) -> "Body":
+        return cls(*msgspec.structs.astuple(obj))
 
     def corners(self) -> np.ndarray:
         """(4, 2) footprint corners, counter-clockwise."""
@@ -36,9 +30,8 @@ class Body:
 
     def shifted(self, dt_s: float) -> "Body":
         """Where this body is after `dt_s` at its current velocity (for extrapolation)."""
-        return Body(self.index, self.kind, self.x_m + self.vx_mps * dt_s,
-                    self.y_m + self.vy_mps * dt_s, self.yaw_deg, self.length_m,
-                    self.width_m, self.height_m, self.vx_mps, self.vy_mps, self.z_m)
+        return msgspec.structs.replace(self, x_m=self.x_m + self.vx_mps * dt_s,
+                                       y_m=self.y_m + self.vy_mps * dt_s)
 
 
 def footprint(x: float, y: float, yaw_deg: float, length: float, width: float) -> np.ndarray:

@@ -1,9 +1,9 @@
 """Decode and encode ARS408 frames from the signal table.
 
-- `decode(spec, data)`: one frame to its record (raises FrameError): the status, radar
+- `decode(spec, data)`: one frame to its record (raises RadarFrameError): the status, radar
   state and version frames, one at a time.
-- `decode_frame(arb_id, data)`: classify the ID, then decode (raises FrameError).
-- `encode(record, sensor_id)`: a record to a `Frame` (raises EncodeError).
+- `decode_frame(arb_id, data)`: classify the ID, then decode (raises RadarFrameError).
+- `encode(record, sensor_id)`: a record to a `RadarFrame` (raises EncodeError).
 - `decode_columns(spec, datas)`: the list frames of a cycle (general, quality, extended),
   all of one message at once, to one numpy row per signal with a per-frame validity mask.
 """
@@ -25,15 +25,16 @@ from services.radar.ars408.table import (
 )
 
 
-class Frame(NamedTuple):
-    """A classic CAN frame with an 11-bit ID."""
+class RadarFrame(NamedTuple):
+    """A classic CAN frame with an 11-bit ID, to or from the radar (as encoded or to be
+    written; a frame as received, with its times and flags, is common's CanFrame)."""
 
     arb_id: int
     data: bytes
 
 
-class FrameError(ValueError):
-    """A frame that cannot be used; `reason` is the short counter key (e.g. ``wrong_dlc``)."""
+class RadarFrameError(ValueError):
+    """A radar frame that cannot be used; `reason` is the short counter key (e.g. ``wrong_dlc``)."""
 
     def __init__(self, reason: str, detail: str) -> None:
         super().__init__(f"{reason}: {detail}")
@@ -50,9 +51,10 @@ def _word(data: bytes | bytearray) -> int:
 
 
 def check_dlc(spec: MessageSpec, data: bytes | bytearray) -> None:
-    """Raises FrameError('wrong_dlc') when `data` is shorter than the message needs."""
+    """Raises RadarFrameError('wrong_dlc') when `data` is shorter than the message needs."""
     if len(data) < spec.dlc or len(data) > 8:
-        raise FrameError("wrong_dlc", f"{spec.dbc_name} has {len(data)} bytes, expects {spec.dlc}")
+        raise RadarFrameError("wrong_dlc",
+                              f"{spec.dbc_name} has {len(data)} bytes, expects {spec.dlc}")
 
 
 # raw * scale + offset is inexact in binary (1523 * 0.2 - 204.6 = 100.00000000000003):
@@ -73,7 +75,7 @@ def _value(sig: Signal, raw: int) -> float | int:
 def decode(spec: MessageSpec, data: bytes | bytearray) -> Any:
     """Decode one frame's payload as `spec`'s record.
 
-    Raises FrameError with reason ``wrong_dlc`` or ``out_of_range`` (naming the signal).
+    Raises RadarFrameError with reason ``wrong_dlc`` or ``out_of_range`` (naming the signal).
     """
     check_dlc(spec, data)
     word = _word(data)
@@ -82,7 +84,8 @@ def decode(spec: MessageSpec, data: bytes | bytearray) -> Any:
         value = _value(sig, (word >> sig.shift) & sig.mask)
         if sig.valid is not None and not _within(sig.valid, value):
             lo, hi = sig.valid
-            raise FrameError("out_of_range", f"{sig.dbc_name}={value:g} outside {lo:g}..{hi:g}")
+            raise RadarFrameError("out_of_range",
+                                  f"{sig.dbc_name}={value:g} outside {lo:g}..{hi:g}")
         values.append(value)
     return spec.record(*values)
 
@@ -90,16 +93,16 @@ def decode(spec: MessageSpec, data: bytes | bytearray) -> Any:
 def decode_frame(arb_id: int, data: bytes | bytearray) -> tuple[MessageSpec, int, Any]:
     """(spec, sensor ID, record) of an ARS408 frame.
 
-    Raises FrameError with reason ``unknown_id``, ``wrong_dlc`` or ``out_of_range``.
+    Raises RadarFrameError with reason ``unknown_id``, ``wrong_dlc`` or ``out_of_range``.
     """
     found = classify(arb_id)
     if found is None:
-        raise FrameError("unknown_id", f"0x{arb_id:03X} is not an ARS408 message")
+        raise RadarFrameError("unknown_id", f"0x{arb_id:03X} is not an ARS408 message")
     spec, sensor_id = found
     return spec, sensor_id, decode(spec, data)
 
 
-def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> Frame:
+def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> RadarFrame:
     """The frame carrying `record` from/to radar `sensor_id` (ID + 0x10 * sensor_id).
 
     Raises EncodeError when a value is not representable: not finite, out of the raw
@@ -124,7 +127,7 @@ def encode(record: NamedTuple, sensor_id: int = 0, validate: bool = True) -> Fra
             raise EncodeError(f"{sig.dbc_name}={value} is outside {sig.valid}")
         word |= raw << sig.shift
     data = word.to_bytes(8, "big")[: spec.dlc]
-    return Frame(spec.base_id + SENSOR_ID_STRIDE * sensor_id, data)
+    return RadarFrame(spec.base_id + SENSOR_ID_STRIDE * sensor_id, data)
 
 
 BoolArray = npt.NDArray[np.bool_]

@@ -7,7 +7,7 @@ Frame order is the radar's: status, N general, then N quality and N extended whe
 import math
 from collections.abc import Sequence
 
-from services.radar.ars408.codec import EncodeError, Frame, encode
+from services.radar.ars408.codec import EncodeError, RadarFrame, encode
 from services.radar.ars408.records import (
     ClusterGeneral,
     ClusterListStatus,
@@ -30,7 +30,7 @@ def object_cycle_frames(
     extended: Sequence[ObjectExtended] | None = None,
     sensor_id: int = 0,
     interface_version: int = 1,
-) -> list[Frame]:
+) -> list[RadarFrame]:
     """One object-mode cycle: 0x60A, then 0x60B per object, then 0x60C / 0x60D if given.
 
     `meas_counter` wraps at 65536. Raises EncodeError for more than 255 objects or
@@ -56,7 +56,7 @@ def cluster_cycle_frames(
     n_near: int | None = None,
     sensor_id: int = 0,
     interface_version: int = 1,
-) -> list[Frame]:
+) -> list[RadarFrame]:
     """One cluster-mode cycle: 0x600, then 0x701 per cluster, then 0x702 if given.
 
     The first `n_near` clusters are near-scan ones (all of them when None). Raises
@@ -81,7 +81,8 @@ FORWARD = 1
 REVERSE = 2
 
 
-def ego_motion_frames(speed_mps: float, yaw_rate_dps: float, sensor_id: int = 0) -> list[Frame]:
+def ego_motion_frames(speed_mps: float, yaw_rate_dps: float,
+                      sensor_id: int = 0) -> list[RadarFrame]:
     """0x300 and 0x301 for an ego speed (negative = reversing) and yaw rate (left positive).
 
     A speed that rounds to zero steps is sent as standstill. Raises EncodeError when a
