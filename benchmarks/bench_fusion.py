@@ -67,7 +67,7 @@ from common.messages import (
     RadarTracks,
     encode,
 )
-from common.net import free_endpoint
+from common.net import free_endpoint, wait_listening
 from common.resources import EXAMPLE_CALIBRATION
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
@@ -466,21 +466,6 @@ def one_decode_us(reps: int = 40) -> float:
     return float(np.median(samples))
 
 
-def _wait_listening(endpoint: str, timeout_s: float) -> None:
-    import socket
-
-    host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            with socket.create_connection((host, int(port)), timeout=0.5):
-                return
-        except OSError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
-
-
 def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
                     ) -> dict[str, Any]:
     """The cameras scale: each camera count, with and without traffic."""
@@ -490,7 +475,7 @@ def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
     results: dict[str, Any] = {"one_decode_us": one_decode_us(), "counts": list(counts)}
     cameras = None
     try:
-        _wait_listening(endpoint, 30)
+        wait_listening(int(endpoint.rsplit(":", 1)[1]), 30)
         # One camera process streams every rig camera for the whole measurement; each
         # case subscribes to the cameras it uses (the router forwards only those).
         cameras = subprocess.Popen(
