@@ -5,7 +5,8 @@ camera, fusion, brake services) runs unchanged in its own processes.
 
 One loop thread ticks every few milliseconds: it steps the world with the actuator's
 position, writes a radar cycle every 72-76 ms, publishes the world at 50 Hz and records
-the run's timeline. The radar keeps cycling between runs (an empty road, the ego at
+the run's timeline (the per-tick logic is scenario_run.py's, shared with the lockstep
+loop). The radar keeps cycling between runs (an empty road, the ego at
 rest), as a real radar never stops: fusion keeps its heartbeat and the brake stays armed.
 """
 
@@ -24,14 +25,19 @@ from common.clock import mono_ns, wall_ns
 from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, BrakeStatus, EgoMotion, Header
 from tools.keys import SIM_WORLD
-from tools.messages import SimObject, SimWorld
 from tools.sim.radar_feed import RadarFeed
-from tools.sim.scenario import Scenario, ScenarioKind
-from tools.sim.verdict import Sample, Verdict, judge
+from tools.sim.scenario import Scenario
+from tools.sim.scenario_run import (
+    LoopSettings,
+    RadarSchedule,
+    ScenarioRun,
+    radar_view,
+    world_message,
+)
+from tools.sim.verdict import Sample, Verdict
 from tools.sim.world import World
 
 _log = logging.getLogger("sim")
-STOPPED_MPS = 0.01
 
 
 class Actuator(Protocol):
@@ -62,16 +68,6 @@ class SimActuatorView:
         return self._commanded
 
 
-@dataclass(frozen=True)
-class LoopSettings:
-    tick_s: float = 0.005
-    world_period_s: float = 0.02       # sim/world and vehicle/motion at 50 Hz
-    stopped_hold_s: float = 1.0        # a run ends after the ego stood still this long
-    passed_margin_m: float = 5.0       # ... or drove this far past every object
-    radar_period_s: tuple[float, float] = (0.072, 0.076)
-    vehicle_motion: bool = True        # also publish vehicle/motion (ego speed)
-
-
 @dataclass
 class RunResult:
     scenario: Scenario
@@ -82,12 +78,7 @@ class RunResult:
 
 
 @dataclass
-class _Run:
-    scenario: Scenario
-    world: World
-    number: int
-    samples: list[Sample] = field(default_factory=list)
-    stopped_since: float | None = None
+class _Run(ScenarioRun):
     done: threading.Event = field(default_factory=threading.Event)
 
 
@@ -171,7 +162,7 @@ class Simulator:
             _log.warning("run %s did not end within %.0f s", scenario.name, limit)
         elif not finished:   # the caller's time limit (e.g. a benchmark's measuring time)
             _log.info("run %s cut at the caller's limit of %.1f s", scenario.name, limit)
-        verdict = judge(scenario.name, scenario.kind, run.samples, run.world.collision)
+        verdict = run.verdict()
         return RunResult(scenario, verdict, run.samples, start, end)
 
     # -- the loop -----------------------------------------------------------------------
@@ -179,7 +170,7 @@ class Simulator:
     def _loop(self) -> None:
         s = self.settings
         last = time.monotonic()
-        next_radar = last
+        radar = RadarSchedule(s.radar_period_s, self._rng, last)
         next_world = last
         while not self._stop.is_set():
             now = time.monotonic()
@@ -188,28 +179,21 @@ class Simulator:
             with self._lock:
                 run = self._run
             position = self.actuator.position_pct()
-            if run is not None and not run.done.is_set():
-                run.world.step(dt, position)
-            if now >= next_radar:
+            if run is not None:
+                run.step(dt, position)
+            if radar.due(now):
                 self._radar_cycle(run)
-                next_radar += self._rng.uniform(*s.radar_period_s)
-                if next_radar < now:        # fell behind (loaded machine): no burst
-                    next_radar = now + s.radar_period_s[0]
-                    self.late_ticks += 1
+                self.late_ticks = radar.late
             if run is not None and not run.done.is_set():
-                self._record(run, position, now)
+                self._record(run, position)
             if now >= next_world:
                 self._publish_world(run)
                 next_world = now + s.world_period_s
             time.sleep(max(0.0, s.tick_s - (time.monotonic() - now)))
 
     def _radar_cycle(self, run: _Run | None) -> None:
-        if run is None or run.done.is_set():
-            bodies, ego_x, speed = [], 0.0, 0.0
-        else:
-            bodies, ego_x, speed = run.world.bodies(), run.world.ego.x_m, run.world.ego.speed_mps
         try:
-            self.feed.cycle(bodies, ego_x, speed)
+            self.feed.cycle(*radar_view(run))
         except (OSError, can.CanError) as exc:   # a vanished link must not end the loop
             self.radar_errors += 1
             if self.radar_errors in (1, 10, 100) or self.radar_errors % 1000 == 0:
@@ -218,51 +202,19 @@ class Simulator:
     def _publish_world(self, run: _Run | None) -> None:
         seq = self.bus.next_seq("sim/world")
         stamp, mono = wall_ns(), mono_ns()
-        if run is None:
-            world = SimWorld(header=Header(seq, "sim", stamp, mono), scenario="", run=self._runs,
-                             active=False, t_s=0.0, ego_x_m=0.0, ego_speed_mps=0.0,
-                             ego_accel_mps2=0.0, gap_m=None, ttc_s=None, objects=(), seed=0,
-                             brightness=1.0, noise=2.0)
-            speed = 0.0
-        else:
-            w = run.world
-            threat = w.threat()
-            objects: tuple[SimObject, ...] = tuple(w.bodies())
-            speed = w.ego.speed_mps
-            world = SimWorld(
-                header=Header(seq, "sim", stamp, mono), scenario=run.scenario.name,
-                run=run.number, active=not run.done.is_set(), t_s=w.t_s, ego_x_m=w.ego.x_m,
-                ego_speed_mps=speed, ego_accel_mps2=-w.ego.decel_mps2 if speed > 0 else 0.0,
-                gap_m=threat.gap_m if threat else None, ttc_s=threat.ttc_s if threat else None,
-                objects=objects, seed=run.scenario.seed,
-                brightness=run.scenario.camera.brightness, noise=run.scenario.camera.noise)
+        world = world_message(run, Header(seq, "sim", stamp, mono), self._runs)
+        speed = world.ego_speed_mps
         self._world_pub.put(world)
         if self._motion_pub is not None:
             self._motion_pub.put(EgoMotion(header=Header(self.bus.next_seq("vehicle/motion"),
                                                          "sim", stamp, mono),
                                            speed_mps=speed, yaw_rate_dps=0.0))
 
-    def _record(self, run: _Run, position: float, now: float) -> None:
-        w = run.world
-        threat = w.threat()
-        gap = w.in_path_gap()
-        sample = Sample(w.t_s, w.ego.x_m, w.ego.speed_mps,
-                        gap if gap is not None else (threat.gap_m if threat else None),
-                        threat.ttc_s if threat else None,
-                        self.decision, self.brake_state, self.actuator.commanded_pct(), position,
-                        w.false_target_gap())
-        run.samples.append(sample)
+    def _record(self, run: _Run, position: float) -> None:
+        sample = run.record(self.decision, self.brake_state, self.actuator.commanded_pct(),
+                            position, self.settings)
         if self.on_sample is not None:
             self.on_sample(sample)
-        s = self.settings
-        if w.ego.speed_mps <= STOPPED_MPS:
-            run.stopped_since = run.stopped_since if run.stopped_since is not None else now
-        else:
-            run.stopped_since = None
-        ended = (w.collision is not None or w.t_s >= run.scenario.duration_s
-                 or (run.stopped_since is not None and now - run.stopped_since >= s.stopped_hold_s)
-                 or (run.scenario.kind is ScenarioKind.NO_THREAT
-                     and w.passed_everything(s.passed_margin_m)))
-        if ended:
+        if run.ended:
             run.done.set()
 

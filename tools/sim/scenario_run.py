@@ -1,0 +1,134 @@
+"""One scenario run tick by tick, whatever clock drives it: the world stepped with the
+actuator's position, when the radar's next cycle is due, the timeline sample of each
+tick, when the run ends, and the world as `sim/world` carries it to the camera. A
+SIMULATION of the vehicle and its surroundings.
+
+One implementation for both loops: the real-time runner (runner.py: the stack in its own
+processes, ticks on the monotonic clock) and the lockstep loop (tools/grid/lockstep.py:
+the services' cores in one process, ticks on a simulated clock).
+"""
+
+import random
+from dataclasses import dataclass, field
+
+from common.messages import Header
+from tools.messages import SimObject, SimWorld
+from tools.sim.scenario import Scenario, ScenarioKind
+from tools.sim.verdict import Sample, Verdict, judge
+from tools.sim.world import Body, World
+
+STOPPED_MPS = 0.01
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    tick_s: float = 0.005
+    world_period_s: float = 0.02       # sim/world and vehicle/motion at 50 Hz
+    stopped_hold_s: float = 1.0        # a run ends after the ego stood still this long
+    passed_margin_m: float = 5.0       # ... or drove this far past every object
+    radar_period_s: tuple[float, float] = (0.072, 0.076)
+    vehicle_motion: bool = True        # also publish vehicle/motion (ego speed)
+
+
+class RadarSchedule:
+    """When the simulated radar's cycles fall: every 72-76 ms (`period_s`), drawn from
+    `rng`. A loop that fell behind (a loaded machine) sends one cycle, not a burst, and
+    counts it in `late`."""
+
+    def __init__(self, period_s: tuple[float, float], rng: random.Random,
+                 start_s: float) -> None:
+        self.period_s = period_s
+        self.rng = rng
+        self.next_s = start_s
+        self.late = 0
+
+    def due(self, now_s: float) -> bool:
+        """Whether a cycle is due at `now_s` (and if so, the next one is scheduled)."""
+        if now_s < self.next_s:
+            return False
+        self.next_s += self.rng.uniform(*self.period_s)
+        if self.next_s < now_s:
+            self.next_s = now_s + self.period_s[0]
+            self.late += 1
+        return True
+
+
+@dataclass
+class ScenarioRun:
+    """A scenario in motion: its world, its timeline, whether it has ended. `number`
+    counts the runs of one loop (the camera starts a new scene at each)."""
+
+    scenario: Scenario
+    world: World
+    number: int
+    samples: list[Sample] = field(default_factory=list)
+    stopped_since_s: float | None = None
+    ended: bool = False
+
+    @classmethod
+    def start(cls, scenario: Scenario, number: int) -> "ScenarioRun":
+        return cls(scenario, World(scenario), number)
+
+    def step(self, dt_s: float, position_pct: float) -> None:
+        """The world `dt_s` on with the actuator at `position_pct` (nothing once ended)."""
+        if not self.ended:
+            self.world.step(dt_s, position_pct)
+
+    def record(self, decision: str, brake_state: str, commanded_pct: float,
+               position_pct: float, settings: LoopSettings) -> Sample:
+        """This tick's sample (appended to the timeline), and whether the run ended with
+        it: a collision, the scenario's duration, the ego stopped for `stopped_hold_s`,
+        or (no threat) past every object."""
+        w = self.world
+        threat = w.threat()
+        gap = w.in_path_gap()
+        sample = Sample(w.t_s, w.ego.x_m, w.ego.speed_mps,
+                        gap if gap is not None else (threat.gap_m if threat else None),
+                        threat.ttc_s if threat else None, decision, brake_state,
+                        commanded_pct, position_pct, w.false_target_gap())
+        self.samples.append(sample)
+        if w.ego.speed_mps <= STOPPED_MPS:
+            if self.stopped_since_s is None:
+                self.stopped_since_s = w.t_s
+        else:
+            self.stopped_since_s = None
+        self.ended = (w.collision is not None or w.t_s >= self.scenario.duration_s
+                      or (self.stopped_since_s is not None
+                          and w.t_s - self.stopped_since_s >= settings.stopped_hold_s)
+                      or (self.scenario.kind is ScenarioKind.NO_THREAT
+                          and w.passed_everything(settings.passed_margin_m)))
+        return sample
+
+    def verdict(self) -> Verdict:
+        """The run's verdict (verdict.judge). Raises ValueError before the first sample."""
+        return judge(self.scenario.name, self.scenario.kind, self.samples,
+                     self.world.collision)
+
+
+def radar_view(run: ScenarioRun | None) -> tuple[list[Body], float, float]:
+    """What the radar sees this cycle: the bodies, the ego's x and speed; the empty road
+    with the ego at rest between runs (a real radar never stops cycling)."""
+    if run is None or run.ended:
+        return [], 0.0, 0.0
+    w = run.world
+    return w.bodies(), w.ego.x_m, w.ego.speed_mps
+
+
+def world_message(run: ScenarioRun | None, header: Header, runs: int) -> SimWorld:
+    """`sim/world` now: the run's world (`active` until it ended), or, between runs
+    (`runs` so far), the empty road with the ego at rest."""
+    if run is None:
+        return SimWorld(header=header, scenario="", run=runs, active=False, t_s=0.0,
+                        ego_x_m=0.0, ego_speed_mps=0.0, ego_accel_mps2=0.0, gap_m=None,
+                        ttc_s=None, objects=(), seed=0, brightness=1.0, noise=2.0)
+    w = run.world
+    threat = w.threat()
+    objects: tuple[SimObject, ...] = tuple(w.bodies())
+    speed = w.ego.speed_mps
+    return SimWorld(
+        header=header, scenario=run.scenario.name, run=run.number, active=not run.ended,
+        t_s=w.t_s, ego_x_m=w.ego.x_m, ego_speed_mps=speed,
+        ego_accel_mps2=-w.ego.decel_mps2 if speed > 0 else 0.0,
+        gap_m=threat.gap_m if threat else None, ttc_s=threat.ttc_s if threat else None,
+        objects=objects, seed=run.scenario.seed,
+        brightness=run.scenario.camera.brightness, noise=run.scenario.camera.noise)
