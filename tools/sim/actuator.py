@@ -26,6 +26,10 @@ Reading the brake position (closing the loop in a scenario simulator):
 - from another process: `aeb sim-actuator --status-file PATH` rewrites PATH atomically
   at `--status-hz` with one JSON object (`SimSnapshot` fields, e.g. `position_pct`,
   `t_mono_ns`, `warning`); the `status` control line prints the same JSON on stdout.
+
+Driven on a simulated clock (the lockstep loop, tools/grid/lockstep.py): `in_memory(clock)`
+gives an actuator without a thread on a MemoryEndpoint; `receive(data, now_ns)` hands it
+the host's bytes (and runs its watchdog), `endpoint.take()` returns what it wrote.
 """
 
 import argparse
@@ -118,6 +122,32 @@ class FdEndpoint:
         else:
             with contextlib.suppress(OSError):
                 os.close(self.fd)
+
+
+class MemoryEndpoint:
+    """An endpoint in memory, for an actuator driven without its thread: what the
+    actuator writes waits in `take()`; the host's bytes go in through
+    `SimActuator.receive`."""
+
+    def __init__(self) -> None:
+        self._out = bytearray()
+
+    def fileno(self) -> int:
+        return -1
+
+    def read_available(self) -> bytes:
+        return b""
+
+    def write(self, data: bytes) -> None:
+        self._out += data
+
+    def close(self) -> None:
+        pass
+
+    def take(self) -> bytes:
+        """Everything written since the last call."""
+        out, self._out = bytes(self._out), bytearray()
+        return out
 
 
 class SerialEndpoint:
@@ -267,6 +297,16 @@ class SimActuator:
         sim._connect()
         assert pair is not None
         return sim, pair
+
+    @classmethod
+    def in_memory(cls, clock: Callable[[], int], **kw: Any) -> tuple["SimActuator",
+                                                                     MemoryEndpoint]:
+        """An actuator on a MemoryEndpoint, connected, on `clock` (ns), for a caller that
+        drives it with `receive` and never calls `start`."""
+        endpoint = MemoryEndpoint()
+        sim = cls(lambda: endpoint, clock=clock, **kw)
+        sim._connect()
+        return sim, endpoint
 
     # ---- life cycle -----------------------------------------------------------------
 
@@ -424,14 +464,20 @@ class SimActuator:
                             self._endpoint = None
                             self._event(self._clock(), "disconnect")
                             _log.info(kv("sim_actuator_disconnected", error=exc))
-            with self._lock:
-                # Lines take effect when their bytes arrived, not when this thread got the
-                # lock from the simulator's: a latency instrument times the line.
-                now = read_ns or self._clock()
-                for item in self._reader.feed(data) if data else ():
-                    self._handle(item, now)
-                self._housekeeping(now)
-            self._flush_events()
+            # Lines take effect when their bytes arrived, not when this thread got the
+            # lock from the simulator's: a latency instrument times the line.
+            self.receive(data, read_ns or None)
+
+    def receive(self, data: bytes, now_ns: int | None = None) -> None:
+        """The host's bytes read at `now_ns` (default: the clock's now), and what is due
+        by then (delayed acknowledgements, the watchdog, fault lines): the thread's step,
+        also for a caller that drives the actuator on its own clock."""
+        with self._lock:
+            now = self._clock() if now_ns is None else now_ns
+            for item in self._reader.feed(data) if data else ():
+                self._handle(item, now)
+            self._housekeeping(now)
+        self._flush_events()
 
     def _timeout(self, now: int) -> float:
         due = [now + 100_000_000]
