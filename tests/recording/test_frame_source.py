@@ -172,3 +172,27 @@ def test_decoded_pixels_are_let_go_beyond_the_last_few_read():
     assert src.decoded == DECODED_KEPT + 1
     assert np.array_equal(frames[0].gray, picture(0))   # let go: produced again
     assert src.decoded == DECODED_KEPT + 2
+
+
+def test_a_depth_producer_is_read_on_demand_once_and_a_failure_counted_once():
+    made: list[int] = []
+
+    def depth(seq: int) -> Callable[[], np.ndarray]:
+        def produce() -> np.ndarray:
+            made.append(seq)
+            if seq == 1:
+                raise FrameError("depth_codec", "the depth did not decode")
+            return np.full((H, W), float(seq), np.float32)
+        return produce
+
+    src = FrameSource({"front": (W, H)})
+    frames = [src.add("front", seq, T0 + seq * PERIOD, T0 + seq * PERIOD,
+                      partial(picture, seq), depth(seq)) for seq in range(3)]
+    feed = src.feed("front", T0 + 2 * PERIOD)
+    assert made == [] and feed.depth_received == 3 and feed.depth_undecodable == 0
+    first = frames[2].depth_m
+    assert first is not None and float(first[0, 0]) == 2.0
+    assert frames[2].depth_m is first and made == [2] and src.depth_produced == 1
+    assert frames[1].depth_m is None and frames[1].depth_m is None and made == [2, 1]
+    assert src.feed("front", T0 + 2 * PERIOD).depth_undecodable == 1
+    assert not frames[1].undecodable and src.decoded == 0    # its pixels are still fine

@@ -54,7 +54,7 @@ class RecordedDepth:
         try:
             stamp = message_head(payload).stamp_ns
         except DecodeError:
-            self._count(camera, "depth_message")
+            self.count_unusable(camera, "depth_message")
             return
         raw = self._raw[camera]
         raw[stamp] = payload
@@ -76,7 +76,7 @@ class RecordedDepth:
         try:
             depth = decode_depth_frame(payload, width, height)[1]
         except FrameError as exc:
-            self._count(camera, exc.reason)
+            self.count_unusable(camera, exc.reason)
             depth = None
         self._decoded[key] = depth
         if len(self._decoded) > self._DECODED_KEPT:
@@ -88,6 +88,7 @@ class RecordedDepth:
         raw = self._raw.get(camera)
         return raw is not None and stamp_ns in raw
 
-    def _count(self, camera: str, reason: str) -> None:
+    def count_unusable(self, camera: str, reason: str) -> None:
+        """A depth image of `camera` that could not be used, by reason."""
         self.counters[reason] = self.counters.get(reason, 0) + 1
         self.unusable[camera] = self.unusable.get(camera, 0) + 1

@@ -12,7 +12,8 @@ fusion's `decode_frame` (`add_recorded`), or any other producer of pixels (`add`
 frame whose pixels cannot be produced raises FrameError to its reader, is counted as
 fusion counts an undecodable frame, and is in no ring after that: live fusion never
 holds one. A frame's depth is the recorded DepthFrame of its capture stamp
-(tools/recording/depth.py).
+(tools/recording/depth.py), or comes from a producer given with the frame (`add`), also
+when first read (a simulator renders it on demand).
 
 What the live decoder knows and this cannot: frames it dropped behind a backlog, and a
 picture repeated (a frozen camera), which take every frame decoded; the feed's `dropped`
@@ -44,6 +45,10 @@ Pixels = Callable[[], np.ndarray]
 """Produces a frame's grayscale pixels (2-D uint8 at the camera's calibration size).
 Raises FrameError (`reason` names the counter)."""
 
+Depth = Callable[[], np.ndarray]
+"""Produces a frame's depth (float32 metres at the frame's size, 0 = no return). Raises
+FrameError (`reason` names the counter: the frame then has no depth)."""
+
 
 @dataclass(slots=True)
 class RecordedJpeg:
@@ -65,14 +70,17 @@ class SourcedFrame(DecodedFrame):
     recorder's log time), which orders frames for the paper's "newest frame" policy.
     Frames are compared by identity."""
 
-    __slots__ = ("_error", "_pixels", "_produce", "_source")
+    __slots__ = ("_depth", "_error", "_pixels", "_produce", "_produce_depth", "_source")
     _error: FrameError | None
     _pixels: np.ndarray | None
     _produce: Pixels
+    _produce_depth: Depth | None
+    _depth: np.ndarray | FrameError | None
     _source: "FrameSource"
 
     def __init__(self, camera: str, seq: int, stamp_ns: int, rx_mono_ns: int,
-                 produce: Pixels, source: "FrameSource") -> None:
+                 produce: Pixels, source: "FrameSource",
+                 produce_depth: Depth | None = None) -> None:
         init = object.__setattr__      # frozen to fusion's code, not to its source
         init(self, "camera", camera)
         init(self, "seq", seq)
@@ -82,6 +90,8 @@ class SourcedFrame(DecodedFrame):
         init(self, "_source", source)
         init(self, "_pixels", None)
         init(self, "_error", None)
+        init(self, "_produce_depth", produce_depth)
+        init(self, "_depth", None)
 
     __eq__ = object.__eq__
     __hash__ = object.__hash__
@@ -93,6 +103,8 @@ class SourcedFrame(DecodedFrame):
 
     @property
     def depth_m(self) -> np.ndarray | None:
+        if self._produce_depth is not None:
+            return self._source.depth_of(self)
         return self._source.depth.at(self.camera, self.stamp_ns)
 
     @property
@@ -145,8 +157,10 @@ class FrameSource:
         self.depth = RecordedDepth(sizes, 2 * WINDOW_FRAMES, {} if counters is None
                                    else counters)
         self._decoded: OrderedDict[int, SourcedFrame] = OrderedDict()
+        self._depth_kept: OrderedDict[int, SourcedFrame] = OrderedDict()
         self.decoded = 0          # pixels produced (a frame again after it was let go)
         self.decode_failed = 0    # frames whose pixels could not be produced
+        self.depth_produced = 0   # depth produced by a frame's own producer
 
     def add_recorded(self, camera: str, payload: bytes, rx_ns: int) -> SourcedFrame:
         """A recorded CompressedFrame payload of `camera`, received at `rx_ns`. Raises
@@ -162,13 +176,17 @@ class FrameSource:
                         RecordedJpeg(payload, rx_ns, cam.width, cam.height))
 
     def add(self, camera: str, seq: int, stamp_ns: int, rx_ns: int,
-            produce: Pixels) -> SourcedFrame:
+            produce: Pixels, depth: Depth | None = None) -> SourcedFrame:
         """A frame of `camera` captured at `stamp_ns`, received at `rx_ns` (frames are
-        added in the order received), its pixels from `produce` when first read."""
+        added in the order received), its pixels from `produce` when first read; with
+        `depth`, its depth (received with it) from that producer when first read."""
         cam = self._cameras[camera]
-        frame = SourcedFrame(camera, seq, stamp_ns, rx_ns, produce, self)
+        frame = SourcedFrame(camera, seq, stamp_ns, rx_ns, produce, self, depth)
         cam.frames.append(frame)
         cam.count_received(rx_ns)
+        if depth is not None:
+            cam.depth_received += 1
+            cam.depth_rx.append(rx_ns)
         return frame
 
     def add_depth(self, camera: str, payload: bytes, rx_ns: int) -> None:
@@ -240,6 +258,32 @@ class FrameSource:
             _, oldest = self._decoded.popitem(last=False)
             object.__setattr__(oldest, "_pixels", None)
         return pixels
+
+
+    def depth_of(self, frame: SourcedFrame) -> np.ndarray | None:
+        """A frame's depth from its own producer: produced on the first read (kept among
+        the last DECODED_KEPT read), the same after that; None once it failed (counted
+        once, as fusion counts an undecodable DepthFrame)."""
+        assert frame._produce_depth is not None
+        kept = frame._depth
+        if isinstance(kept, FrameError):
+            return None
+        if kept is not None:
+            self._depth_kept.move_to_end(id(frame))
+            return kept
+        try:
+            depth = frame._produce_depth()
+        except FrameError as exc:
+            object.__setattr__(frame, "_depth", exc)
+            self.depth.count_unusable(frame.camera, exc.reason)
+            return None
+        self.depth_produced += 1
+        object.__setattr__(frame, "_depth", depth)
+        self._depth_kept[id(frame)] = frame
+        if len(self._depth_kept) > DECODED_KEPT:
+            _, oldest = self._depth_kept.popitem(last=False)
+            object.__setattr__(oldest, "_depth", None)
+        return depth
 
 
 def _rx(frame: SourcedFrame) -> int:
