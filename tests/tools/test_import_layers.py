@@ -24,7 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("launch",),                                    # aeb up: process tables, supervisor
     ("sim",),                                       # the simulator and its closed loop
     ("recording",),                                 # MCAP, replay, rerun, evidence
-    ("ab", "eval", "faults", "foxglove"),           # what stands on recordings and the sim
+    ("ab", "eval", "faults", "foxglove", "grid"),   # what stands on recordings and the sim
     ("cli", "demo"),                                # top-level commands
 )
 LAYER_OF = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
