@@ -193,6 +193,7 @@ class Lockstep:
         self.start_ns: int | None = None
         self.cycles: list[FusionCycle] = []
         self._tick_ns = round(config.loop.tick_s * 1e9)
+        self._world_ns = 0              # when the world was last stepped
 
     def _instances(self) -> list[_Fusion]:
         return [self.primary] + ([self.candidate] if self.candidate is not None else [])
@@ -241,6 +242,7 @@ class Lockstep:
             run = self.run
             if run is not None:
                 run.step(self.config.loop.tick_s, position)
+            self._world_ns = t_ns
         if self.schedule.due(t_ns / 1e9):
             with self.profile.part("radar"):
                 published = self.radar.cycle(*radar_view(run), t_ns)
@@ -268,8 +270,7 @@ class Lockstep:
 
     def _capture(self, t_ns: int) -> None:
         # The world as of the last tick (the camera extrapolates it to the capture time).
-        last_tick = t_ns - t_ns % self._tick_ns
-        self.camera.capture(self._world(last_tick), self.events.wall_ns(t_ns),
+        self.camera.capture(self._world(self._world_ns), self.events.wall_ns(t_ns),
                             self.events.mono_ns(t_ns + self.delays.camera_frame_ns))
         self.events.at(t_ns + self.camera.period_ns, self._capture)
 
