@@ -190,7 +190,8 @@ class Lockstep:
         self.run: ScenarioRun | None = None
         self.scene = 0                  # the camera's scene number of the run
         self.decision = ""              # the followed instance's latest command
-        self.start_ns: int | None = None
+        self.start_ns: int | None = None   # the tick the run started at
+        self._starting = False
         self.cycles: list[FusionCycle] = []
         self._tick_ns = round(config.loop.tick_s * 1e9)
         self._world_ns = 0              # when the world was last stepped
@@ -204,24 +205,23 @@ class Lockstep:
         """Settle on the empty road, then play the scenario to its end; the run and the
         settling time. Raises LockstepError when the stack never armed."""
         ev = self.events
-        self.brake.connect(0)
-        ev.at(0, self._tick)
-        ev.at(round(self.rng.uniform(0, self.camera.period_ns)), self._capture)
-        ev.at(HOUSEKEEPING_NS, self._housekeeping)
-        if not ev.run_until(self._settled, round(SETTLE_LIMIT_S * 1e9)):
-            raise LockstepError(
-                f"{self.scenario.name}: the stack did not settle within {SETTLE_LIMIT_S:g} s "
-                f"(fusion {self.decision or 'silent'}, brake {self.brake.core.state.value}: "
-                f"{self.brake.core.reason})")
-        settle_ns = ev.now_ns
-        self.scene = self.scenes.scene()
-        self.radar.reset(self.scenario.radar, self.scenario.seed)
-        run = self.run = ScenarioRun.start(self.scenario, self.scene)
-        self.start_ns = settle_ns
-        limit = settle_ns + round((self.scenario.duration_s + 1.0) * 1e9)
-        ev.run_until(lambda: run.ended, limit)
-        self.brake.close()
-        return run, settle_ns / 1e9
+        try:
+            self.brake.connect(0)
+            ev.at(0, self._tick)
+            ev.at(round(self.rng.uniform(0, self.camera.period_ns)), self._capture)
+            ev.at(HOUSEKEEPING_NS, self._housekeeping)
+            if not ev.run_until(self._settled, round(SETTLE_LIMIT_S * 1e9)):
+                raise LockstepError(
+                    f"{self.scenario.name}: the stack did not settle within "
+                    f"{SETTLE_LIMIT_S:g} s (fusion {self.decision or 'silent'}, brake "
+                    f"{self.brake.core.state.value}: {self.brake.core.reason})")
+            self._starting = True         # at the next tick
+            limit = ev.now_ns + round((self.scenario.duration_s + 1.0) * 1e9)
+            ev.run_until(lambda: self.run is not None and self.run.ended, limit)
+        finally:
+            self.brake.close()
+        assert self.run is not None and self.start_ns is not None
+        return self.run, self.start_ns / 1e9
 
     def _settled(self) -> bool:
         view = self.brake.view
@@ -253,8 +253,18 @@ class Lockstep:
             with self.profile.part("world"):
                 run.record(self.decision, self.brake.core.state.value,
                            self.brake.view.commanded_pct(), position, self.config.loop)
+        if self._starting:
+            self._start(t_ns)
         if run is None or not run.ended:
             self.events.at(t_ns + self._tick_ns, self._tick)
+
+    def _start(self, t_ns: int) -> None:
+        """The scenario from this tick on (its first step is the next tick's)."""
+        self._starting = False
+        self.scene = self.scenes.scene()
+        self.radar.reset(self.scenario.radar, self.scenario.seed)
+        self.run = ScenarioRun.start(self.scenario, self.scene)
+        self.start_ns = t_ns
 
     def _housekeeping(self, t_ns: int) -> None:
         with self.profile.part("radar"):
