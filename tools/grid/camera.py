@@ -112,23 +112,27 @@ class CapturedFrame:
                     header=header, camera=s.name, width=units.shape[1], height=units.shape[0],
                     codec=s.depth.codec, data=encode_depth(units, s.depth.codec)))
 
-    def gray(self) -> np.ndarray:
-        """The pixels fusion decodes from the JPEG. Raises FrameError."""
+    def _messages(self) -> tuple[bytes, bytes | None]:
+        """The CompressedFrame and DepthFrame (None without depth) as published."""
         if self._jpeg is None:
             self._produce()
         assert self._jpeg is not None
+        return self._jpeg, self._depth
+
+    def gray(self) -> np.ndarray:
+        """The pixels fusion decodes from the JPEG. Raises FrameError."""
         cam = self.camera
+        jpeg = self._messages()[0]
         with cam.profile.part("jpeg_decode"):
-            return RecordedJpeg(self._jpeg, self.rx_mono_ns, cam.width, cam.height)()
+            return RecordedJpeg(jpeg, self.rx_mono_ns, cam.width, cam.height)()
 
     def depth_m(self) -> np.ndarray:
         """The depth fusion decodes from the DepthFrame. Raises FrameError."""
-        if self._jpeg is None:
-            self._produce()
-        assert self._depth is not None
         cam = self.camera
+        depth = self._messages()[1]
+        assert depth is not None, "a frame without depth asked for its depth"
         with cam.profile.part("depth_codec"):
-            return decode_depth_frame(self._depth, cam.width, cam.height)[1]
+            return decode_depth_frame(depth, cam.width, cam.height)[1]
 
 
 class LockstepCamera:

@@ -13,12 +13,13 @@ from collections.abc import Sequence
 import msgspec
 
 from common.config.radar import RadarSettings
-from common.messages import RadarStatus, RadarTracks, encode
+from common.messages import RadarTracks, encode
 from services.radar.ars408 import RadarFrame
 from services.radar.ports import radar_message
 from services.radar.shell import RadarShell
 from tools.grid.clock import Events
 from tools.grid.delays import Delays
+from tools.recording.rerun_radar import Collected
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.scenario import RadarLook
 from tools.sim.world import Body
@@ -37,8 +38,8 @@ class LockstepRadar:
         self._sent: list[tuple[int, RadarFrame]] = []
         self.feed = RadarFeed(self, look, seed, clock=self._clock, sleep=self._sleep,
                               yield_cpu=lambda: None)
-        self._out: list[RadarTracks] = []
-        self.shell = RadarShell(settings, _Sink(self._out))
+        self._out = Collected()
+        self.shell = RadarShell(settings, self._out)
         self.cycles = 0
 
     # -- the feed's sink and clock --------------------------------------------------------
@@ -72,8 +73,8 @@ class LockstepRadar:
             wall, mono = ev.wall_ns(rx), ev.mono_ns(rx)
             self.shell.receive(radar_message(frame, wall / 1e9), wall, mono)
             out += [(rx + self.delays.radar_ns, self._published(tracks, mono))
-                    for tracks in self._out]
-            self._out.clear()
+                    for tracks in self._out.got]
+            self._out.got.clear()
         self.cycles += 1
         return out
 
@@ -81,8 +82,8 @@ class LockstepRadar:
         """The service's housekeeping at `t_ns` (cycles closed by timeout, status)."""
         self.shell.tick(self.events.mono_ns(t_ns), self.events.wall_ns(t_ns))
         out = [(t_ns, self._published(tracks, self.events.mono_ns(t_ns)))
-               for tracks in self._out]
-        self._out.clear()
+               for tracks in self._out.got]
+        self._out.got.clear()
         return out
 
     def _published(self, tracks: RadarTracks, done_mono_ns: int) -> bytes:
@@ -91,18 +92,3 @@ class LockstepRadar:
             tracks, processing_ns=d,
             header=msgspec.structs.replace(tracks.header, pub_mono_ns=done_mono_ns + d)))
 
-
-class _Sink:
-    """The shell's RadarOutput: finished cycles into a list."""
-
-    def __init__(self, into: list[RadarTracks]) -> None:
-        self.into = into
-
-    def tracks(self, sensor: str, msg: RadarTracks) -> None:
-        self.into.append(msg)
-
-    def status(self, sensor: str, msg: RadarStatus) -> None:
-        pass
-
-    def serving(self) -> None:
-        pass

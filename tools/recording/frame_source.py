@@ -252,13 +252,8 @@ class FrameSource:
             self._cameras[frame.camera].count_undecodable(frame.rx_mono_ns, exc)
             raise
         self.decoded += 1
-        object.__setattr__(frame, "_pixels", pixels)
-        self._decoded[id(frame)] = frame
-        if len(self._decoded) > DECODED_KEPT:
-            _, oldest = self._decoded.popitem(last=False)
-            object.__setattr__(oldest, "_pixels", None)
+        _keep(self._decoded, frame, "_pixels", pixels)
         return pixels
-
 
     def depth_of(self, frame: SourcedFrame) -> np.ndarray | None:
         """A frame's depth from its own producer: produced on the first read (kept among
@@ -278,12 +273,19 @@ class FrameSource:
             self.depth.count_unusable(frame.camera, exc.reason)
             return None
         self.depth_produced += 1
-        object.__setattr__(frame, "_depth", depth)
-        self._depth_kept[id(frame)] = frame
-        if len(self._depth_kept) > DECODED_KEPT:
-            _, oldest = self._depth_kept.popitem(last=False)
-            object.__setattr__(oldest, "_depth", None)
+        _keep(self._depth_kept, frame, "_depth", depth)
         return depth
+
+
+def _keep(kept: OrderedDict[int, SourcedFrame], frame: SourcedFrame, slot: str,
+          value: np.ndarray) -> None:
+    """`value` in the frame's `slot`, the newest of the last DECODED_KEPT kept there; the
+    oldest beyond those let go (produced again when read again)."""
+    object.__setattr__(frame, slot, value)
+    kept[id(frame)] = frame
+    if len(kept) > DECODED_KEPT:
+        _, oldest = kept.popitem(last=False)
+        object.__setattr__(oldest, slot, None)
 
 
 def _rx(frame: SourcedFrame) -> int:

@@ -29,8 +29,9 @@ from tools.recording.compare import Comparison
 from tools.recording.reader import Recording
 
 
-class _Collect:
-    """The shell's output: the tracks it publishes, in order (status is not re-run)."""
+class Collected:
+    """The shell's output (RadarOutput): the tracks it publishes, in order (status is
+    not kept)."""
 
     def __init__(self) -> None:
         self.got: list[RadarTracks] = []
@@ -70,7 +71,7 @@ class RadarRerun:
                 except DecodeError:
                     continue
                 recorded[(t.sensor, t.header.stamp_ns)] = t
-        out = _Collect()
+        out = Collected()
         shell = RadarShell(self.settings, out)
         next_tick = 0
         last_mono: int | None = None
@@ -104,7 +105,7 @@ class RadarRerun:
         self.span_s = ((last_log or 0) - (first_log or 0)) / 1e9
         self.comparison.recorded_only = len(recorded)
 
-    def _drain(self, out: _Collect, recorded: dict[tuple[str, int], RadarTracks],
+    def _drain(self, out: Collected, recorded: dict[tuple[str, int], RadarTracks],
                log_ns: int) -> Iterator[tuple[RadarTracks | None, RadarTracks, int]]:
         for msg in out.got:
             msg = normalised(msg)
