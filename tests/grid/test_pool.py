@@ -2,6 +2,8 @@
 in the order given, with progress, and a case that cannot run reported beside the
 others."""
 
+import threading
+
 import pytest
 
 from common.resources import DEPLOY
@@ -33,3 +35,16 @@ def test_workers_give_the_outcomes_of_one_process_in_order_with_progress(tmp_pat
         assert mine.result.samples == theirs.result.samples
         assert mine.result.verdict == theirs.result.verdict
     assert [o.result.verdict.passed for o in pooled if o.result is not None] == [True] * 3
+
+
+def test_once_stopped_no_case_starts_and_those_running_finish():
+    case = Case(load_scenario(find_scenario("no_threat_parked_cars_30kph")),
+                DEPLOY / "fusion.toml")
+    stop = threading.Event()
+
+    def progress(done: int, total: int, o: Outcome) -> None:
+        stop.set()
+
+    outcomes = run_cases([case] * 8, workers=2, progress=progress, stop=stop)
+    assert 1 <= len(outcomes) < 8
+    assert all(o.result is not None and o.result.verdict.passed for o in outcomes)

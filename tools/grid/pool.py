@@ -19,6 +19,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -112,14 +113,19 @@ def iter_cases(cases: Sequence[Case], workers: int = 2,
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(min(workers, len(cases)), mp_context=context,
                              initializer=_worker_init) as pool:
-        pending: set[Future[Outcome]] = {pool.submit(run_case, i, c)
-                                         for i, c in enumerate(cases)}
+        submitted = {pool.submit(run_case, i, c): i for i, c in enumerate(cases)}
+        pending: set[Future[Outcome]] = set(submitted)
         try:
             while pending:
                 finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
                 for future in finished:
-                    if not future.cancelled():
+                    if future.cancelled():
+                        continue
+                    try:
                         yield future.result()
+                    except BrokenProcessPool as exc:   # a worker died (killed, out of memory)
+                        i = submitted[future]
+                        yield Outcome(i, cases[i], None, f"worker process died: {exc}")
                 if stop is not None and stop.is_set():
                     for future in pending:
                         future.cancel()
