@@ -122,6 +122,7 @@ class LockstepResult:
     loop_seed: int
     settle_s: float                     # the empty road before the scenario started
     wall_s: float                       # how long the run took on this host
+    cpu_s: float                        # the process's CPU time for it (all its threads)
     profile: Profile
     fusion_failures: int = 0            # cycles whose processing raised (answered
     candidate_failures: int = 0         # as the shell answers them)
@@ -334,13 +335,14 @@ def run_scenario(scenario: Scenario, config: LoopConfig, scenes: SceneCamera | N
     renderer (built here when not given: a second or two); `loop_seed`: the loop's own
     draws (radar cycle lengths, the camera's phase) - the scenario's seed drives the
     world's and the radar model's. Raises LockstepError, ConfigError, KeyFileError."""
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     scenes = scenes or SceneCamera(Calibration.load(EXAMPLE_CALIBRATION))
     loop = Lockstep(scenario, config, scenes, loop_seed)
     run, settle_s = loop.execute()
     return LockstepResult(
         scenario=scenario, config=config.name or config.fusion.fusion.instance,
         verdict=run.verdict(), samples=run.samples, cycles=loop.cycles, loop_seed=loop_seed,
-        settle_s=settle_s, wall_s=time.perf_counter() - t0, profile=loop.profile,
+        settle_s=settle_s, wall_s=time.perf_counter() - t0,
+        cpu_s=time.process_time() - cpu0, profile=loop.profile,
         fusion_failures=loop.primary.failures,
         candidate_failures=loop.candidate.failures if loop.candidate is not None else 0)

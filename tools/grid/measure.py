@@ -7,7 +7,8 @@ and where that time goes. A SIMULATION measurement.
     python -m tools.grid.measure --fusion-config deploy/fusion-paper.toml --json out/x.json
 
 Wall times are this host's, one run at a time (`--workers 1`, the default: runs in
-parallel share the cores and the figures with them).
+parallel share the cores and the figures with them); CPU times (the process's, all its
+threads) move less with the host's load.
 """
 
 import argparse
@@ -62,6 +63,7 @@ def rows(outcomes: list[Outcome], demo: dict[str, dict[str, Any]]) -> list[dict[
             "delta_s": (float(np.median(known)) - live["first_brake_t_s"]
                         if known and live.get("first_brake_t_s") is not None else None),
             "wall_per_sim_s": sum(r.wall_s for r in done) / sim_s if sim_s else None,
+            "cpu_per_sim_s": sum(r.cpu_s for r in done) / sim_s if sim_s else None,
             "simulated_s": sim_s,
             "parts_per_sim_s": {p: v / sim_s for p, v in parts.items()} if sim_s else {},
             "frames_rendered": sum(r.profile.frames_rendered for r in done),
@@ -74,7 +76,8 @@ def print_table(table: list[dict[str, Any]], demo: bool) -> None:
     head = f"{'scenario':<42} {'lockstep':<34} {'1st BRAKE (s)':<22}"
     if demo:
         head += f" {'aeb demo':<24} {'delta':>6}"
-    print(head + f" {'wall/sim':>8}  render jpeg fusion-own other (ms per simulated s)")
+    print(head + f" {'wall/sim':>8} {'cpu/sim':>7}  render jpeg fusion-own other "
+                 "(ms wall per simulated s)")
     for r in table:
         brakes = [b for b in r["first_brake_s"] if b is not None]
         when = (f"{min(brakes):.2f}-{max(brakes):.2f}" if len(set(brakes)) > 1
@@ -88,7 +91,8 @@ def print_table(table: list[dict[str, Any]], demo: bool) -> None:
         p = {k: 1000 * v for k, v in r["parts_per_sim_s"].items()}
         codecs = p.get("jpeg_encode", 0) + p.get("jpeg_decode", 0) + p.get("depth_codec", 0)
         other = 1000 * (r["wall_per_sim_s"] or 0) - p.get("fusion", 0.0)
-        line += (f" {r['wall_per_sim_s'] or 0:8.3f}  {p.get('render', 0):6.0f} {codecs:4.0f}"
+        line += (f" {r['wall_per_sim_s'] or 0:8.3f} {r['cpu_per_sim_s'] or 0:7.3f}"
+                 f"  {p.get('render', 0):6.0f} {codecs:4.0f}"
                  f" {p.get('fusion_own', 0):10.0f} {other:5.0f}")
         print(line)
 
