@@ -29,9 +29,9 @@ from tools.messages import SimWorld
 from tools.recording.frame_source import FrameSource, RecordedJpeg
 from tools.sim.camera_source import SimCameraSource
 
-# The camera source keeps the newest world it was shown; each frame is rendered from
-# the world of its own capture, shown to the source in a time of its own that only
-# grows (frames are rendered in the order fusion reads them, across runs too).
+# The camera source keeps only a world newer than the one it has: each frame's world is
+# shown to it at a time of its own that only grows (whatever order frames are rendered
+# in, across runs too), the capture stamp moved with it (only their difference counts).
 _SHOW_STEP_NS = 1_000_000_000_000
 
 

@@ -27,8 +27,8 @@ from tools.sim.world import Body
 
 class LockstepRadar:
     """`settings`: the radar service's (the demo runs its defaults). `cycle()` models and
-    sends one cycle at the loop's current time; each cycle the service finishes is handed
-    to `deliver(t_ns, payload)` at the time it is published."""
+    sends one cycle, `tick()` keeps the service's house; both return the RadarTracks the
+    service published, with the (loop) time each was published."""
 
     def __init__(self, events: Events, settings: RadarSettings, delays: Delays,
                  look: RadarLook, seed: int) -> None:
@@ -81,7 +81,7 @@ class LockstepRadar:
     def tick(self, t_ns: int) -> list[tuple[int, bytes]]:
         """The service's housekeeping at `t_ns` (cycles closed by timeout, status)."""
         self.shell.tick(self.events.mono_ns(t_ns), self.events.wall_ns(t_ns))
-        out = [(t_ns, self._published(tracks, self.events.mono_ns(t_ns)))
+        out = [(t_ns + self.delays.radar_ns, self._published(tracks, self.events.mono_ns(t_ns)))
                for tracks in self._out.got]
         self._out.got.clear()
         return out
