@@ -68,8 +68,12 @@ def load_dbc(path: str) -> Any:
                           "'aeb-radar-camera[dbc]'") from exc
     try:
         db = cantools.database.load_file(path)
-    except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+    except OSError as exc:
         raise ExportError(f"{path}: cannot read the DBC: {exc}") from exc
+    except (cantools.database.UnsupportedDatabaseFormatError, ValueError) as exc:
+        # ValueError: a file extension cantools has no parser for
+        raise ExportError(f"{path}: not a CAN database cantools reads (DBC, KCD, SYM, "
+                          f"ARXML, CDD): {str(exc).strip()}") from exc
     if not isinstance(db, cantools.database.can.Database):
         raise ExportError(f"{path}: not a CAN database")
     return db
