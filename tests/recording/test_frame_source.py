@@ -172,3 +172,21 @@ def test_decoded_pixels_are_let_go_beyond_the_last_few_read():
     assert src.decoded == DECODED_KEPT + 1
     assert np.array_equal(frames[0].gray, picture(0))   # let go: produced again
     assert src.decoded == DECODED_KEPT + 2
+
+
+def test_a_frames_depth_is_there_once_received_unless_pinned():
+    # live fusion pairs a depth with its frame only once the depth has arrived
+    src = FrameSource({"front": (W, H)})
+    data, rx = FRAMES[3]
+    frame = src.add_recorded("front", data, rx)
+    src.add_depth("front", DEPTH[3], rx + 2 * MS)        # just after the frame
+    src.feed("front", rx + MS)
+    assert frame.depth_m is None and not src.has_depth("front", frame.stamp_ns)
+    src.feed("front", rx + 2 * MS)
+    assert frame.depth_m is not None and src.has_depth("front", frame.stamp_ns)
+    # the recorded output says the live instance had none: none, whenever it arrived
+    src.feed("front", rx + 10 * MS, depth_pins={frame.stamp_ns: False})
+    assert frame.depth_m is None
+    # ... or had it, received before the recorder got it
+    src.feed("front", rx + MS, depth_pins={frame.stamp_ns: True})
+    assert frame.depth_m is not None
