@@ -9,6 +9,7 @@ limit; they never reach a callback and never raise in Zenoh's threads.
 
 import json
 import logging
+import re
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -54,6 +55,16 @@ class BusError(RuntimeError):
     """The Zenoh configuration is invalid or the session could not be opened."""
 
 
+# Where in zenoh's Rust source an error was raised (" at /root/.cargo/.../tcp.rs:61."):
+# the build machine's paths, nothing for a user
+_RUST_SOURCE = re.compile(r"\s+at\s+\S+\.rs:\d+\.?")
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """A zenoh error's text without the source locations of zenoh's build."""
+    return _RUST_SOURCE.sub("", str(exc))
+
+
 def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
     """Build a zenoh.Config: file first, then our fields, then raw overrides.
 
@@ -90,11 +101,11 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
                 conf.insert_json5(key, json.dumps(value))
             except zenoh.ZError as exc:
                 raise BusError(f"invalid zenoh configuration: {key} = {value!r}: "
-                               f"{exc}") from exc
+                               f"{zenoh_message(exc)}") from exc
     except (zenoh.ZError, TypeError, ValueError) as exc:
         # ZError: a key, value or file zenoh refuses; TypeError/ValueError: an override
         # that is not JSON
-        raise BusError(f"invalid zenoh configuration: {exc}") from exc
+        raise BusError(f"invalid zenoh configuration: {zenoh_message(exc)}") from exc
     return conf
 
 
@@ -104,7 +115,7 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
     try:
         return zenoh.open(conf)
     except zenoh.ZError as exc:
-        raise BusError(f"cannot open zenoh session: {exc}") from exc
+        raise BusError(f"cannot open zenoh session: {zenoh_message(exc)}") from exc
 
 
 def encoding(spec: KeySpec[Any]) -> zenoh.Encoding | None:
