@@ -48,3 +48,17 @@ COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-
 OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
                     "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense",
                     "mcap": "record", "foxglove": "record"}
+
+# The commands that serve a page or a socket, and their default ports: apart, so that
+# both can run at once (Foxglove's own default for its WebSocket protocol is 8765).
+DEFAULT_PORTS = {"foxglove": 8765, "label": 8780}
+
+
+def port_in_use(command: str, host: str, port: int) -> str:
+    """What to tell a user whose `aeb <command>` found `host:port` taken."""
+    other = next((name for name, p in DEFAULT_PORTS.items()
+                  if p == port and name != command), None)
+    who = (f"the default port of aeb {other}: is an `aeb {other}` running?" if other
+           else "by another program, or another aeb " + command)
+    return (f"{host}:{port} is in use ({who}); choose another with --port "
+            f"(0: any free port)")

@@ -10,7 +10,9 @@ subscribe, then binary message data (opcode 1, subscription id, log time, payloa
 import asyncio
 import base64
 import json
+import socket
 import struct
+import subprocess
 
 import numpy as np
 import pytest
@@ -130,3 +132,15 @@ def test_max_fps_and_scale_downsample_the_camera(router, tmp_path):
                  got[ANNOTATIONS][0][1])
     corner = ann.points[0].points[0]
     assert (corner.x, corner.y) == (200, 100)
+
+
+def test_a_port_in_use_is_exit_2_saying_so_before_any_bus(tmp_path):
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        port = holder.getsockname()[1]
+        done = subprocess.run(python_module(
+            "tools.cli", "foxglove", "--port", str(port), "--connect",
+            f"tcp/127.0.0.1:{free_port()}"), capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert f"127.0.0.1:{port} is in use" in done.stderr and "--port" in done.stderr

@@ -9,10 +9,12 @@ before the page shows the next ROI. Each ROI is shown on its frame (green: the R
 blue: the projected column) with the ROI enlarged beside it. ROIs with ground truth (data
 sets, simulator runs) are left out unless --include-truth.
 
-Serves on 127.0.0.1 only by default. Exit codes: 0 stopped, 2 bad arguments or input.
+Serves on 127.0.0.1:8780 by default (aeb foxglove's WebSocket has 8765). Exit codes: 0
+stopped, 2 bad arguments or input, or the port in use.
 """
 
 import argparse
+import errno
 import json
 import sys
 import threading
@@ -24,6 +26,7 @@ import cv2
 import numpy as np
 
 from common.log import add_log_level, setup_logging
+from tools.commands import DEFAULT_PORTS, port_in_use
 from tools.eval.frames import FrameLoadError, load_bgr
 from tools.eval.label_page import PAGE
 from tools.eval.labels import (
@@ -245,7 +248,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    help="also ROIs that have ground truth")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8765, help="0: any free port")
+    p.add_argument("--port", type=int, default=DEFAULT_PORTS["label"],
+                   help=f"default {DEFAULT_PORTS['label']} (aeb foxglove's is "
+                        f"{DEFAULT_PORTS['foxglove']}); 0: any free port")
     add_log_level(p, "INFO")
     return p.parse_args(argv)
 
@@ -274,7 +279,13 @@ def main(argv: list[str] | None = None) -> int:
         edges = tuple(float(e) for e in args.edges.split(",") if e.strip())
         items = pick_sample(pool, label_path, args.sample, keys, groups, edges, args.seed)
         session = LabelSession(items, label_path, args.who)
-        server = make_server(session, args.host, args.port)
+        try:
+            server = make_server(session, args.host, args.port)
+        except OSError as exc:
+            session.close()
+            if exc.errno != errno.EADDRINUSE:
+                raise
+            raise ValueError(port_in_use("label", args.host, args.port)) from exc
     except (RecordFileError, LabelFileError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

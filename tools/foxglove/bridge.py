@@ -20,6 +20,7 @@ Exit codes: 0 after a signal or --duration, 2 for bad arguments, no bus or no po
 """
 
 import argparse
+import errno
 import os
 import sys
 import threading
@@ -34,6 +35,7 @@ from common.messages import DecodeError, decode
 from common.messages.schema import schema_name
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
+from tools.commands import DEFAULT_PORTS, port_in_use
 from tools.recording.format import ChannelType, parse_topic
 from tools.recording.foxglove_views import Converter, object_schema
 from tools.recording.recorder import Recorder, decision_settings, selection
@@ -120,7 +122,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     add_bus_args(parser, connect_timeout_s=0.0)
     parser.add_argument("--host", default="127.0.0.1",
                         help="address the WebSocket server binds (0.0.0.0: every interface)")
-    parser.add_argument("--port", type=int, default=8765, help="WebSocket port (0: any free)")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORTS["foxglove"],
+                        help=f"WebSocket port, default {DEFAULT_PORTS['foxglove']} "
+                             f"(Foxglove's; aeb label's is {DEFAULT_PORTS['label']}); 0: any "
+                             "free")
     parser.add_argument("--keys", default="", help="only these keys (default: every key)")
     parser.add_argument("--max-fps", type=float, default=0.0,
                         help="at most this many camera frames per second (0: all)")
@@ -151,8 +156,11 @@ def main(argv: list[str] | None = None) -> int:
         server = foxglove.start_server(name="aeb", host=args.host, port=args.port,
                                        context=context)
     except RuntimeError as exc:
-        print(f"error: cannot start the WebSocket server on {args.host}:{args.port}: {exc}",
-              file=sys.stderr)
+        if f"(os error {errno.EADDRINUSE})" in str(exc):
+            print(f"error: {port_in_use('foxglove', args.host, args.port)}", file=sys.stderr)
+        else:
+            print(f"error: cannot start the WebSocket server on {args.host}:{args.port}: "
+                  f"{exc}", file=sys.stderr)
         return 2
     bus = open_bus(args, "foxglove", stop)
     sink = FoxgloveSink(context)
