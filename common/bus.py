@@ -182,7 +182,7 @@ class Bus:
 
         `zenoh.open` blocks until a router is reachable and a signal handler only runs
         once it returns, so the session is opened on a helper thread while this thread
-        waits on `stop`. The wait is logged at once with the endpoints, then every
+        waits on `stop`. A client's wait is logged at once with the endpoints, then every
         `WAIT_LOG_INTERVAL_S` while Zenoh keeps retrying. Raises BusError.
         """
         log = log or _log
@@ -205,7 +205,9 @@ class Bus:
         threading.Thread(target=opener, name="bus-open", daemon=True).start()
         endpoints = ",".join(settings.connect or settings.listen) or "(config file)"
         started = mono_ns()
-        if not done.wait(WAIT_LOG_FIRST_S):
+        # a router (or a peer) waits for nobody: its open only takes zenoh's scouting delay
+        says_wait = settings.mode is ZenohMode.CLIENT
+        if not done.wait(WAIT_LOG_FIRST_S) and says_wait:
             log.warning(kv("waiting_for_router", endpoints=endpoints, mode=settings.mode.value,
                            retry_max_ms=CONNECT_RETRY_MAX_MS))
         next_log = started + int((WAIT_LOG_FIRST_S + WAIT_LOG_INTERVAL_S) * 1e9)
@@ -218,7 +220,7 @@ class Bus:
                 log.info(kv("stopped_waiting_for_router", endpoints=endpoints,
                             waited_s=round((mono_ns() - started) / 1e9, 1)))
                 return None
-            if mono_ns() >= next_log:
+            if says_wait and mono_ns() >= next_log:
                 next_log += int(WAIT_LOG_INTERVAL_S * 1e9)
                 log.warning(kv("still_waiting_for_router", endpoints=endpoints,
                                waited_s=round((mono_ns() - started) / 1e9, 1)))
@@ -228,7 +230,7 @@ class Bus:
         if stop.is_set():
             outcome.close()
             return None
-        if mono_ns() - started > int(WAIT_LOG_FIRST_S * 1e9):
+        if says_wait and mono_ns() - started > int(WAIT_LOG_FIRST_S * 1e9):
             log.info(kv("router_reached", endpoints=endpoints,
                         waited_s=round((mono_ns() - started) / 1e9, 1)))
         return outcome
