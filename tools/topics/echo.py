@@ -28,7 +28,7 @@ from common.clock import wall_ns
 from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus
+from tools.bus import add_bus_args, non_negative, open_bus
 from tools.topics.catalog import Catalog
 
 Sample = tuple[bytes, str, str, int]       # payload, key, encoding, receipt wall ns
@@ -40,8 +40,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("key", help="registry name, key or key expression")
     parser.add_argument("--table", action="store_true", help="a short table, one row each")
     parser.add_argument("--count", type=int, default=0, help="exit after N messages")
-    parser.add_argument("--duration", type=float, default=None, help="exit after S seconds")
-    parser.add_argument("--timeout", type=float, default=None,
+    parser.add_argument("--duration", type=non_negative, default=None,
+                        help="exit after S seconds")
+    parser.add_argument("--timeout", type=non_negative, default=None,
                         help="exit 1 when no message arrived within S seconds")
     parser.add_argument("--bytes", action="store_true",
                         help="print byte fields in full (base64) instead of their length")
