@@ -99,7 +99,7 @@ def test_a_client_subscribes_to_camera_and_annotations_and_decodes_them(router, 
         (box,), (label,) = ann.points, ann.texts
         assert [(q.x, q.y) for q in box.points] == [(400, 200), (440, 200), (440, 290),
                                                     (400, 290)]
-        assert label.text.startswith("#1 12.0 m TTC 2.4 s d 0.080 verified")
+        assert label.text.startswith("#1 12.0 m TTC 2.4 s edge_density 0.08 verified")
         # Stamped with the frame it was checked in: Foxglove pairs them by timestamp.
         stamp = ann.points[0].timestamp.seconds * 10**9 + ann.points[0].timestamp.nanos
         assert stamp in stamps or stamp < min(stamps)

@@ -52,7 +52,7 @@ def test_annotations_go_to_each_camera_stamped_with_the_frame_checked():
     assert box.timestamp.seconds * 10**9 + box.timestamp.nanos == STAMP - 12_500_000
     assert [(p.x, p.y) for p in back.points[0].points] == [(100, 100), (150, 100),
                                                            (150, 180), (100, 180)]
-    assert back.texts[0].text == "#7 10.0 m TTC 2.0 s d 0.080 verified BRAKE"
+    assert back.texts[0].text == "#7 10.0 m TTC 2.0 s edge_density 0.08 verified BRAKE"
     assert state_colour(msg.targets[0]) == (0.95, 0.1, 0.1, 1.0)      # BRAKE: red
     assert state_colour(msg.targets[1])[2] == 1.0                      # rejected: blue
     half = decoded(Converter("ego", scale=0.5).annotations(msg)["side"])

@@ -90,10 +90,12 @@ def _fmt(value: float | None, unit: str, digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f} {unit}"
 
 
-def target_label(t: VerifiedTarget) -> str:
-    """`#7 12.3 m TTC 2.1 s d 0.041 verified BRAKE`."""
-    density = "-" if t.density is None else f"{t.density:.3f}"
-    return (f"#{t.track_id} {t.range_m:.1f} m TTC {_fmt(t.ttc_s, 's')} d {density} "
+def target_label(t: VerifiedTarget, verifier: str) -> str:
+    """`#7 12.3 m TTC 2.1 s combined 1.557 verified BRAKE`: the score named by the
+    verifier that gave it (`density` is whatever score the instance's verifier gives;
+    an edge density only for the edge-density verifiers)."""
+    score = "-" if t.density is None else f"{t.density:.3g}"
+    return (f"#{t.track_id} {t.range_m:.1f} m TTC {_fmt(t.ttc_s, 's')} {verifier} {score} "
             f"{t.verification.value} {t.decision.value}")
 
 
@@ -313,7 +315,7 @@ class Converter:
                 outline_color=_colour(colour), thickness=max(1.0, 2.0 * s)))
             entry[2].append(fg.TextAnnotation(
                 timestamp=ts, position=fg.Point2(x=x, y=max(0.0, y - 4 * s)),
-                text=target_label(t), font_size=max(8.0, 13.0 * s),
+                text=target_label(t, targets.verifier), font_size=max(8.0, 13.0 * s),
                 text_color=_colour(colour), background_color=fg.Color(r=0, g=0, b=0, a=0.6)))
         return {camera: fg.ImageAnnotations(points=points, texts=texts)
                 for camera, (_, points, texts) in by_camera.items()}
@@ -336,7 +338,8 @@ class Converter:
                                         color=_colour(colour, 0.7))],
                 texts=[fg.TextPrimitive(pose=_pose(t.x_m, t.y_m, 2.0), billboard=True,
                                         font_size=14.0, scale_invariant=True,
-                                        color=_colour(colour), text=target_label(t))],
+                                        color=_colour(colour),
+                                        text=target_label(t, targets.verifier))],
                 metadata=[fg.KeyValuePair(key="in_path", value=str(t.in_path)),
                           fg.KeyValuePair(key="reason", value=t.reason)]))
         return fg.SceneUpdate(
