@@ -46,11 +46,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
 COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
                  "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
                  "faults": "demo",
-                 "record": "record", "replay": "record", "rerun": "record",
-                 "evidence": "record", "foxglove": "record"}
+                 "record": "record", "info": "record", "replay": "record", "rerun": "record",
+                 "evidence": "record", "foxglove": "record", "ab-report": "record",
+                 "eval": "eval", "label": "eval", "train-verifier": "eval"}
 OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
-                    "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense",
-                    "mcap": "record", "foxglove": "record"}
+                    "zstandard": "camera", "matplotlib": "demo", "cantools": "dbc",
+                    "pyrealsense2": "realsense", "mcap": "record", "foxglove": "record",
+                    "dask": "eval", "distributed": "eval"}
 
 # The commands that serve a page or a socket, and their default ports: apart, so that
 # both can run at once (Foxglove's own default for its WebSocket protocol is 8765).

@@ -20,14 +20,10 @@ import sys
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any
-
-import cv2
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from common.log import add_log_level, setup_logging
 from tools.commands import DEFAULT_PORTS, port_in_use
-from tools.eval.frames import FrameLoadError, load_bgr
 from tools.eval.label_page import PAGE
 from tools.eval.labels import (
     AMBIGUOUS,
@@ -41,7 +37,11 @@ from tools.eval.labels import (
     read_labels,
 )
 from tools.eval.records import RecordFileError, RoiRecord, read_records
-from tools.eval.sampling import DENSITY_EDGES, stratified, stratum_key
+
+# OpenCV, numpy and the sampling are imported where they are used: `aeb label --help`
+# needs no extra installed
+if TYPE_CHECKING:
+    import numpy as np
 
 ROI_BGR = (0, 255, 0)
 COLUMN_BGR = (255, 128, 0)
@@ -129,6 +129,11 @@ class LabelSession:
 
     def frame_png(self, index: int) -> bytes:
         """The ROI's frame with its box. Raises IndexError, FrameLoadError."""
+        import cv2
+        import numpy as np
+
+        from tools.eval.frames import load_bgr
+
         r = self.items[index]
         img = np.ascontiguousarray(load_bgr(r.frame_ref))
         cx, cy, cw, ch = r.column
@@ -140,6 +145,10 @@ class LabelSession:
 
     def crop_png(self, index: int) -> bytes:
         """The ROI alone, enlarged. Raises IndexError, FrameLoadError."""
+        import cv2
+
+        from tools.eval.frames import load_bgr
+
         r = self.items[index]
         img = load_bgr(r.frame_ref)
         x, y, w, h = r.roi
@@ -148,7 +157,11 @@ class LabelSession:
         return _png(cv2.resize(crop, (w * k, h * k), interpolation=cv2.INTER_NEAREST))
 
 
-def _png(img: np.ndarray) -> bytes:
+def _png(img: "np.ndarray") -> bytes:
+    import cv2
+
+    from tools.eval.frames import FrameLoadError
+
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise FrameLoadError("PNG encoding failed")
@@ -158,6 +171,7 @@ def _png(img: np.ndarray) -> bytes:
 def make_server(session: LabelSession, host: str = "127.0.0.1", port: int = 0
                 ) -> ThreadingHTTPServer:
     """The page's HTTP server (not started); `server_address[1]` is its port."""
+    from tools.eval.frames import FrameLoadError
 
     class Handler(BaseHTTPRequestHandler):
         def log_message(self, format: str, *args: Any) -> None:   # quiet
@@ -216,6 +230,8 @@ def pick_sample(records: list[RoiRecord], label_path: Path, n: int, keys: list[s
                 groups: list[tuple[str, str]], edges: tuple[float, ...], seed: int
                 ) -> list[RoiRecord]:
     """The sample kept beside the label file, or a new stratified one (then kept)."""
+    from tools.eval.sampling import stratified, stratum_key
+
     sample_path = label_path.with_name(label_path.name + ".sample")
     by_id = {r.id: r for r in records}
     if sample_path.is_file():
@@ -240,8 +256,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--strata", default="lighting",
                    help="conditions crossed with the density bands: any of lighting, "
                         "group, kind, camera, session (comma-separated, '' for none)")
-    p.add_argument("--edges", default=",".join(f"{e:g}" for e in DENSITY_EDGES),
-                   help="edge-density band edges")
+    p.add_argument("--edges", default="",
+                   help="edge-density band edges (default: the sampling's, "
+                        "tools/eval/sampling.py)")
     p.add_argument("--group", action="append", default=[], metavar="NAME=GLOB",
                    help="a session group (for --strata group)")
     p.add_argument("--include-truth", action="store_true",
@@ -276,7 +293,9 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--group {g!r}: expected NAME=GLOB")
             groups.append((name, pattern))
         keys = [k.strip() for k in args.strata.split(",") if k.strip()]
-        edges = tuple(float(e) for e in args.edges.split(",") if e.strip())
+        from tools.eval.sampling import DENSITY_EDGES
+
+        edges = tuple(float(e) for e in args.edges.split(",") if e.strip()) or DENSITY_EDGES
         items = pick_sample(pool, label_path, args.sample, keys, groups, edges, args.seed)
         session = LabelSession(items, label_path, args.who)
         try:

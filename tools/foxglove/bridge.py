@@ -24,9 +24,8 @@ import errno
 import os
 import sys
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import foxglove
 import msgspec
 
 from common.keys import CAMERA_JPEG
@@ -37,9 +36,13 @@ from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
 from tools.commands import DEFAULT_PORTS, port_in_use
 from tools.recording.format import ChannelType, parse_topic
-from tools.recording.foxglove_views import Converter, object_schema
-from tools.recording.recorder import Recorder, decision_settings, selection
-from tools.recording.writer import TopicCount, WriterStats
+
+# foxglove-sdk and the views are imported once the arguments are read: `--help` needs no
+# extra installed
+if TYPE_CHECKING:
+    import foxglove
+
+    from tools.recording.writer import WriterStats
 
 
 class FoxgloveSink:
@@ -48,14 +51,19 @@ class FoxgloveSink:
     (msgpack) are sent as JSON with their schema; the camera's raw frames are left out
     (the image channel has them)."""
 
-    def __init__(self, context: foxglove.Context) -> None:
+    def __init__(self, context: "foxglove.Context") -> None:
+        from tools.recording.writer import TopicCount, WriterStats
+
         self.context = context
         self.stats = WriterStats()
+        self._new_count = TopicCount
         self._channels: dict[str, foxglove.Channel] = {}
         self._json: dict[type[Any], foxglove.Schema] = {}
         self._lock = threading.Lock()
 
-    def _channel(self, topic: str, kind: ChannelType) -> foxglove.Channel:
+    def _channel(self, topic: str, kind: ChannelType) -> "foxglove.Channel":
+        import foxglove
+
         channel = self._channels.get(topic)
         if channel is None:
             schema = foxglove.Schema(name=kind.schema_name, encoding=kind.schema_encoding,
@@ -74,7 +82,7 @@ class FoxgloveSink:
             kind, payload = converted
         with self._lock:
             self._channel(topic, kind).log(payload, log_time=log_time_ns)
-            count = self.stats.topics.setdefault(topic, TopicCount())
+            count = self.stats.topics.setdefault(topic, self._new_count())
             count.messages += 1
             count.bytes += len(payload)
 
@@ -82,6 +90,8 @@ class FoxgloveSink:
         info = parse_topic(topic)
         if info is None or info.spec.msg_type is None or info.spec is CAMERA_JPEG:
             return None
+        from tools.recording.foxglove_views import object_schema
+
         msg_type = info.spec.msg_type
         try:
             msg = decode(payload, msg_type)
@@ -91,7 +101,7 @@ class FoxgloveSink:
         return ChannelType(schema_name(msg_type), "jsonschema", schema, "json"), \
             msgspec.json.encode(msg)
 
-    def close(self) -> WriterStats:
+    def close(self) -> "WriterStats":
         with self._lock:
             for channel in self._channels.values():
                 channel.close()
@@ -138,9 +148,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from common.config.loader import ConfigError
-
     args = parse_args(argv)
+    import foxglove
+
+    from common.config.loader import ConfigError
+    from tools.recording.foxglove_views import Converter
+    from tools.recording.recorder import Recorder, decision_settings, selection
+
     setup_logging("foxglove", args.log_level)
     stop = stop_event_on_signals()
     try:

@@ -19,10 +19,13 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from common.log import add_log_level, setup_logging
 from tools.recording.format import DERIVED_PREFIX, METADATA_NAME, missed_between, parse_topic
-from tools.recording.reader import Recording, RecordingError
+
+if TYPE_CHECKING:      # mcap's reader waits for the arguments (`--help` needs no extra)
+    from tools.recording.reader import Recording
 
 _PROGRESS_S = 2.0
 
@@ -71,8 +74,10 @@ def _numbered(topic: str) -> bool:
             and "header" in info.spec.msg_type.__struct_fields__)
 
 
-def inspect(rec: Recording, progress: bool = False) -> RecordingInfo:
+def inspect(rec: "Recording", progress: bool = False) -> RecordingInfo:
     """Everything `aeb info` says of a recording. Raises RecordingError."""
+    from tools.recording.reader import RecordingError
+
     summaries = rec.channels()
     channels = {t: ChannelInfo(t, s.schema_name or "-", s.message_encoding,
                                dropped=0 if _numbered(t) else None)
@@ -165,6 +170,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    from tools.recording.reader import Recording, RecordingError
+
     setup_logging("info", args.log_level)
     try:
         info = inspect(Recording.open([Path(p) for p in args.recording]),

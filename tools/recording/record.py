@@ -30,24 +30,18 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from common.config.loader import ConfigError
 from common.log import setup_logging
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
-from tools.recording.foxglove_views import Converter
-from tools.recording.recorder import (
-    RECORDER_STATUS,
-    Recorder,
-    RecordStats,
-    decision_settings,
-    selection,
-)
-from tools.recording.writer import RecordingWriter
+
+if TYPE_CHECKING:
+    from tools.recording.recorder import RecordStats
 
 
-def summary_text(stats: RecordStats) -> str:
+def summary_text(stats: "RecordStats") -> str:
     minutes = max(1e-9, (stats.ended_ns - stats.started_ns) / 60e9)
     lines = [f"wrote {len(stats.files)} file(s), {stats.bytes_on_disk / 1e6:.1f} MB in "
              f"{minutes * 60:.1f} s ({stats.bytes_on_disk / 1e6 / minutes:.1f} MB/min): "
@@ -114,6 +108,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    # after the arguments: `--help` needs no extra installed
+    from tools.recording.foxglove_views import Converter
+    from tools.recording.recorder import RECORDER_STATUS, Recorder, decision_settings, selection
+    from tools.recording.writer import RecordingWriter
+
     setup_logging("record", args.log_level)
     stop = stop_event_on_signals()
     out = Path(args.out or default_name(time.time()))

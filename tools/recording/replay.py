@@ -37,9 +37,8 @@ from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
 import msgspec
 
 from common.bus import Bus, TypedPublisher
@@ -62,7 +61,9 @@ from tools.keys import MESSAGE_KEYS
 from tools.recording.format import DERIVED_PREFIX, parse_topic
 from tools.recording.keyboard import keyboard
 from tools.recording.playback import Playback, TimeMap
-from tools.recording.reader import Record, Recording, RecordingError
+
+if TYPE_CHECKING:      # mcap's reader waits for the arguments (`--help` needs no extra)
+    from tools.recording.reader import Record, Recording
 
 GENERIC: KeySpec[Any] = KeySpec("replayed", "**", None, None, None, QoS())
 
@@ -150,6 +151,8 @@ class CanOut:
     @classmethod
     def bus(cls, spec: str) -> tuple["CanOut", Callable[[], None]]:
         """`INTERFACE:CHANNEL` through python-can. Raises ValueError, OSError."""
+        import can
+
         interface, sep, channel = spec.partition(":")
         if not sep or not interface or not channel:
             raise ValueError(f"--can-bus {spec!r}: expected INTERFACE:CHANNEL")
@@ -190,7 +193,7 @@ class Replayer:
     """Publishes a recording's messages when `playback` lets each out (its rate, pauses
     and steps)."""
 
-    def __init__(self, bus: Bus, recording: Recording, topics: list[str], playback: Playback,
+    def __init__(self, bus: Bus, recording: "Recording", topics: list[str], playback: Playback,
                  keep_stamps: bool, vehicle_map: Callable[[str], str],
                  can_out: CanOut | None = None) -> None:
         self.bus = bus
@@ -237,7 +240,7 @@ class Replayer:
             # The next pass numbers on from this one's highest sequence number.
             seq_offset += max((hi - lo + 1 for lo, hi in spans.values()), default=0)
 
-    def _publish(self, rec: Record, tm: TimeMap, seq_offset: int,
+    def _publish(self, rec: "Record", tm: TimeMap, seq_offset: int,
                  spans: dict[str, tuple[int, int]]) -> None:
         info = parse_topic(rec.topic)
         payload = rec.data
@@ -335,6 +338,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    from tools.recording.reader import Recording, RecordingError
+
     setup_logging("replay", args.log_level)
     stop = stop_event_on_signals()
     if args.rate <= 0:

@@ -26,7 +26,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 
@@ -38,12 +38,12 @@ from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import add_log_level, setup_logging
 from common.messages import encode
 from common.resources import DEPLOY
-from services.fusion.verifiers import VerifierConfigError
 from tools.recording.compare import Comparison, Difference, check_declared, summary_table
 from tools.recording.format import stack_channel
-from tools.recording.foxglove_views import Converter, encode_derived
-from tools.recording.reader import Recording, RecordingError
-from tools.recording.writer import RecordingWriter
+
+if TYPE_CHECKING:      # the re-runs' own imports wait for the arguments (`--help`, no extra)
+    from tools.recording.reader import Recording
+    from tools.recording.writer import RecordingWriter
 
 
 class Progress:
@@ -96,15 +96,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _window(rec: Recording, args: argparse.Namespace) -> tuple[int, int, int | None, int | None]:
+def _window(rec: "Recording", args: argparse.Namespace) -> tuple[int, int, int | None, int | None]:
     first, last = rec.time_range()
     start = None if args.start is None else first + round(args.start * 1e9)
     end = None if args.end is None else first + round(args.end * 1e9)
     return first, last, start, end
 
 
-def run_fusion(args: argparse.Namespace, rec: Recording,
+def run_fusion(args: argparse.Namespace, rec: "Recording",
                vehicle: str) -> tuple[Comparison, dict[str, Any]]:
+    from tools.recording.foxglove_views import Converter, encode_derived
     from tools.recording.rerun_fusion import FusionRerun, config_params, normalised
 
     cfg = load_config(args.config or DEPLOY / "fusion.toml", FusionConfig, args.overrides)
@@ -166,8 +167,9 @@ def run_fusion(args: argparse.Namespace, rec: Recording,
     return comparison, timing
 
 
-def run_radar(args: argparse.Namespace, rec: Recording,
+def run_radar(args: argparse.Namespace, rec: "Recording",
               vehicle: str) -> tuple[Comparison, dict[str, Any]]:
+    from tools.recording.foxglove_views import Converter, encode_derived
     from tools.recording.rerun_radar import RadarRerun
 
     cfg = load_config(args.config or DEPLOY / "radar.toml", RadarConfig, args.overrides)
@@ -206,7 +208,9 @@ def run_radar(args: argparse.Namespace, rec: Recording,
     return comparison, timing
 
 
-def _writer(args: argparse.Namespace, metadata: dict[str, str]) -> RecordingWriter | None:
+def _writer(args: argparse.Namespace, metadata: dict[str, str]) -> "RecordingWriter | None":
+    from tools.recording.writer import RecordingWriter
+
     if not args.out:
         return None
     # No time-based flush: the same outputs must make the same bytes.
@@ -258,7 +262,7 @@ def report(args: argparse.Namespace, comparison: Comparison, timing: dict[str, A
     return code
 
 
-def nothing_compared(args: argparse.Namespace, rec: Recording, vehicle: str,
+def nothing_compared(args: argparse.Namespace, rec: "Recording", vehicle: str,
                      timing: dict[str, Any]) -> str:
     """Why --compare found no recorded output to compare with, naming what is there."""
     spec = FUSION_BRAKE_CMD if args.service == "fusion" else RADAR_TRACKS
@@ -277,6 +281,9 @@ def nothing_compared(args: argparse.Namespace, rec: Recording, vehicle: str,
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    from services.fusion.verifiers import VerifierConfigError
+    from tools.recording.reader import Recording, RecordingError
+
     setup_logging("rerun", args.log_level)
     try:
         rec = Recording.open(args.recording)
