@@ -78,7 +78,13 @@ class LabelSession:
         if cur is not None:
             r = self.items[cur]
             got = self.labels.get(r.id)
-            current = {"index": cur, "id": r.id, "kind": r.kind, "obj_class": r.obj_class,
+            # With ground truth, what the ROI was built from (an object, a background
+            # patch, its class) is the answer: the page gets none of it, nor the id
+            # that spells it (it still labels by it).
+            hidden = r.truth is not None
+            current = {"index": cur, "id": r.id, "truth_hidden": hidden,
+                       "kind": None if hidden else r.kind,
+                       "obj_class": None if hidden else r.obj_class,
                        "range_m": r.range_m, "ttc_s": r.ttc_s, "track_id": r.track_id,
                        "density": r.density, "lighting": r.lighting, "camera": r.camera,
                        "session": r.session, "frame": r.frame, "roi": list(r.roi),
