@@ -56,14 +56,24 @@ def test_zenohs_build_paths_are_left_out_and_a_bind_failure_is_recognised():
     assert bind_failure("invalid zenoh configuration: listen/endpoints") is None
 
 
+def waiting_router(tmp_path, argv: list[str]) -> ServiceProcess:
+    """A router started with `argv`, once it said it waits for an address."""
+    router = ServiceProcess("router", argv, tmp_path)
+    try:
+        wait_for(lambda: "listen_address_unavailable" in router.output()
+                 or not router.alive(), START_TIMEOUT_S, 0.05, "the router to say it waits")
+        assert router.alive(), router.output()
+    except BaseException:
+        router.stop()
+        raise
+    return router
+
+
 def test_a_port_still_held_is_waited_for_then_served(tmp_path):
     with held_port() as (port, holder):
-        router = ServiceProcess("router", python_module(
-            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"), tmp_path)
+        router = waiting_router(tmp_path, python_module(
+            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"))
         try:
-            wait_for(lambda: "listen_address_unavailable" in router.output()
-                     or not router.alive(), START_TIMEOUT_S, 0.05, "the router to say it waits")
-            assert router.alive(), router.output()
             log = router.output()
             assert f"endpoint=tcp/127.0.0.1:{port}" in log and "already in use" in log
             assert ".cargo" not in log
@@ -81,11 +91,9 @@ def test_a_port_still_held_is_waited_for_then_served(tmp_path):
 
 def test_a_router_stopped_while_it_waits_exits_cleanly(tmp_path):
     with held_port() as (port, _):
-        router = ServiceProcess("router", python_module(
-            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"), tmp_path)
+        router = waiting_router(tmp_path, python_module(
+            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"))
         try:
-            wait_for(lambda: "listen_address_unavailable" in router.output()
-                     or not router.alive(), START_TIMEOUT_S, 0.05, "the router to wait")
             router.signal(signal.SIGINT)
             assert router.proc.wait(30) == 0, router.output()
         finally:
@@ -130,13 +138,11 @@ def test_ecu_as_router_waits_for_its_vehicle_network_address(tmp_path):
     # ECU A's shipped router config listens on 192.168.10.1, here on a board (a network
     # namespace of its own) whose address comes up after the router started
     with namespace() as ns:
-        router = ServiceProcess("router", ["ip", "netns", "exec", ns, *python_module(
+        router = waiting_router(tmp_path, ["ip", "netns", "exec", ns, *python_module(
             "tools.cli", "router", "--config-file",
-            str(DEPLOY / "zenoh" / "ecu-a-router.json5"))], tmp_path)
+            str(DEPLOY / "zenoh" / "ecu-a-router.json5"))])
         try:
-            wait_for(lambda: "listen_address_unavailable" in router.output()
-                     or not router.alive(), START_TIMEOUT_S, 0.05, "the router to wait")
-            assert router.alive() and "endpoint=tcp/192.168.10.1:7447" in router.output()
+            assert "endpoint=tcp/192.168.10.1:7447" in router.output()
             ip("netns", "exec", ns, "ip", "addr", "add", "192.168.10.1/24", "dev", "lo")
             wait_for(lambda: "router_ready" in router.output() or not router.alive(),
                      START_TIMEOUT_S, 0.05, "the router to serve")
