@@ -9,6 +9,7 @@ limit; they never reach a callback and never raise in Zenoh's threads.
 
 import json
 import logging
+import re
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -54,6 +55,16 @@ class BusError(RuntimeError):
     """The Zenoh configuration is invalid or the session could not be opened."""
 
 
+# Where in zenoh's Rust source an error was raised (" at /root/.cargo/.../tcp.rs:61."):
+# the build machine's paths, nothing for a user
+_RUST_SOURCE = re.compile(r"\s+at\s+\S+\.rs:\d+\.?")
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """A zenoh error's text without the source locations of zenoh's build."""
+    return _RUST_SOURCE.sub("", str(exc))
+
+
 def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
     """Build a zenoh.Config: file first, then our fields, then raw overrides.
 
@@ -90,11 +101,11 @@ def zenoh_config(settings: ZenohSettings) -> zenoh.Config:
                 conf.insert_json5(key, json.dumps(value))
             except zenoh.ZError as exc:
                 raise BusError(f"invalid zenoh configuration: {key} = {value!r}: "
-                               f"{exc}") from exc
+                               f"{zenoh_message(exc)}") from exc
     except (zenoh.ZError, TypeError, ValueError) as exc:
         # ZError: a key, value or file zenoh refuses; TypeError/ValueError: an override
         # that is not JSON
-        raise BusError(f"invalid zenoh configuration: {exc}") from exc
+        raise BusError(f"invalid zenoh configuration: {zenoh_message(exc)}") from exc
     return conf
 
 
@@ -104,7 +115,7 @@ def open_session(settings: ZenohSettings) -> zenoh.Session:
     try:
         return zenoh.open(conf)
     except zenoh.ZError as exc:
-        raise BusError(f"cannot open zenoh session: {exc}") from exc
+        raise BusError(f"cannot open zenoh session: {zenoh_message(exc)}") from exc
 
 
 def encoding(spec: KeySpec[Any]) -> zenoh.Encoding | None:
@@ -171,7 +182,7 @@ class Bus:
 
         `zenoh.open` blocks until a router is reachable and a signal handler only runs
         once it returns, so the session is opened on a helper thread while this thread
-        waits on `stop`. The wait is logged at once with the endpoints, then every
+        waits on `stop`. A client's wait is logged at once with the endpoints, then every
         `WAIT_LOG_INTERVAL_S` while Zenoh keeps retrying. Raises BusError.
         """
         log = log or _log
@@ -194,7 +205,9 @@ class Bus:
         threading.Thread(target=opener, name="bus-open", daemon=True).start()
         endpoints = ",".join(settings.connect or settings.listen) or "(config file)"
         started = mono_ns()
-        if not done.wait(WAIT_LOG_FIRST_S):
+        # a router (or a peer) waits for nobody: its open only takes zenoh's scouting delay
+        says_wait = settings.mode is ZenohMode.CLIENT
+        if not done.wait(WAIT_LOG_FIRST_S) and says_wait:
             log.warning(kv("waiting_for_router", endpoints=endpoints, mode=settings.mode.value,
                            retry_max_ms=CONNECT_RETRY_MAX_MS))
         next_log = started + int((WAIT_LOG_FIRST_S + WAIT_LOG_INTERVAL_S) * 1e9)
@@ -207,7 +220,7 @@ class Bus:
                 log.info(kv("stopped_waiting_for_router", endpoints=endpoints,
                             waited_s=round((mono_ns() - started) / 1e9, 1)))
                 return None
-            if mono_ns() >= next_log:
+            if says_wait and mono_ns() >= next_log:
                 next_log += int(WAIT_LOG_INTERVAL_S * 1e9)
                 log.warning(kv("still_waiting_for_router", endpoints=endpoints,
                                waited_s=round((mono_ns() - started) / 1e9, 1)))
@@ -217,7 +230,7 @@ class Bus:
         if stop.is_set():
             outcome.close()
             return None
-        if mono_ns() - started > int(WAIT_LOG_FIRST_S * 1e9):
+        if says_wait and mono_ns() - started > int(WAIT_LOG_FIRST_S * 1e9):
             log.info(kv("router_reached", endpoints=endpoints,
                         waited_s=round((mono_ns() - started) / 1e9, 1)))
         return outcome

@@ -15,3 +15,6 @@ EXAMPLE_KEYS = DEPLOY / "keys"   # INSECURE example command keys: demo and simul
 SINGLE_HOST_TABLE = DEPLOY / "single-host.toml"
 ARS408_RECORDING = DEPLOY / "recordings" / "ars408" / "candump-2026-06-24_154259.log"
 
+# the ARS408-21 DBC rendered from the radar's signal table (services/radar/ars408/dbc.py):
+# found without importing the radar (and numpy), for `aeb can-export`
+ARS408_DBC = DEPLOY.parent / "services" / "radar" / "ars408" / "ars408_21.dbc"

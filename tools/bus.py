@@ -27,6 +27,32 @@ _LOOPBACK = ("127.", "localhost", "[::1]")
 _log = logging.getLogger("bus")
 
 
+def positive(text: str) -> float:
+    """An argparse type: a number > 0 (a period, a rate); argparse exits 2 otherwise."""
+    value = _number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be greater than 0")
+    return value
+
+
+def non_negative(text: str) -> float:
+    """An argparse type: a number >= 0 (a duration, a timeout)."""
+    value = _number(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must not be negative")
+    return value
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"{text!r}: not a finite number")
+    return value
+
+
 def add_bus_args(parser: argparse.ArgumentParser, connect_timeout_s: float = 10.0,
                  listen: bool = False) -> None:
     """`--connect`, `--vehicle`, `--zenoh-config`, `--connect-timeout` (default
@@ -36,7 +62,7 @@ def add_bus_args(parser: argparse.ArgumentParser, connect_timeout_s: float = 10.
                         help=f"router endpoint (repeatable), default {DEFAULT_ENDPOINT}")
     parser.add_argument("--vehicle", default="ego")
     parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 client config")
-    parser.add_argument("--connect-timeout", type=float, default=connect_timeout_s,
+    parser.add_argument("--connect-timeout", type=non_negative, default=connect_timeout_s,
                         help="give up when no router answers within this many seconds "
                              f"(0: wait as long as it takes; default {connect_timeout_s:g})")
     if listen:

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from common.log import add_log_level, setup_logging
-from services.radar.ars408.dbc import DBC_PATH
+from common.resources import ARS408_DBC
 
 WIDE_HEAD = ["time_s", "channel", "can_id", "message"]
 LONG_HEAD = [*WIDE_HEAD, "signal", "value", "unit"]
@@ -43,7 +43,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb can-export", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("log", help="CAN log (candump .log, .asc, .blf, ...)")
-    parser.add_argument("--dbc", default=str(DBC_PATH),
+    parser.add_argument("--dbc", default=str(ARS408_DBC),
                         help="DBC file (default: the shipped ARS408-21 DBC)")
     parser.add_argument("--out", help="CSV file to write (default: stdout)")
     parser.add_argument("--format", choices=["wide", "long"], default="wide")
@@ -68,8 +68,12 @@ def load_dbc(path: str) -> Any:
                           "'aeb-radar-camera[dbc]'") from exc
     try:
         db = cantools.database.load_file(path)
-    except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+    except OSError as exc:
         raise ExportError(f"{path}: cannot read the DBC: {exc}") from exc
+    except (cantools.database.UnsupportedDatabaseFormatError, ValueError) as exc:
+        # ValueError: a file extension cantools has no parser for
+        raise ExportError(f"{path}: not a CAN database cantools reads (DBC, KCD, SYM, "
+                          f"ARXML, CDD): {str(exc).strip()}") from exc
     if not isinstance(db, cantools.database.can.Database):
         raise ExportError(f"{path}: not a CAN database")
     return db

@@ -4,10 +4,13 @@ the command table (tools/commands.py).
 Commands are imported lazily so that `aeb brake` never pays for OpenCV.
 """
 
+import ast
 import importlib
 import importlib.metadata
+import importlib.util
 import os
 import sys
+from pathlib import Path
 
 from tools.commands import COMMAND_EXTRA, COMMANDS, OPTIONAL_MODULES
 
@@ -26,6 +29,15 @@ def usage() -> str:
              "commands:"]
     lines += [f"  {name:<13} {doc}" for name, (_, doc) in COMMANDS.items()]
     return "\n".join(lines)
+
+
+def module_doc(module: str) -> str:
+    """A module's docstring read from its source, without importing it."""
+    spec = importlib.util.find_spec(module)
+    if spec is None or spec.origin is None:
+        return ""
+    tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+    return (ast.get_docstring(tree) or "").strip()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -47,8 +59,15 @@ def main(argv: list[str] | None = None) -> int:
         if missing not in OPTIONAL_MODULES:
             raise
         extra = COMMAND_EXTRA.get(name, OPTIONAL_MODULES[missing])
-        print(f"error: aeb {name} needs the Python package {exc.name!r}, which is not "
-              f"installed: pip install 'aeb-radar-camera[{extra}]'", file=sys.stderr)
+        install = (f"aeb {name} needs the Python package {exc.name!r}, which is not "
+                   f"installed: pip install 'aeb-radar-camera[{extra}]'")
+        if "-h" in rest or "--help" in rest:
+            # A command whose module cannot be imported without its extra: its own
+            # description, read from the source, and what to install for the options.
+            print(f"aeb {name}: {COMMANDS[name][1]}\n\n{module_doc(COMMANDS[name][0])}\n"
+                  f"(its options are listed once it can run: {install})")
+            return 0
+        print(f"error: {install}", file=sys.stderr)
         return 2
     try:
         result = module.main(rest)

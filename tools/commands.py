@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
     "bench": ("benchmarks.suite", "the benchmark suite"),
     "record": ("tools.recording.record", "record the bus into MCAP (opens in Foxglove)"),
+    "info": ("tools.recording.info", "what a recording holds: channels, counts, rates, drops"),
     "replay": ("tools.recording.replay", "publish a recording back on the bus"),
     "rerun": ("tools.recording.rerun", "re-run fusion or radar on a recording, offline"),
     "evidence": ("tools.recording.evidence", "a folder of evidence per WARNING and BRAKE"),
@@ -28,6 +29,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "init": ("tools.init", "write an editable copy of deploy/ for a vehicle"),
     "keygen": ("tools.keygen", "make the BrakeCommand key of a fusion instance"),
     "schemas": ("tools.schemas", "JSON schemas of every message on the bus"),
+    "list": ("tools.topics.list_keys", "the keys being published: types, publishers, rates"),
+    "nodes": ("tools.topics.nodes", "the services and instances up (liveliness tokens)"),
     "echo": ("tools.topics.echo", "print the decoded messages of a key (JSON lines or a table)"),
     "hz": ("tools.topics.hz", "publish rate of a key: mean, min, max and std of the period"),
     "can-export": ("tools.can_export", "a CAN log decoded to CSV with the shipped DBC"),
@@ -43,8 +46,24 @@ COMMANDS: dict[str, tuple[str, str]] = {
 COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
                  "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
                  "faults": "demo",
-                 "record": "record", "replay": "record", "rerun": "record",
-                 "evidence": "record", "foxglove": "record"}
+                 "record": "record", "info": "record", "replay": "record", "rerun": "record",
+                 "evidence": "record", "foxglove": "record", "ab-report": "record",
+                 "eval": "eval", "label": "eval", "train-verifier": "eval"}
 OPTIONAL_MODULES = {"can": "radar", "numpy": "radar", "cv2": "camera", "simplejpeg": "camera",
-                    "matplotlib": "demo", "cantools": "dbc", "pyrealsense2": "realsense",
-                    "mcap": "record", "foxglove": "record"}
+                    "zstandard": "camera", "matplotlib": "demo", "cantools": "dbc",
+                    "pyrealsense2": "realsense", "mcap": "record", "foxglove": "record",
+                    "dask": "eval", "distributed": "eval"}
+
+# The commands that serve a page or a socket, and their default ports: apart, so that
+# both can run at once (Foxglove's own default for its WebSocket protocol is 8765).
+DEFAULT_PORTS = {"foxglove": 8765, "label": 8780}
+
+
+def port_in_use(command: str, host: str, port: int) -> str:
+    """What to tell a user whose `aeb <command>` found `host:port` taken."""
+    other = next((name for name, p in DEFAULT_PORTS.items()
+                  if p == port and name != command), None)
+    who = (f"the default port of aeb {other}: is an `aeb {other}` running?" if other
+           else "by another program, or another aeb " + command)
+    return (f"{host}:{port} is in use ({who}); choose another with --port "
+            f"(0: any free port)")

@@ -24,7 +24,7 @@ class RealSenseSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, t
                       tag="realsense"):
     """An Intel RealSense camera (colour stream) or a RealSense `.bag` recording.
 
-    Needs the optional extra: `pip install -e '.[realsense]'`.
+    Needs the optional extra: `pip install 'aeb-radar-camera[realsense]'`.
     """
 
     serial: str = ""            # empty: the first device found

@@ -33,7 +33,7 @@ from services.camera.source import (
 
 _MAX_CLOCK_GAP_NS = 1_000_000_000
 _MM = 0.001
-INSTALL_HINT = "pip install -e '.[realsense]' (or pip install pyrealsense2)"
+INSTALL_HINT = "pip install 'aeb-radar-camera[realsense]' (or pip install pyrealsense2)"
 
 
 def import_pyrealsense2() -> ModuleType:

@@ -54,7 +54,7 @@ def test_realsense_without_its_extra_exits_2_with_the_install_command(tmp_path, 
     monkeypatch.setitem(sys.modules, "pyrealsense2", None)
     code, err = run_main(tmp_path, f'[camera]\ncalibration = "{CALIBRATION}"\n', capsys)
     assert code == 2
-    assert "pip install -e '.[realsense]'" in err
+    assert "pip install 'aeb-radar-camera[realsense]'" in err
 
 
 def test_shipped_configs_are_valid():

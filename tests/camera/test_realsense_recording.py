@@ -11,7 +11,7 @@ import pytest
 
 rs = pytest.importorskip(
     "pyrealsense2",
-    reason="optional extra not installed (pip install -e '.[realsense]'); "
+    reason="optional extra not installed (pip install 'aeb-radar-camera[realsense]'); "
            "test_sources.py covers the wrapper with a stand-in")
 
 from services.camera.realsense import RealSenseSource  # noqa: E402

@@ -268,7 +268,7 @@ def test_factory_path_format_is_checked_at_config_load_and_by_the_loader():
 
 def test_missing_pyrealsense2_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "pyrealsense2", None)   # import fails as if absent
-    with pytest.raises(SourceConfigError, match=r"pip install -e '\.\[realsense\]'"):
+    with pytest.raises(SourceConfigError, match=r"pip install 'aeb-radar-camera\[realsense\]'"):
         import_pyrealsense2()
     with pytest.raises(SourceConfigError, match="pyrealsense2"):
         RealSenseSource().open()

@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 import cv2
+import msgspec
 import numpy as np
 import pytest
 from websockets.sync.client import ClientConnection, connect
@@ -24,8 +25,8 @@ from tools.eval.scoring import Scorer, default_specs
 
 pytestmark = pytest.mark.slow
 
-# Where the page puts the frame (label_page.py: #frame at left 8 px, top 48 px).
-FRAME_LEFT, FRAME_TOP = 8, 48
+# Where the page puts the frame (label_page.py: #frame at left 8 px, top 66 px).
+FRAME_LEFT, FRAME_TOP = 8, 66
 DEADLINE_S = 60.0
 
 
@@ -187,3 +188,55 @@ def test_label_file_survives_a_new_session(page, tmp_path):
     assert resumed.state()["current"]["id"] != first["id"]
     resumed.close()
     assert Path(str(labels) + ".sample").is_file()
+
+
+def click(tools: DevTools, element_id: str) -> None:
+    """A real mouse click in the middle of the element, as a person clicks."""
+    box = tools.evaluate(f"JSON.stringify(document.getElementById('{element_id}')"
+                         ".getBoundingClientRect())")
+    r = json.loads(str(box))
+    x, y = r["x"] + r["width"] / 2, r["y"] + r["height"] / 2
+    for kind in ("mousePressed", "mouseReleased"):
+        tools.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left",
+                   clickCount=1)
+
+
+def test_buttons_beside_the_keys_say_what_yes_means_and_hide_the_answer(page):
+    tools, session, labels = page
+    first = session.state()["current"]
+    shown(tools, first["id"])
+    item = session.items[first["index"]]
+    assert item.truth is not None                 # the simulator's ground truth is loaded
+    text = str(tools.evaluate("document.body.innerText"))
+    assert "YES: an object stands in the green box at the track's range" in text
+    # the answer is not on the page: neither what the ROI was built from nor its id
+    assert first["kind"] is None and first["truth_hidden"]
+    info = str(tools.evaluate("document.getElementById('info').textContent")).splitlines()
+    assert info[0] == f"ROI {first['index'] + 1} of 8 (ground truth loaded: its kind is not " \
+                      "shown)"
+    assert item.id not in text, text
+    assert not item.obj_class or item.obj_class not in info[0], info
+    # each answer is a button beside its key, and a click labels as the key does
+    keys = [str(tools.evaluate(f"document.getElementById('{b}').textContent")).split()
+            for b in ("yes", "no", "ambiguous", "skip", "back")]
+    assert keys == [["Y", "yes"], ["N", "no"], ["A", "ambiguous"], ["S", "skip"],
+                    ["←", "back"]]
+    click(tools, "no")
+    wait_for(lambda: first["id"] in read_labels(labels), DEADLINE_S, 0.05, "the click")
+    assert read_labels(labels)[first["id"]].value == "NO"
+    second = wait_for(lambda: (session.state()["current"] or {}).get("id") != first["id"]
+                      and session.state()["current"], DEADLINE_S, 0.05, "the next ROI")
+    shown(tools, second["id"])
+    click(tools, "back")
+    wait_for(lambda: (session.state()["current"] or {}).get("id") == first["id"],
+             DEADLINE_S, 0.05, "back to the first ROI")
+
+
+def test_without_ground_truth_the_kind_is_shown(tmp_path):
+    rec = write_sim_recording(tmp_path / "drive.mcap", n_cycles=2)
+    records = [msgspec.structs.replace(r, truth=None) for r in recording_records(
+        rec.path, RecordingSettings(background_per_object=0), Scorer(default_specs()), {})]
+    session = LabelSession(records, tmp_path / "labels.tsv", "t")
+    current = session.state()["current"]
+    assert current["kind"] == records[0].kind and not current["truth_hidden"]
+    session.close()

@@ -10,7 +10,9 @@ subscribe, then binary message data (opcode 1, subscription id, log time, payloa
 import asyncio
 import base64
 import json
+import socket
 import struct
+import subprocess
 
 import numpy as np
 import pytest
@@ -97,7 +99,7 @@ def test_a_client_subscribes_to_camera_and_annotations_and_decodes_them(router, 
         (box,), (label,) = ann.points, ann.texts
         assert [(q.x, q.y) for q in box.points] == [(400, 200), (440, 200), (440, 290),
                                                     (400, 290)]
-        assert label.text.startswith("#1 12.0 m TTC 2.4 s d 0.080 verified")
+        assert label.text.startswith("#1 12.0 m TTC 2.4 s edge_density 0.08 verified")
         # Stamped with the frame it was checked in: Foxglove pairs them by timestamp.
         stamp = ann.points[0].timestamp.seconds * 10**9 + ann.points[0].timestamp.nanos
         assert stamp in stamps or stamp < min(stamps)
@@ -130,3 +132,15 @@ def test_max_fps_and_scale_downsample_the_camera(router, tmp_path):
                  got[ANNOTATIONS][0][1])
     corner = ann.points[0].points[0]
     assert (corner.x, corner.y) == (200, 100)
+
+
+def test_a_port_in_use_is_exit_2_saying_so_before_any_bus(tmp_path):
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        port = holder.getsockname()[1]
+        done = subprocess.run(python_module(
+            "tools.cli", "foxglove", "--port", str(port), "--connect",
+            f"tcp/127.0.0.1:{free_port()}"), capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert f"127.0.0.1:{port} is in use" in done.stderr and "--port" in done.stderr

@@ -5,8 +5,13 @@ track, the health view, and bytes that decode with the schema they are written w
 import json
 
 import msgspec
+import numpy as np
+import pytest
 
+from common.calibration import Calibration
 from common.messages import Decision, Verification
+from common.resources import EXAMPLE_CALIBRATION
+from tests.eval.fixtures import camera_info
 from tests.foxglove.protobuf import decode
 from tests.recording.publish import textured_jpeg
 from tests.system.messages import brake_status, target, verified_targets
@@ -52,7 +57,7 @@ def test_annotations_go_to_each_camera_stamped_with_the_frame_checked():
     assert box.timestamp.seconds * 10**9 + box.timestamp.nanos == STAMP - 12_500_000
     assert [(p.x, p.y) for p in back.points[0].points] == [(100, 100), (150, 100),
                                                            (150, 180), (100, 180)]
-    assert back.texts[0].text == "#7 10.0 m TTC 2.0 s d 0.080 verified BRAKE"
+    assert back.texts[0].text == "#7 10.0 m TTC 2.0 s edge_density 0.08 verified BRAKE"
     assert state_colour(msg.targets[0]) == (0.95, 0.1, 0.1, 1.0)      # BRAKE: red
     assert state_colour(msg.targets[1])[2] == 1.0                      # rejected: blue
     half = decoded(Converter("ego", scale=0.5).annotations(msg)["side"])
@@ -94,3 +99,43 @@ def test_the_plots_and_the_health_view():
     assert {(s["service"], s["alive"], s["status"]) for s in health["services"]} == {
         ("fusion", True, "unknown"), ("brake", False, "ok")}
     assert conv.convert("brake_status", brake_status(2))[1:] == []   # unchanged: no repeat
+
+
+def _rotate(q, v):
+    """A vector rotated by a unit quaternion (x, y, z, w)."""
+    x, y, z, w = q
+    u = np.array([x, y, z])
+    v = np.asarray(v, float)
+    return v + 2 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def test_camera_info_gives_the_calibration_and_the_cameras_place_in_the_radar_frame():
+    # the shipped calibration (a camera above and behind the radar, pitched): the 3D
+    # panel must put the image where fusion projects the tracks
+    cal = Calibration.load(EXAMPLE_CALIBRATION)
+    info = camera_info(cal, STAMP)
+    views = dict(Converter("ego").convert("camera_info", info))
+    calib = decoded(views["/foxglove/ego/camera/front/calibration"])
+    assert calib.frame_id == "front" and (calib.width, calib.height) == (cal.width,
+                                                                       cal.height)
+    assert list(calib.K) == pytest.approx(cal.k.ravel().tolist())
+    assert calib.distortion_model == "plumb_bob"
+    (tf,) = decoded(views["/foxglove/ego/tf"]).transforms
+    assert (tf.parent_frame_id, tf.child_frame_id) == ("radar", "front")
+    q = (tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w)
+    centre = np.array([tf.translation.x, tf.translation.y, tf.translation.z])
+    assert centre == pytest.approx(cal.camera_position_m)
+    # a point in front of the radar: through the camera frame and back by the transform
+    ground = np.array([[12.0, -1.5, 0.8]])
+    in_camera = cal.to_camera(ground)[0]
+    assert centre + _rotate(q, in_camera) == pytest.approx(ground[0])
+    # ... and the calibration's K puts it on the pixel fusion projects it to
+    k = np.array(calib.K).reshape(3, 3)
+    u, v, s = k @ in_camera
+    uv, _ = cal.project(ground)
+    if not np.any(cal.dist):
+        assert (u / s, v / s) == pytest.approx(tuple(uv[0]), abs=1e-6)
+    # scaled images (the bridge's --scale) have their intrinsics scaled with them
+    half = decoded(dict(Converter("ego", scale=0.5).convert("camera_info", info))[
+        "/foxglove/ego/camera/front/calibration"])
+    assert half.width == round(cal.width / 2) and half.K[0] == pytest.approx(cal.k[0, 0] / 2)

@@ -9,11 +9,14 @@ on a fresh demo run (slow)."""
 import json
 import subprocess
 
+import cv2
+import numpy as np
 import pytest
 
 from common.net import free_port
 from tests.recording.checks import STACK_SPECS, check_recording, stamp_ns
 from tests.support import REPO, ServiceProcess, python_module
+from tools.recording.evidence_frames import contrast
 from tools.recording.format import parse_topic
 
 SIM = REPO / "tests" / "data" / "recording" / "pedestrian_standing_20kph.mcap"
@@ -73,7 +76,17 @@ def test_evidence_of_the_warning_and_the_brake(tmp_path):
     assert stages[0] == "radar: last CAN frame of the cycle"
     assert "brake: command bytes on the serial line" in stages
     readme = (brake / "README.md").read_text()
-    assert "**Why:** track" in readme and "| density |" in readme
+    # the score named for what it is: the verifier's, not an edge density
+    assert "**Why:** track" in readme and "| combined score | 1.5" in readme
+    assert "| density |" not in readme
+    # the deciding ROI's label readable at a glance: on a box of its colour, text in
+    # black or white whichever contrasts, about 15 px high on the 480-line frame
+    img = cv2.imread(str(brake / "frame_annotated.jpg"))
+    x, y = t["roi_xywh"][:2]
+    box = _label_box_above(img, x, y)
+    assert box is not None, "no label box above the deciding ROI"
+    colour, height, text = box
+    assert height >= 18 and contrast(colour, text) >= 4.5
     import can
 
     frames = list(can.LogReader(str(brake / "can.log")))
@@ -112,3 +125,22 @@ def test_a_demo_run_recorded_beside_it(tmp_path):
     fields = json.loads((tmp_path / "f.json").read_text())["comparison"]["fields"]
     assert not any(k.startswith(("decisions.", "commands.decision")) for k in fields), \
         fusion.stdout
+
+
+def _label_box_above(img, x: int, y: int):
+    """(box colour, box height, text colour) of the filled label box right above a ROI
+    whose top-left corner is (x, y), or None. The box's left padding has no text: its
+    height is the run of rows of one colour there."""
+    colour = img[y - 3, x + 2].astype(int)
+    height = 0
+    while y - 1 - height >= 0 and np.abs(img[y - 1 - height, x + 1:x + 3].astype(int)
+                                         - colour).sum(axis=1).max() < 60:
+        height += 1
+    if height < 2:
+        return None
+    region = img[y - height:y, x:x + 200].reshape(-1, 3).astype(int)
+    far = region[np.abs(region - colour).sum(axis=1) > 250]
+    if len(far) < 20:
+        return None
+    text = np.median(far, axis=0)
+    return tuple(int(c) for c in colour), height, tuple(int(c) for c in text)

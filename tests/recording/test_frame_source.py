@@ -196,3 +196,21 @@ def test_a_depth_producer_is_read_on_demand_once_and_a_failure_counted_once():
     assert frames[1].depth_m is None and frames[1].depth_m is None and made == [2, 1]
     assert src.feed("front", T0 + 2 * PERIOD).depth_undecodable == 1
     assert not frames[1].undecodable and src.decoded == 0    # its pixels are still fine
+
+
+def test_a_frames_depth_is_there_once_received_unless_pinned():
+    # live fusion pairs a depth with its frame only once the depth has arrived
+    src = FrameSource({"front": (W, H)})
+    data, rx = FRAMES[3]
+    frame = src.add_recorded("front", data, rx)
+    src.add_depth("front", DEPTH[3], rx + 2 * MS)        # just after the frame
+    src.feed("front", rx + MS)
+    assert frame.depth_m is None and not src.has_depth("front", frame.stamp_ns)
+    src.feed("front", rx + 2 * MS)
+    assert frame.depth_m is not None and src.has_depth("front", frame.stamp_ns)
+    # the recorded output says the live instance had none: none, whenever it arrived
+    src.feed("front", rx + 10 * MS, depth_pins={frame.stamp_ns: False})
+    assert frame.depth_m is None
+    # ... or had it, received before the recorder got it
+    src.feed("front", rx + MS, depth_pins={frame.stamp_ns: True})
+    assert frame.depth_m is not None

@@ -5,9 +5,12 @@ router answers yet."""
 
 import json
 import signal
+import subprocess
+import time
 
 import pytest
 
+from common.messages import Header
 from common.net import free_port
 from tests.foxglove.protobuf import decode as decode_protobuf
 from tests.recording.publish import StackPublisher
@@ -20,7 +23,9 @@ from tests.support import (
     wait_for,
 )
 from tools.recording.reader import Recording, decode_record
+from tools.recording.record import default_name
 from tools.recording.recorder import RECORDER_STATUS
+from tools.recording.writer import RecordingWriter
 
 pytestmark = pytest.mark.slow
 
@@ -181,3 +186,33 @@ def test_ctrl_c_while_no_router_answers_ends_it_at_once(tmp_path):
         assert "Traceback" not in proc.output()
     finally:
         proc.stop()
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_an_existing_recording_is_never_overwritten(tmp_path, split):
+    # refused before the bus is opened: no router needed, the file untouched
+    out = tmp_path / "drive.mcap"
+    existing = tmp_path / "drive_0000.mcap" if split else out
+    existing.write_bytes(b"a drive worth keeping")
+    argv = ["record", "-o", str(out), "--connect", f"tcp/127.0.0.1:{free_port()}",
+            *(["--split-duration", "60"] if split else [])]
+    done = subprocess.run(python_module("tools.cli", *argv), capture_output=True, text=True,
+                          timeout=60, cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert f"{existing} already exists" in done.stderr and "never overwrites" in done.stderr
+    assert existing.read_bytes() == b"a drive worth keeping"
+
+
+def test_the_default_name_is_the_start_date_and_time():
+    now = time.mktime((2026, 12, 2, 15, 18, 8, 0, 0, -1))
+    assert default_name(now) == "aeb_2026_12_02-15_18_08.mcap"
+
+
+def test_the_writer_refuses_a_file_that_appeared_meanwhile(tmp_path):
+    out = tmp_path / "late.mcap"
+    writer = RecordingWriter(out, exclusive=True)
+    out.write_bytes(b"another recorder's")
+    with pytest.raises(FileExistsError):
+        writer.write_message("aeb/ego/x", Header(seq=1, source="t", stamp_ns=1,
+                                                  pub_mono_ns=1), 1)
+    assert out.read_bytes() == b"another recorder's"

@@ -17,6 +17,7 @@ import pytest
 
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeState, RadarTracks, decode
+from common.net import free_port
 from tests.support import (
     REPO,
     START_TIMEOUT_S,
@@ -154,3 +155,14 @@ def test_rate_fast_window_loop_and_another_vehicle(router, tmp_path):
         assert seqs == sorted(seqs) and len(set(seqs)) == 40   # numbered on across passes
     assert span_s > 5
     assert Path(SIM).stat().st_size < 5_000_000     # a kept fixture stays small
+
+
+def test_a_replay_that_is_the_router_does_not_say_it_waits_for_one(tmp_path):
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    done = subprocess.run(python_module(
+        "tools.cli", "replay", str(SIM), "--listen", listen, "--keys", "radar_tracks",
+        "--fast", "--quiet", "--log-level", "INFO"), capture_output=True, text=True,
+        timeout=120, cwd=REPO)
+    assert done.returncode == 0, done.stderr
+    assert "published 83 messages" in done.stderr
+    assert "waiting_for_router" not in done.stderr and "router_reached" not in done.stderr

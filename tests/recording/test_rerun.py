@@ -15,13 +15,14 @@ from common.config.fusion import FusionConfig
 from common.config.loader import load_config
 from common.config.radar import CanSettings, Pace, RadarSettings, RawCanSettings, ReplaySettings
 from common.keys import RADAR_CAN, RADAR_TRACKS
-from common.messages import RawCanFrames, Verification, encode
+from common.messages import RawCanFrames, Verification, VerifiedTargets, decode, encode
 from services.radar.shell import RadarShell
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.support import REPO, python_module
 from tests.system.messages import radar_tracks, track
 from tools.recording.compare import Difference, check_declared
-from tools.recording.format import stack_channel
+from tools.recording.depth import message_head
+from tools.recording.format import channel_of_topic, stack_channel
 from tools.recording.reader import Recording
 from tools.recording.rerun_fusion import FusionRerun, normalised
 from tools.recording.writer import RecordingWriter
@@ -165,3 +166,74 @@ def test_numbers_compare_to_rounding_unless_exact():
         other = msgspec.structs.replace(recorded, tracks=(rerun,))
         assert len(Comparison().add_tracks(1, 0, recorded, other)) == rounded
         assert len(Comparison(exact=True).add_tracks(1, 0, recorded, other)) == exact
+
+
+def _rewrite(src: Recording, out, keep=lambda rec: True, extra=()) -> None:
+    """`src`'s records for which `keep` holds, and `extra` records, in log order."""
+    records = sorted([*(r for r in src.records() if keep(r)), *extra],
+                     key=lambda r: r.log_time_ns)
+    with RecordingWriter(out, metadata=src.metadata(), flush_s=None) as writer:
+        for r in records:
+            writer.write(r.topic, channel_of_topic(r.topic), r.data, r.log_time_ns,
+                         r.publish_time_ns, r.sequence)
+
+
+def _first_frame_checked_with_depth() -> int:
+    """The capture stamp of the first frame live fusion checked a track in with its
+    depth, in the kept recording."""
+    rec = Recording.open(SIM)
+    stamps = {message_head(r.data).seq: message_head(r.data).stamp_ns
+              for r in rec.records(["aeb/ego/camera/front/jpeg"])}
+    for r in rec.records(["aeb/ego/fusion/primary/targets"]):
+        for t in decode(r.data, VerifiedTargets).targets:
+            if t.gate_detail.get("depth_available") == 1.0 and t.frame_seq is not None:
+                return stamps[t.frame_seq]
+    raise AssertionError("no frame checked with depth")
+
+
+def _without_depth_of(stamp: int):
+    return lambda r: not (r.topic == "aeb/ego/camera/front/depth"
+                          and message_head(r.data).stamp_ns == stamp)
+
+
+def test_a_frame_whose_depth_live_fusion_had_not_yet_is_rerun_without_it(tmp_path):
+    # Live fusion checked a frame before its depth had reached it (the depth arrived,
+    # and was recorded, just before the cycle): its outputs say `depth_available` 0.
+    # Made from the kept recording: its inputs whole, its outputs those of fusion
+    # without that depth.
+    stamp = _first_frame_checked_with_depth()
+    no_depth, live = tmp_path / "no_depth.mcap", tmp_path / "live.mcap"
+    _rewrite(Recording.open(SIM), no_depth, _without_depth_of(stamp))
+    proc = rerun("fusion", str(no_depth), "-o", str(tmp_path / "outputs.mcap"),
+                 "--out-instance", "primary", "--no-views", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    outputs = list(Recording.open(tmp_path / "outputs.mcap").records())
+    recorded_outputs = ("aeb/ego/fusion/primary/targets", "aeb/ego/fusion/primary/brake_cmd")
+    _rewrite(Recording.open(SIM), live, lambda r: r.topic not in recorded_outputs, outputs)
+    assert any(r.topic == "aeb/ego/camera/front/depth" and message_head(r.data).stamp_ns
+               == stamp for r in Recording.open(live).records())
+
+    proc = rerun("fusion", str(live), "--compare", "--quiet", "--json",
+                 str(tmp_path / "result.json"))
+    assert proc.returncode == 0 and "no difference" in proc.stdout, proc.stdout
+    timing = json.loads((tmp_path / "result.json").read_text())["timing"]
+    assert timing["depth_pinned"] > 0 and timing["depth_missing"] == 0
+
+
+def test_depth_the_live_instance_had_but_the_recording_lacks_is_said(tmp_path):
+    stamp = _first_frame_checked_with_depth()
+    lacking = tmp_path / "lacking.mcap"
+    _rewrite(Recording.open(SIM), lacking, _without_depth_of(stamp))
+    proc = rerun("fusion", str(lacking), "--compare", "--quiet")
+    assert "1 frame(s) had their depth in the live instance, but the recording does not " \
+           "hold it" in proc.stdout, proc.stdout
+
+
+def test_comparing_nothing_fails_naming_the_recorded_instance():
+    # the paper's config is instance `paper`; the recording holds `primary`'s outputs
+    proc = rerun("fusion", str(SIM), "--compare", "--quiet", "-c",
+                 str(REPO / "deploy" / "fusion-paper.toml"))
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "nothing compared" in proc.stderr and "fusion instance 'paper'" in proc.stderr
+    assert "it holds instance 'primary'" in proc.stderr
+    assert "no difference" not in proc.stdout

@@ -11,6 +11,7 @@ from common.resources import ARS408_RECORDING
 from services.radar.ars408 import RadarFrameError, decode_frame
 from tests.can_support import RECORDING_FRAMES, recording_messages
 from tests.extras_support import run_without
+from tests.support import REPO
 from tools.can_export import LONG_HEAD, main
 
 
@@ -81,8 +82,11 @@ def test_another_sensor_id_and_what_cannot_be_exported_is_counted(tmp_path, caps
     (["missing.log"], "missing.log: no such file"),
     ([str(ARS408_RECORDING), "--dbc", "missing.dbc"], "cannot read the DBC"),
     ([str(ARS408_RECORDING), "--only", "Obj_9_Nothing"], "no such message"),
+    ([str(ARS408_RECORDING), "--dbc", "README.md"], "README.md: not a CAN database"),
+    ([str(ARS408_RECORDING), "--dbc", "deploy/radar.toml"], "radar.toml: not a CAN database"),
 ])
-def test_bad_input_is_exit_2_naming_it(capsys, args, said):
+def test_bad_input_is_exit_2_naming_it(capsys, monkeypatch, args, said):
+    monkeypatch.chdir(REPO)
     assert main(args) == 2
     assert said in capsys.readouterr().err
 

@@ -57,3 +57,18 @@ def test_a_lower_case_level_reaches_the_service(tmp_path):
 
     args = service_argparser("brake", "").parse_args(["--log-level", "debug"])
     assert load_service_config(args, BrakeConfig).log.level.value == "DEBUG"
+
+
+@pytest.mark.parametrize(("argv", "said"), [
+    (["monitor", "--interval", "-1"], "argument --interval: '-1': must be greater than 0"),
+    (["monitor", "--interval", "0"], "argument --interval: '0': must be greater than 0"),
+    (["monitor", "--duration", "-5"], "argument --duration: '-5': must not be negative"),
+    (["hz", "radar_tracks", "--interval", "nan"], "'nan': not a finite number"),
+    (["echo", "radar_tracks", "--timeout", "-1"], "argument --timeout: '-1': must not be"),
+    (["record", "--connect-timeout", "soon"], "argument --connect-timeout: 'soon': not a"),
+])
+def test_a_period_or_duration_out_of_range_is_refused(argv, said, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert said in capsys.readouterr().err

@@ -220,3 +220,77 @@ def test_hz_on_every_key_lists_each_with_its_nominal_rate(router):
     row = next(ln for ln in reversed(lines) if ln.startswith("fusion/primary/brake_cmd"))
     assert row.split()[2] == "13.33"          # the registry's nominal rate
     assert float(row.split()[1]) > 0
+
+
+# -- a misspelt key, `aeb list`, `aeb nodes` ------------------------------------------------
+
+
+def test_a_misspelt_key_is_said_with_the_registry_names_nearest_to_it():
+    catalog = Catalog("ego")
+    assert not catalog.known(catalog.expression("radar/front/trakcs"))
+    assert catalog.known(catalog.expression("fusion/*/brake_cmd"))
+    assert catalog.known(catalog.expression("**"))
+    assert catalog.suggest("radar/front/trakcs")[0] == "radar/front/tracks (radar_tracks)"
+    assert catalog.suggest("radar_trakcs")[0] == "radar_tracks"
+    assert catalog.suggest("zzz") == []
+
+
+def test_echo_on_a_misspelt_key_says_it_and_that_nothing_publishes_it(router):
+    proc = subprocess.run(aeb("echo", "radar/front/trakcs", "--timeout", "4",
+                              "--connect", router), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 1
+    assert "aeb/ego/radar/front/trakcs is no key of the registry; did you mean " \
+           "radar/front/tracks (radar_tracks)" in proc.stderr
+    assert "nothing on aeb/ego/radar/front/trakcs in 3 s: no publisher yet" in proc.stderr
+
+
+def test_list_names_each_key_heard_with_its_type_publisher_and_rate(router):
+    def put(bus, i):
+        bus.publisher(FUSION_BRAKE_CMD, instance="primary").put(command(i))
+        if i % 4 == 0:
+            bus.publisher(RADAR_TRACKS, sensor="front").put(example(RadarTracks))
+
+    with publishing(router, put):
+        proc = subprocess.run(aeb("list", "--json", "--all", "--connect", router),
+                              capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    rows = {r["key"]: r for r in json.loads(proc.stdout)["keys"]}
+    cmd = rows["fusion/primary/brake_cmd"]
+    assert cmd["type"] == "BrakeCommand" and cmd["messages"] > 10 and cmd["rate_hz"] > 20
+    assert cmd["publishers"] == [example(BrakeCommand).header.source]
+    assert rows["radar/front/tracks"]["rate_hz"] < cmd["rate_hz"]
+    # --all: a key of the registry nobody published, said as such
+    assert rows["brake/status"]["messages"] == 0 and rows["brake/status"]["publishers"] == []
+
+
+def test_list_on_a_silent_bus_exits_1(router):
+    proc = subprocess.run(aeb("list", "--duration", "0.5", "--connect", router),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1 and "0 key(s) heard" in proc.stdout
+
+
+def test_nodes_lists_the_liveliness_tokens_and_their_keys(router):
+    with open_bus(router, source="node") as bus:
+        radar = bus.declare_health("radar", "front")
+        fusion = bus.declare_health("fusion", "primary")
+
+        def put(b, i):
+            b.publisher(RADAR_TRACKS, sensor="front").put(msgspec.structs.replace(
+                example(RadarTracks), header=msgspec.structs.replace(
+                    example(RadarTracks).header, source="radar/front")))
+            b.session.put("aeb/ego/sim/world", b"\x00", encoding="application/msgpack")
+
+        with publishing(router, put):
+            proc = subprocess.run(aeb("nodes", "--keys", "--json", "--connect", router),
+                                  capture_output=True, text=True, timeout=120)
+        radar.undeclare()
+        after = subprocess.run(aeb("nodes", "--connect", router), capture_output=True,
+                               text=True, timeout=120)
+        fusion.undeclare()
+    assert proc.returncode == 0, proc.stderr
+    said = json.loads(proc.stdout)
+    assert said["nodes"] == ["fusion/primary", "radar/front"]
+    assert said["keys"]["radar/front"] == ["radar/front/tracks"]
+    assert said["keys"]["fusion/primary"] == []
+    assert after.stdout.split() == ["fusion/primary"]

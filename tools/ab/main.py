@@ -29,8 +29,8 @@ from tools.ab.compare import Comparator, Report, render
 from tools.ab.feeder import Feeder
 from tools.bus import add_bus_args, open_bus
 from tools.recording.format import channel_of_topic, publish_time
-from tools.recording.reader import Recording, RecordingError
-from tools.recording.writer import RecordingWriter
+
+# mcap's reader and writer are imported where they are used: `--help` needs no extra
 
 SPECS: dict[str, KeySpec[Any]] = {s.name: s for s in (FUSION_TARGETS, FUSION_BRAKE_CMD)}
 
@@ -63,6 +63,8 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> None:
     """Raises SystemExit(2) when the bus cannot be opened."""
     stop = stop_event_on_signals()
     bus = open_bus(args, "ab-report", stop)
+    from tools.recording.writer import RecordingWriter
+
     record = RecordingWriter(args.record, metadata={"vehicle": args.vehicle,
                                                     "recorder": "aeb ab-report"}) \
         if args.record else None
@@ -92,6 +94,8 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> None:
 def read_recording(args: argparse.Namespace, feeder: Feeder) -> None:
     """Feed both instances' recorded outputs in recorded order. Raises RecordingError
     for what is not a recording, and for one without output of either instance."""
+    from tools.recording.reader import Recording, RecordingError
+
     rec = Recording.open(args.source)
     vehicle = rec.metadata().get("vehicle", args.vehicle)
     topics = {spec.key(vehicle, instance=inst): spec.name for spec in SPECS.values()
@@ -122,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     feeder = Feeder(comparator)
     if args.source:
+        from tools.recording.reader import RecordingError
+
         try:
             read_recording(args, feeder)
         except RecordingError as exc:

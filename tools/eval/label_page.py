@@ -1,6 +1,9 @@
 """The label tool's page (served by tools/eval/labelweb.py): the frame with the ROI in
-green on the left, the ROI enlarged on the right, what is known about it below, and the
-keys: Y yes, N no, A ambiguous, S (or space) skip, left arrow back."""
+green on the left, the ROI enlarged on the right, what is known about it below, a line
+saying what YES and NO mean, and the answers as buttons beside their keys: Y yes, N no,
+A ambiguous, S (or space) skip, left arrow back. A ROI whose ground truth is loaded is
+shown without what it was built from (its kind, class and id would give the answer
+away)."""
 
 PAGE = """<!doctype html>
 <html><head><meta charset="utf-8"><title>aeb label</title>
@@ -11,16 +14,27 @@ PAGE = """<!doctype html>
  #progress { display: inline-block; width: 240px; height: 10px; background: #555;
              vertical-align: middle; margin-left: 12px; }
  #progress div { height: 10px; background: #3c9; width: 0; }
- #frame { position: absolute; left: 8px; top: 48px; image-rendering: pixelated; }
- #crop { position: absolute; top: 48px; image-rendering: pixelated; }
+ #frame { position: absolute; left: 8px; top: 66px; image-rendering: pixelated; }
+ #crop { position: absolute; top: 66px; image-rendering: pixelated; }
  #info { position: absolute; left: 8px; white-space: pre; }
- #keys { color: #aaa; }
+ #keys { display: inline-block; margin-left: 12px; }
+ #keys button { font: 14px sans-serif; margin-right: 4px; padding: 3px 10px;
+                background: #444; color: #f0f0f0; border: 1px solid #777;
+                border-radius: 3px; cursor: pointer; }
+ #keys button:hover { background: #555; }
+ #keys kbd { font-weight: bold; color: #ffd75e; }
+ #meaning { position: absolute; left: 8px; top: 40px; height: 22px; line-height: 22px;
+            color: #ddd; }
  .done { color: #3c9; font-size: 20px; }
 </style></head>
 <body>
 <div id="bar"><span id="count">loading</span><span id="progress"><div></div></span>
- <span id="keys">&nbsp; Y yes &middot; N no &middot; A ambiguous &middot; S skip
- &middot; &larr; back</span></div>
+ <span id="keys"><button id="yes"><kbd>Y</kbd> yes</button><button id="no"><kbd>N</kbd>
+ no</button><button id="ambiguous"><kbd>A</kbd> ambiguous</button><button id="skip">
+ <kbd>S</kbd> skip</button><button id="back"><kbd>&larr;</kbd> back</button></span></div>
+<div id="meaning"><b>YES</b>: an object stands in the green box at the track's range,
+ something the car must not hit. <b>NO</b>: nothing does (road, a flat patch, something
+ overhead, an empty box). <b>A</b>: cannot tell.</div>
 <img id="frame" alt=""><img id="crop" alt="">
 <div id="info"></div>
 <script>
@@ -43,7 +57,7 @@ function show() {
   const info = document.getElementById("info");
   if (s.current === null) {
     frame.removeAttribute("src"); crop.removeAttribute("src");
-    info.style.top = "56px";
+    info.style.top = "74px";
     info.innerHTML = '<span class="done">All ROIs of this sample are labelled.</span>';
     document.body.dataset.ready = "done";
     return;
@@ -51,30 +65,41 @@ function show() {
   const c = s.current;
   frame.onload = () => {
     crop.style.left = (16 + frame.naturalWidth) + "px";
-    info.style.top = (56 + frame.naturalHeight) + "px";
+    info.style.top = (74 + frame.naturalHeight) + "px";
     document.body.dataset.ready = c.id;
   };
   document.body.dataset.ready = "";
   frame.src = `/frame/${c.index}.png`;
   crop.src = `/crop/${c.index}.png`;
+  const what = c.truth_hidden
+    ? `ROI ${c.index + 1} of ${s.total} (ground truth loaded: its kind is not shown)\\n`
+    : `${c.id}\\n${c.kind} ${c.obj_class} | `;
   info.textContent =
-    `${c.id}\\n${c.kind} ${c.obj_class} | range ${c.range_m.toFixed(1)} m | ` +
+    `${what}range ${c.range_m.toFixed(1)} m | ` +
     `TTC ${c.ttc_s === null ? "-" : c.ttc_s.toFixed(1) + " s"} | track ${c.track_id}\\n` +
     `edge density ${c.density.toFixed(3)} | lighting ${c.lighting} | camera ${c.camera}` +
     (c.label ? `\\nlabelled ${c.label}` : "");
 }
-document.addEventListener("keydown", (e) => {
-  if (!state || state.current === null) return;
+function act(what) {
+  if (!state || state.current === null) return false;
   const id = state.current.id;
-  const k = e.key.toLowerCase();
-  if (k === "y") load("/api/label", {id: id, value: "YES"});
-  else if (k === "n") load("/api/label", {id: id, value: "NO"});
-  else if (k === "a") load("/api/label", {id: id, value: "ambiguous"});
-  else if (k === "s" || k === " ") load("/api/skip", {id: id});
-  else if (e.key === "ArrowLeft") load("/api/back", {id: id});
-  else return;
-  e.preventDefault();
+  if (what === "yes") load("/api/label", {id: id, value: "YES"});
+  else if (what === "no") load("/api/label", {id: id, value: "NO"});
+  else if (what === "ambiguous") load("/api/label", {id: id, value: "ambiguous"});
+  else if (what === "skip") load("/api/skip", {id: id});
+  else if (what === "back") load("/api/back", {id: id});
+  else return false;
+  return true;
+}
+const KEYS = {y: "yes", n: "no", a: "ambiguous", s: "skip", " ": "skip",
+              arrowleft: "back"};
+document.addEventListener("keydown", (e) => {
+  if (act(KEYS[e.key.toLowerCase()])) e.preventDefault();
 });
+for (const what of ["yes", "no", "ambiguous", "skip", "back"]) {
+  const b = document.getElementById(what);
+  b.addEventListener("click", () => { act(what); b.blur(); });
+}
 load("/api/state");
 </script></body></html>
 """

@@ -9,22 +9,21 @@ before the page shows the next ROI. Each ROI is shown on its frame (green: the R
 blue: the projected column) with the ROI enlarged beside it. ROIs with ground truth (data
 sets, simulator runs) are left out unless --include-truth.
 
-Serves on 127.0.0.1 only by default. Exit codes: 0 stopped, 2 bad arguments or input.
+Serves on 127.0.0.1:8780 by default (aeb foxglove's WebSocket has 8765). Exit codes: 0
+stopped, 2 bad arguments or input, or the port in use.
 """
 
 import argparse
+import errno
 import json
 import sys
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any
-
-import cv2
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from common.log import add_log_level, setup_logging
-from tools.eval.frames import FrameLoadError, load_bgr
+from tools.commands import DEFAULT_PORTS, port_in_use
 from tools.eval.label_page import PAGE
 from tools.eval.labels import (
     AMBIGUOUS,
@@ -38,7 +37,11 @@ from tools.eval.labels import (
     read_labels,
 )
 from tools.eval.records import RecordFileError, RoiRecord, read_records
-from tools.eval.sampling import DENSITY_EDGES, stratified, stratum_key
+
+# OpenCV, numpy and the sampling are imported where they are used: `aeb label --help`
+# needs no extra installed
+if TYPE_CHECKING:
+    import numpy as np
 
 ROI_BGR = (0, 255, 0)
 COLUMN_BGR = (255, 128, 0)
@@ -75,7 +78,13 @@ class LabelSession:
         if cur is not None:
             r = self.items[cur]
             got = self.labels.get(r.id)
-            current = {"index": cur, "id": r.id, "kind": r.kind, "obj_class": r.obj_class,
+            # With ground truth, what the ROI was built from (an object, a background
+            # patch, its class) is the answer: the page gets none of it, nor the id
+            # that spells it (it still labels by it).
+            hidden = r.truth is not None
+            current = {"index": cur, "id": r.id, "truth_hidden": hidden,
+                       "kind": None if hidden else r.kind,
+                       "obj_class": None if hidden else r.obj_class,
                        "range_m": r.range_m, "ttc_s": r.ttc_s, "track_id": r.track_id,
                        "density": r.density, "lighting": r.lighting, "camera": r.camera,
                        "session": r.session, "frame": r.frame, "roi": list(r.roi),
@@ -126,6 +135,11 @@ class LabelSession:
 
     def frame_png(self, index: int) -> bytes:
         """The ROI's frame with its box. Raises IndexError, FrameLoadError."""
+        import cv2
+        import numpy as np
+
+        from tools.eval.frames import load_bgr
+
         r = self.items[index]
         img = np.ascontiguousarray(load_bgr(r.frame_ref))
         cx, cy, cw, ch = r.column
@@ -137,6 +151,10 @@ class LabelSession:
 
     def crop_png(self, index: int) -> bytes:
         """The ROI alone, enlarged. Raises IndexError, FrameLoadError."""
+        import cv2
+
+        from tools.eval.frames import load_bgr
+
         r = self.items[index]
         img = load_bgr(r.frame_ref)
         x, y, w, h = r.roi
@@ -145,7 +163,11 @@ class LabelSession:
         return _png(cv2.resize(crop, (w * k, h * k), interpolation=cv2.INTER_NEAREST))
 
 
-def _png(img: np.ndarray) -> bytes:
+def _png(img: "np.ndarray") -> bytes:
+    import cv2
+
+    from tools.eval.frames import FrameLoadError
+
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise FrameLoadError("PNG encoding failed")
@@ -155,6 +177,7 @@ def _png(img: np.ndarray) -> bytes:
 def make_server(session: LabelSession, host: str = "127.0.0.1", port: int = 0
                 ) -> ThreadingHTTPServer:
     """The page's HTTP server (not started); `server_address[1]` is its port."""
+    from tools.eval.frames import FrameLoadError
 
     class Handler(BaseHTTPRequestHandler):
         def log_message(self, format: str, *args: Any) -> None:   # quiet
@@ -213,6 +236,8 @@ def pick_sample(records: list[RoiRecord], label_path: Path, n: int, keys: list[s
                 groups: list[tuple[str, str]], edges: tuple[float, ...], seed: int
                 ) -> list[RoiRecord]:
     """The sample kept beside the label file, or a new stratified one (then kept)."""
+    from tools.eval.sampling import stratified, stratum_key
+
     sample_path = label_path.with_name(label_path.name + ".sample")
     by_id = {r.id: r for r in records}
     if sample_path.is_file():
@@ -237,15 +262,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--strata", default="lighting",
                    help="conditions crossed with the density bands: any of lighting, "
                         "group, kind, camera, session (comma-separated, '' for none)")
-    p.add_argument("--edges", default=",".join(f"{e:g}" for e in DENSITY_EDGES),
-                   help="edge-density band edges")
+    p.add_argument("--edges", default="",
+                   help="edge-density band edges (default: the sampling's, "
+                        "tools/eval/sampling.py)")
     p.add_argument("--group", action="append", default=[], metavar="NAME=GLOB",
                    help="a session group (for --strata group)")
     p.add_argument("--include-truth", action="store_true",
                    help="also ROIs that have ground truth")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8765, help="0: any free port")
+    p.add_argument("--port", type=int, default=DEFAULT_PORTS["label"],
+                   help=f"default {DEFAULT_PORTS['label']} (aeb foxglove's is "
+                        f"{DEFAULT_PORTS['foxglove']}); 0: any free port")
     add_log_level(p, "INFO")
     return p.parse_args(argv)
 
@@ -271,10 +299,18 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--group {g!r}: expected NAME=GLOB")
             groups.append((name, pattern))
         keys = [k.strip() for k in args.strata.split(",") if k.strip()]
-        edges = tuple(float(e) for e in args.edges.split(",") if e.strip())
+        from tools.eval.sampling import DENSITY_EDGES
+
+        edges = tuple(float(e) for e in args.edges.split(",") if e.strip()) or DENSITY_EDGES
         items = pick_sample(pool, label_path, args.sample, keys, groups, edges, args.seed)
         session = LabelSession(items, label_path, args.who)
-        server = make_server(session, args.host, args.port)
+        try:
+            server = make_server(session, args.host, args.port)
+        except OSError as exc:
+            session.close()
+            if exc.errno != errno.EADDRINUSE:
+                raise
+            raise ValueError(port_in_use("label", args.host, args.port)) from exc
     except (RecordFileError, LabelFileError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

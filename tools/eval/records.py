@@ -6,6 +6,7 @@ verifiers saw (a message in a recording, or a data-set image resampled and JPEG-
 so a data set is read in place and never copied.
 """
 
+import os
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -27,7 +28,8 @@ class FrameRef(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     kind "mcap": the CompressedFrame logged at `log_time_ns` on `topic` of `path`.
     kind "image": the image file `path`, resized by `scale` (INTER_AREA) and, with
-    `jpeg_quality` > 0, JPEG-coded and decoded as the camera would.
+    `jpeg_quality` > 0, JPEG-coded and decoded as the camera would. A ROI file stores
+    `path` absolute; a relative one (a file written by hand) is relative to the ROI file.
     """
 
     kind: str
@@ -106,13 +108,24 @@ class RecordFileError(ValueError):
     """A ROI file that cannot be read; the message names the file and line."""
 
 
+def _frame_at(r: RoiRecord, base: Path) -> RoiRecord:
+    """`r` with its frame's path absolute: a relative one taken from `base`."""
+    ref = r.frame_ref
+    if not ref.path or os.path.isabs(ref.path):
+        return r
+    return msgspec.structs.replace(r, frame_ref=msgspec.structs.replace(
+        ref, path=os.path.abspath(base / ref.path)))
+
+
 def write_records(path: Path, records: Iterable[RoiRecord]) -> int:
-    """Write JSON lines; returns how many. Raises OSError."""
+    """Write JSON lines, frame paths absolute (the file works from any directory);
+    returns how many. Raises OSError."""
     n = 0
     path.parent.mkdir(parents=True, exist_ok=True)
+    cwd = Path.cwd()
     with open(path, "wb") as f:
         for r in records:
-            f.write(_encoder.encode(r))
+            f.write(_encoder.encode(_frame_at(r, cwd)))
             f.write(b"\n")
             n += 1
     return n
@@ -125,7 +138,7 @@ def iter_records(path: Path) -> Iterator[RoiRecord]:
             if not line.strip():
                 continue
             try:
-                yield _decoder.decode(line)
+                yield _frame_at(_decoder.decode(line), path.parent)
             except (msgspec.DecodeError, msgspec.ValidationError) as exc:
                 raise RecordFileError(f"{path}:{i}: not a ROI record: {exc}") from exc
 

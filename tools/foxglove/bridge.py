@@ -20,12 +20,12 @@ Exit codes: 0 after a signal or --duration, 2 for bad arguments, no bus or no po
 """
 
 import argparse
+import errno
 import os
 import sys
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import foxglove
 import msgspec
 
 from common.keys import CAMERA_JPEG
@@ -34,10 +34,15 @@ from common.messages import DecodeError, decode
 from common.messages.schema import schema_name
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
+from tools.commands import DEFAULT_PORTS, port_in_use
 from tools.recording.format import ChannelType, parse_topic
-from tools.recording.foxglove_views import Converter, object_schema
-from tools.recording.recorder import Recorder, decision_settings, selection
-from tools.recording.writer import TopicCount, WriterStats
+
+# foxglove-sdk and the views are imported once the arguments are read: `--help` needs no
+# extra installed
+if TYPE_CHECKING:
+    import foxglove
+
+    from tools.recording.writer import WriterStats
 
 
 class FoxgloveSink:
@@ -46,14 +51,19 @@ class FoxgloveSink:
     (msgpack) are sent as JSON with their schema; the camera's raw frames are left out
     (the image channel has them)."""
 
-    def __init__(self, context: foxglove.Context) -> None:
+    def __init__(self, context: "foxglove.Context") -> None:
+        from tools.recording.writer import TopicCount, WriterStats
+
         self.context = context
         self.stats = WriterStats()
+        self._new_count = TopicCount
         self._channels: dict[str, foxglove.Channel] = {}
         self._json: dict[type[Any], foxglove.Schema] = {}
         self._lock = threading.Lock()
 
-    def _channel(self, topic: str, kind: ChannelType) -> foxglove.Channel:
+    def _channel(self, topic: str, kind: ChannelType) -> "foxglove.Channel":
+        import foxglove
+
         channel = self._channels.get(topic)
         if channel is None:
             schema = foxglove.Schema(name=kind.schema_name, encoding=kind.schema_encoding,
@@ -72,7 +82,7 @@ class FoxgloveSink:
             kind, payload = converted
         with self._lock:
             self._channel(topic, kind).log(payload, log_time=log_time_ns)
-            count = self.stats.topics.setdefault(topic, TopicCount())
+            count = self.stats.topics.setdefault(topic, self._new_count())
             count.messages += 1
             count.bytes += len(payload)
 
@@ -80,6 +90,8 @@ class FoxgloveSink:
         info = parse_topic(topic)
         if info is None or info.spec.msg_type is None or info.spec is CAMERA_JPEG:
             return None
+        from tools.recording.foxglove_views import object_schema
+
         msg_type = info.spec.msg_type
         try:
             msg = decode(payload, msg_type)
@@ -89,7 +101,7 @@ class FoxgloveSink:
         return ChannelType(schema_name(msg_type), "jsonschema", schema, "json"), \
             msgspec.json.encode(msg)
 
-    def close(self) -> WriterStats:
+    def close(self) -> "WriterStats":
         with self._lock:
             for channel in self._channels.values():
                 channel.close()
@@ -120,7 +132,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     add_bus_args(parser, connect_timeout_s=0.0)
     parser.add_argument("--host", default="127.0.0.1",
                         help="address the WebSocket server binds (0.0.0.0: every interface)")
-    parser.add_argument("--port", type=int, default=8765, help="WebSocket port (0: any free)")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORTS["foxglove"],
+                        help=f"WebSocket port, default {DEFAULT_PORTS['foxglove']} "
+                             f"(Foxglove's; aeb label's is {DEFAULT_PORTS['label']}); 0: any "
+                             "free")
     parser.add_argument("--keys", default="", help="only these keys (default: every key)")
     parser.add_argument("--max-fps", type=float, default=0.0,
                         help="at most this many camera frames per second (0: all)")
@@ -133,9 +148,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from common.config.loader import ConfigError
-
     args = parse_args(argv)
+    import foxglove
+
+    from common.config.loader import ConfigError
+    from tools.recording.foxglove_views import Converter
+    from tools.recording.recorder import Recorder, decision_settings, selection
+
     setup_logging("foxglove", args.log_level)
     stop = stop_event_on_signals()
     try:
@@ -151,8 +170,11 @@ def main(argv: list[str] | None = None) -> int:
         server = foxglove.start_server(name="aeb", host=args.host, port=args.port,
                                        context=context)
     except RuntimeError as exc:
-        print(f"error: cannot start the WebSocket server on {args.host}:{args.port}: {exc}",
-              file=sys.stderr)
+        if f"(os error {errno.EADDRINUSE})" in str(exc):
+            print(f"error: {port_in_use('foxglove', args.host, args.port)}", file=sys.stderr)
+        else:
+            print(f"error: cannot start the WebSocket server on {args.host}:{args.port}: "
+                  f"{exc}", file=sys.stderr)
         return 2
     bus = open_bus(args, "foxglove", stop)
     sink = FoxgloveSink(context)

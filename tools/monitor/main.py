@@ -25,7 +25,7 @@ from common.clock import mono_ns, wall_ns
 from common.keys import KeySpec
 from common.log import setup_logging
 from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, endpoints, on_this_host, open_bus
+from tools.bus import add_bus_args, endpoints, non_negative, on_this_host, open_bus, positive
 from tools.keys import MESSAGE_KEYS
 from tools.monitor.state import MonitorState
 from tools.monitor.view import render_text, snapshot
@@ -39,9 +39,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     add_bus_args(parser)
     parser.add_argument("--once", action="store_true",
                         help="collect for --duration (default 3 s), print once, exit")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=non_negative, default=None,
                         help="stop after this many seconds")
-    parser.add_argument("--interval", type=float, default=1.0, help="refresh period (s)")
+    parser.add_argument("--interval", type=positive, default=1.0, help="refresh period (s)")
     parser.add_argument("--json", action="store_true", help="print snapshots as JSON lines")
     parser.add_argument("--plain", action="store_true",
                         help="append snapshots instead of redrawing (default when not a TTY)")

@@ -14,8 +14,6 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from common.freshness import Freshness
 from common.keys import KeySpec
 
@@ -69,6 +67,8 @@ class HealthView:
 def _percentiles(values: deque[tuple[int, float]]) -> tuple[float | None, float | None]:
     if not values:
         return None, None
+    import numpy as np  # here: `aeb monitor --help` needs no extra installed
+
     arr = np.fromiter((v for _, v in values), float, len(values))
     return float(np.percentile(arr, 50)), float(np.percentile(arr, 99))
 

@@ -37,7 +37,8 @@ class RecordedDepth:
     """`sizes`: each camera's frame size (width, height), the size depth is brought to;
     `keep`: raw DepthFrames kept per camera (the oldest go first); `counters`: rejected
     payloads by reason (`depth_message`, and decode_depth_frame's reasons); `unusable`:
-    rejected payloads by camera."""
+    rejected payloads by camera. Each DepthFrame is kept with its receive time: asked
+    `by_ns`, one received later is not there yet (as live fusion had not received it)."""
 
     _DECODED_KEPT = 8
 
@@ -47,30 +48,32 @@ class RecordedDepth:
         self.keep = keep
         self.counters = counters
         self.unusable: dict[str, int] = {}
-        self._raw: dict[str, OrderedDict[int, bytes]] = {c: OrderedDict() for c in sizes}
+        self._raw: dict[str, OrderedDict[int, tuple[bytes, int]]] = {
+            c: OrderedDict() for c in sizes}
         self._decoded: OrderedDict[tuple[str, int], np.ndarray | None] = OrderedDict()
 
-    def add(self, camera: str, payload: bytes) -> None:
+    def add(self, camera: str, payload: bytes, rx_ns: int) -> None:
+        """A DepthFrame payload of `camera`, received at `rx_ns`."""
         try:
             stamp = message_head(payload).stamp_ns
         except DecodeError:
             self.count_unusable(camera, "depth_message")
             return
         raw = self._raw[camera]
-        raw[stamp] = payload
+        raw[stamp] = (payload, rx_ns)
         while len(raw) > self.keep:
             raw.popitem(last=False)
 
-    def at(self, camera: str, stamp_ns: int) -> np.ndarray | None:
+    def at(self, camera: str, stamp_ns: int, by_ns: int | None = None) -> np.ndarray | None:
         """The depth of the frame captured at `stamp_ns` (float32 metres at the frame's
-        size), None when none was recorded or it does not decode (counted)."""
+        size), None when none was recorded (received by `by_ns`, when given) or it does
+        not decode (counted)."""
+        if not self.has(camera, stamp_ns, by_ns):
+            return None
         key = (camera, stamp_ns)
         if key in self._decoded:
             return self._decoded[key]
-        raw = self._raw.get(camera)
-        payload = raw.get(stamp_ns) if raw is not None else None
-        if payload is None:
-            return None
+        payload = self._raw[camera][stamp_ns][0]
         width, height = self.sizes[camera]
         depth: np.ndarray | None
         try:
@@ -83,10 +86,12 @@ class RecordedDepth:
             self._decoded.popitem(last=False)
         return depth
 
-    def has(self, camera: str, stamp_ns: int) -> bool:
-        """Whether a DepthFrame of `camera` captured at `stamp_ns` was recorded."""
+    def has(self, camera: str, stamp_ns: int, by_ns: int | None = None) -> bool:
+        """Whether a DepthFrame of `camera` captured at `stamp_ns` was recorded (and
+        received by `by_ns`, when given)."""
         raw = self._raw.get(camera)
-        return raw is not None and stamp_ns in raw
+        kept = raw.get(stamp_ns) if raw is not None else None
+        return kept is not None and (by_ns is None or kept[1] <= by_ns)
 
     def count_unusable(self, camera: str, reason: str) -> None:
         """A depth image of `camera` that could not be used, by reason."""

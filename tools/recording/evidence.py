@@ -10,7 +10,7 @@ decision, or for another track); held BRAKE cycles belong to the event that brak
 folder, `<UTC time>_<instance>_<DECISION>_radar<seq>_track<id>/`, holds:
 
 - README.md: why, in words: the deciding track's range, range rate, TTC and TTC_eff
-  against the thresholds, the density against the verifier's threshold, the corridor
+  against the thresholds, the verifier's score against its threshold, the corridor
   check, and the stage timestamps from the radar's last CAN frame to the brake;
 - event.json: the same, for tools; command.json, targets.json, tracks.json (the cycle);
 - history.json and history.png: the deciding track over the seconds before (the plot
@@ -35,12 +35,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import can
-import cv2
 import msgspec
 
 from common.config.fusion import DecisionSettings
-from common.imaging import ImageDecodeError, decode_bgr
 from common.keys import (
     BRAKE_STATUS,
     CAMERA_JPEG,
@@ -63,13 +60,9 @@ from common.messages import (
 from common.messages.radar import can_message
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
-from tools.recording.foxglove_views import (
-    DECISION_LEVEL,
-    frame_stamp_ns,
-    state_colour,
-    target_label,
-)
-from tools.recording.recorder import Recorder, decision_settings, selection
+
+# What draws, decodes and writes CAN logs is imported where it is used: `aeb evidence
+# --help` needs no extra installed.
 
 HISTORY_S = 3.0
 # An event is written once the stream is this far past its cycle: its targets, raw CAN
@@ -112,6 +105,9 @@ class EvidenceCollector:
         self._last: dict[str, tuple[Decision, int]] = {}
         self._pending: list[Event] = []
         self._lock = threading.Lock()
+        from tools.recording.foxglove_views import DECISION_LEVEL
+
+        self._level = DECISION_LEVEL
 
     def on_message(self, spec_name: str, key: str, msg: Any, payload: bytes,
                    log_ns: int) -> None:
@@ -154,10 +150,10 @@ class EvidenceCollector:
     def _on_command(self, cmd: BrakeCommand, log_ns: int) -> None:
         prev, prev_track = self._last.get(cmd.instance, (Decision.NONE, -1))
         self._last[cmd.instance] = (cmd.decision, cmd.track_id)
-        level = DECISION_LEVEL[cmd.decision]
+        level = self._level[cmd.decision]
         if level == 0 or cmd.held:
             return
-        if level > DECISION_LEVEL[prev] or cmd.track_id != prev_track:
+        if level > self._level[prev] or cmd.track_id != prev_track:
             self._pending.append(Event(cmd.instance, cmd, log_ns, self._cycle_tracks(cmd)))
 
     def _cycle_tracks(self, cmd: BrakeCommand) -> RadarTracks | None:
@@ -263,40 +259,14 @@ class EvidenceCollector:
             return []
         _, frame = found
         (folder / "frame.jpg").write_bytes(frame.jpeg)
-        files = ["frame.jpg"]
+        from common.imaging import ImageDecodeError, decode_bgr
+        from tools.recording.evidence_frames import write_images
+
         try:
             bgr = decode_bgr(frame.jpeg, frame.crc32)
         except ImageDecodeError:
-            return files
-        annotated = bgr.copy()
-        for t in e.targets.targets:
-            if len(t.roi_xywh) != 4 or frame_stamp_ns(e.targets, t) is None or \
-                    (t.camera and t.camera != camera):
-                continue
-            x, y, w, h = t.roi_xywh
-            r, g, b, _ = state_colour(t)
-            colour = (int(b * 255), int(g * 255), int(r * 255))
-            cv2.rectangle(annotated, (x, y), (x + w - 1, y + h - 1), colour,
-                          3 if t.track_id == target.track_id else 1)
-            cv2.putText(annotated, target_label(t), (x, max(12, y - 5)),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)
-        cv2.imwrite(str(folder / "frame_annotated.jpg"), annotated)
-        files.append("frame_annotated.jpg")
-        if len(target.roi_xywh) == 4:
-            x, y, w, h = target.roi_xywh
-            crop = bgr[y:y + h, x:x + w]
-            if crop.size:
-                cv2.imwrite(str(folder / "roi.png"), crop)
-                files.append("roi.png")
-                params = {**e.targets.verifier_params, **target.gate_detail}
-                low, high = params.get("low"), params.get("high")
-                if isinstance(low, int | float) and isinstance(high, int | float) and \
-                        "edge_density" in e.targets.verifier:
-                    gray = cv2.cvtColor(crop, cv2.COLOR_BGR2GRAY)
-                    cv2.imwrite(str(folder / "roi_edges.png"),
-                                cv2.Canny(gray, float(low), float(high)))
-                    files.append("roi_edges.png")
-        return files
+            return ["frame.jpg"]
+        return ["frame.jpg", *write_images(folder, bgr, e.targets, target, camera)]
 
     def _can_frames(self, e: Event, folder: Path) -> int:
         """The frames of the cycle: after the previous cycle's last frame, up to this
@@ -310,6 +280,8 @@ class EvidenceCollector:
                   if prev < f.rx_mono_ns <= end]
         if not frames:
             return 0
+        import can
+
         writer = can.CanutilsLogWriter(str(folder / "can.log"), channel=frames[0][0].bus)
         try:
             for _, f in frames:
@@ -427,9 +399,8 @@ def _readme(s: dict[str, Any]) -> str:
             f"| TTC | {_fmt(t['ttc_s'], ' s')} | |",
             f"| TTC_eff = TTC - {th['ttc_offset_s']} s | {_fmt(t['ttc_eff_s'], ' s')} | "
             f"BRAKE < {th['brake_ttc_eff_s']} s, WARNING < {th['warning_ttc_eff_s']} s |",
-            f"| density | {_fmt(t['density'], '', 4)} | verified >= "
-            f"{_fmt(t['threshold'], '', 4)} "
-            f"({s.get('verifier', {}).get('name', '?')}) |",
+            f"| {s.get('verifier', {}).get('name', '?')} score | "
+            f"{_fmt(t['density'], '', 4)} | verified >= {_fmt(t['threshold'], '', 4)} |",
             f"| verification | {t['verification']} | |",
             f"| lateral offset | {_fmt(c['lateral_offset_m'], ' m')} | in the corridor: "
             f"abs(y) <= {c['half_width_m'] + c['margin_m']:.2f} m (half width + margin); "
@@ -463,10 +434,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     from common.config.loader import ConfigError
     from tools.recording.reader import Recording, RecordingError, decode_record
+    from tools.recording.recorder import Recorder, decision_settings, selection
 
-    args = parse_args(argv)
     setup_logging("evidence", args.log_level)
     try:
         decision = decision_settings(args.fusion_config)

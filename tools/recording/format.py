@@ -114,3 +114,10 @@ def publish_time(payload: bytes, default_ns: int) -> int:
         return _stamp_decoder.decode(payload).header.stamp_ns
     except (msgspec.DecodeError, msgspec.ValidationError):
         return default_ns
+
+
+def missed_between(last_seq: int | None, seq: int) -> int:
+    """Messages a publisher numbered between the last one seen (`last_seq`) and this one
+    that never arrived: what a recording calls dropped. 0 for the first, and after a
+    restart (numbers starting again)."""
+    return seq - last_seq - 1 if last_seq is not None and seq > last_seq + 1 else 0

@@ -5,9 +5,13 @@ the same recorded and live.
 Derived channels, all under ``/foxglove/<vehicle>/`` (`Topics`):
 
 - camera/<camera>/image: foxglove.CompressedImage, from camera/<camera>/jpeg;
+- camera/<camera>/calibration: foxglove.CameraCalibration, and tf: foxglove.FrameTransforms
+  (the camera's frame in the radar's, by the calibration's extrinsics), from
+  camera/<camera>/info: the 3D panel places the image, its annotations and the tracks in
+  one scene;
 - fusion/<instance>/annotations/<camera>: foxglove.ImageAnnotations, from
   fusion/<instance>/targets: each ROI on the frame it was checked in, coloured by state,
-  labelled with range, TTC and density;
+  labelled with range, TTC and the verifier's score;
 - fusion/<instance>/scene: foxglove.SceneUpdate, the confirmed tracks from above with
   the corridor;
 - radar/<sensor>/scene: foxglove.SceneUpdate, every radar track, confirmed or not;
@@ -26,6 +30,7 @@ from typing import Any
 
 import cv2
 import msgspec
+import numpy as np
 from foxglove import messages as fg
 
 from common.config.fusion import CorridorSettings, DecisionSettings
@@ -90,10 +95,12 @@ def _fmt(value: float | None, unit: str, digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f} {unit}"
 
 
-def target_label(t: VerifiedTarget) -> str:
-    """`#7 12.3 m TTC 2.1 s d 0.041 verified BRAKE`."""
-    density = "-" if t.density is None else f"{t.density:.3f}"
-    return (f"#{t.track_id} {t.range_m:.1f} m TTC {_fmt(t.ttc_s, 's')} d {density} "
+def target_label(t: VerifiedTarget, verifier: str) -> str:
+    """`#7 12.3 m TTC 2.1 s combined 1.557 verified BRAKE`: the score named by the
+    verifier that gave it (`density` is whatever score the instance's verifier gives;
+    an edge density only for the edge-density verifiers)."""
+    score = "-" if t.density is None else f"{t.density:.3g}"
+    return (f"#{t.track_id} {t.range_m:.1f} m TTC {_fmt(t.ttc_s, 's')} {verifier} {score} "
             f"{t.verification.value} {t.decision.value}")
 
 
@@ -232,6 +239,12 @@ class Topics:
     def health(self) -> str:
         return f"/foxglove/{self.vehicle}/health"
 
+    def calibration(self, camera: str) -> str:
+        return f"/foxglove/{self.vehicle}/camera/{camera}/calibration"
+
+    def transforms(self) -> str:
+        return f"/foxglove/{self.vehicle}/tf"
+
 
 Derived = tuple[str, Any]      # (topic, a Foxglove message or a JSON view)
 
@@ -273,7 +286,11 @@ class Converter:
         if spec_name == BRAKE_STATUS.name:
             return [(self.topics.brake(), brake_plot(msg)), *self._health_status(
                 "brake", "main", msg)]
-        if spec_name in (RADAR_STATUS.name, CAMERA_INFO.name):
+        if spec_name == CAMERA_INFO.name:
+            return [(self.topics.calibration(msg.camera), self.calibration(msg)),
+                    (self.topics.transforms(), camera_transforms(msg)),
+                    *self._health_status(*_service_of(msg), msg)]
+        if spec_name == RADAR_STATUS.name:
             return self._health_status(*_service_of(msg), msg)
         return []
 
@@ -289,6 +306,21 @@ class Converter:
                                self.jpeg_quality)
         return fg.CompressedImage(timestamp=_stamp(frame.header.stamp_ns),
                                   frame_id=frame.camera, data=data, format="jpeg")
+
+    def calibration(self, info: CameraInfo) -> fg.CameraCalibration:
+        """The camera's intrinsics in the image's frame (the camera's name), for the 3D
+        panel to place the image and its annotations; scaled with the images."""
+        s = self.scale
+        fx, _, cx, _, fy, cy, _, _, _ = info.k
+        k = [fx * s, 0.0, cx * s, 0.0, fy * s, cy * s, 0.0, 0.0, 1.0]
+        dist = list(info.dist)
+        model = "rational_polynomial" if len(dist) >= 8 else "plumb_bob"
+        dist = (dist + [0.0] * 8)[:8 if model == "rational_polynomial" else 5]
+        return fg.CameraCalibration(
+            timestamp=_stamp(info.header.stamp_ns), frame_id=info.camera,
+            width=max(1, round(info.width * s)), height=max(1, round(info.height * s)),
+            distortion_model=model, D=dist, K=k, R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            P=[k[0], 0.0, k[2], 0.0, 0.0, k[4], k[5], 0.0, 0.0, 0.0, 1.0, 0.0])
 
     def annotations(self, targets: VerifiedTargets) -> dict[str, fg.ImageAnnotations]:
         """Per camera, the ROIs of the cycle on the frame they were checked in (stamped
@@ -313,7 +345,7 @@ class Converter:
                 outline_color=_colour(colour), thickness=max(1.0, 2.0 * s)))
             entry[2].append(fg.TextAnnotation(
                 timestamp=ts, position=fg.Point2(x=x, y=max(0.0, y - 4 * s)),
-                text=target_label(t), font_size=max(8.0, 13.0 * s),
+                text=target_label(t, targets.verifier), font_size=max(8.0, 13.0 * s),
                 text_color=_colour(colour), background_color=fg.Color(r=0, g=0, b=0, a=0.6)))
         return {camera: fg.ImageAnnotations(points=points, texts=texts)
                 for camera, (_, points, texts) in by_camera.items()}
@@ -336,7 +368,8 @@ class Converter:
                                         color=_colour(colour, 0.7))],
                 texts=[fg.TextPrimitive(pose=_pose(t.x_m, t.y_m, 2.0), billboard=True,
                                         font_size=14.0, scale_invariant=True,
-                                        color=_colour(colour), text=target_label(t))],
+                                        color=_colour(colour),
+                                        text=target_label(t, targets.verifier))],
                 metadata=[fg.KeyValuePair(key="in_path", value=str(t.in_path)),
                           fg.KeyValuePair(key="reason", value=t.reason)]))
         return fg.SceneUpdate(
@@ -388,6 +421,27 @@ class Converter:
             ServiceHealth(s, i, self._alive.get((s, i), False),
                           *self._status.get((s, i), ("unknown", "no status received")))
             for s, i in names))
+
+
+def camera_transforms(info: CameraInfo) -> fg.FrameTransforms:
+    """The camera's frame (its optical frame: x right, y down, z into the image) placed
+    in the radar's by the calibration's extrinsics. CameraInfo maps radar to camera,
+    X_cam = R X_radar + t; Foxglove wants the child's pose in the parent, so the
+    rotation is R^T and the translation -R^T t (the camera's centre in radar
+    coordinates)."""
+    r = np.array(info.r, float).reshape(3, 3)
+    t = np.array(info.t_m, float).reshape(3)
+    rotation = r.T
+    centre = -rotation @ t
+    rvec, _ = cv2.Rodrigues(rotation)
+    angle = float(np.linalg.norm(rvec))
+    axis = (rvec.reshape(3) / angle) if angle > 0 else np.zeros(3)
+    qx, qy, qz = (axis * math.sin(angle / 2)).tolist()
+    return fg.FrameTransforms(transforms=[fg.FrameTransform(
+        timestamp=_stamp(info.header.stamp_ns), parent_frame_id=RADAR_FRAME,
+        child_frame_id=info.camera,
+        translation=fg.Vector3(x=float(centre[0]), y=float(centre[1]), z=float(centre[2])),
+        rotation=fg.Quaternion(x=qx, y=qy, z=qz, w=math.cos(angle / 2)))])
 
 
 def _pose(x: float, y: float, z: float) -> fg.Pose:

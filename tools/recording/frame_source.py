@@ -12,8 +12,11 @@ fusion's `decode_frame` (`add_recorded`), or any other producer of pixels (`add`
 frame whose pixels cannot be produced raises FrameError to its reader, is counted as
 fusion counts an undecodable frame, and is in no ring after that: live fusion never
 holds one. A frame's depth is the recorded DepthFrame of its capture stamp
-(tools/recording/depth.py), or comes from a producer given with the frame (`add`), also
-when first read (a simulator renders it on demand).
+(tools/recording/depth.py) if it was received by the moment of the camera's last feed
+(live fusion pairs a depth with its frame only once it has arrived), unless the feed
+was told whether the live instance had it (`depth_pins`: what its recorded output says);
+or it comes from a producer given with the frame (`add`), also when first read (a
+simulator renders it on demand).
 
 What the live decoder knows and this cannot: frames it dropped behind a backlog, and a
 picture repeated (a frozen camera), which take every frame decoded; the feed's `dropped`
@@ -104,8 +107,8 @@ class SourcedFrame(DecodedFrame):
     @property
     def depth_m(self) -> np.ndarray | None:
         if self._produce_depth is not None:
-            return self._source.depth_of(self)
-        return self._source.depth.at(self.camera, self.stamp_ns)
+            return self._source.produced_depth(self)
+        return self._source.depth_of(self)
 
     @property
     def undecodable(self) -> bool:
@@ -158,6 +161,10 @@ class FrameSource:
                                    else counters)
         self._decoded: OrderedDict[int, SourcedFrame] = OrderedDict()
         self._depth_kept: OrderedDict[int, SourcedFrame] = OrderedDict()
+        # per camera: the moment of its last feed, and its depth pins (capture stamp ->
+        # whether the frame had its depth)
+        self._as_of: dict[str, int] = {}
+        self._pins: dict[str, Mapping[int, bool]] = {}
         self.decoded = 0          # pixels produced (a frame again after it was let go)
         self.decode_failed = 0    # frames whose pixels could not be produced
         self.depth_produced = 0   # depth produced by a frame's own producer
@@ -190,17 +197,27 @@ class FrameSource:
         return frame
 
     def add_depth(self, camera: str, payload: bytes, rx_ns: int) -> None:
-        """A recorded DepthFrame payload of `camera`, paired with the frame of its capture
-        stamp when that frame's depth is read."""
+        """A recorded DepthFrame payload of `camera` received at `rx_ns`, paired with the
+        frame of its capture stamp when that frame's depth is read."""
         cam = self._cameras[camera]
         cam.depth_received += 1
         cam.depth_rx.append(rx_ns)
-        self.depth.add(camera, payload)
+        self.depth.add(camera, payload, rx_ns)
 
     def has_depth(self, camera: str, stamp_ns: int) -> bool:
-        """Whether a DepthFrame of `camera` captured at `stamp_ns` was added (and is
-        still kept), usable or not."""
-        return self.depth.has(camera, stamp_ns)
+        """Whether the frame of `camera` captured at `stamp_ns` has a DepthFrame (usable
+        or not) as of the camera's last feed: pinned, or added (received by then) and
+        still kept."""
+        pinned = self._pins.get(camera, {}).get(stamp_ns)
+        if pinned is not None:
+            return pinned and self.depth.has(camera, stamp_ns)
+        return self.depth.has(camera, stamp_ns, self._as_of.get(camera))
+
+    def depth_of(self, frame: SourcedFrame) -> np.ndarray | None:
+        """The frame's depth as of its camera's last feed (None: none then, or unusable)."""
+        if not self.has_depth(frame.camera, frame.stamp_ns):
+            return None
+        return self.depth.at(frame.camera, frame.stamp_ns)
 
     def window(self, camera: str) -> tuple[SourcedFrame, ...]:
         """The camera's recent frames, in the order received (the last WINDOW_FRAMES)."""
@@ -219,11 +236,15 @@ class FrameSource:
                              RING_SIZE))
         return tuple(reversed(newest))
 
-    def feed(self, camera: str, at_ns: int,
-             ring: Iterable[SourcedFrame] | None = None) -> FrameFeed:
+    def feed(self, camera: str, at_ns: int, ring: Iterable[SourcedFrame] | None = None,
+             depth_pins: Mapping[int, bool] | None = None) -> FrameFeed:
         """The camera's FrameFeed at `at_ns`: `ring` (default: fusion's ring of the frames
-        received by then), with the decoder's counters of what was received by then."""
+        received by then), with the decoder's counters of what was received by then. Its
+        frames' depth, until the camera's next feed: the depth received by `at_ns`, except
+        for the frames in `depth_pins` (capture stamp -> whether the frame had depth)."""
         cam = self._cameras[camera]
+        self._as_of[camera] = at_ns
+        self._pins[camera] = depth_pins or {}
         frames = self.ring(self.received_by(camera, at_ns)) if ring is None else tuple(ring)
         error_rx, error = max(((rx, e) for rx, e in cam.errors if rx <= at_ns),
                               default=(None, ""))
@@ -255,7 +276,7 @@ class FrameSource:
         _keep(self._decoded, frame, "_pixels", pixels)
         return pixels
 
-    def depth_of(self, frame: SourcedFrame) -> np.ndarray | None:
+    def produced_depth(self, frame: SourcedFrame) -> np.ndarray | None:
         """A frame's depth from its own producer: produced on the first read (kept among
         the last DECODED_KEPT read), the same after that; None once it failed (counted
         once, as fusion counts an undecodable DepthFrame)."""

@@ -87,13 +87,23 @@ class Recording:
 
     def metadata(self) -> dict[str, str]:
         """The recorder's metadata record of the first file ({} when there is none)."""
-        with open(self.files[0], "rb") as f:
+        path = self.files[0]
+        with open(path, "rb") as f:
+            if not _complete(path):
+                # no summary to seek to: the metadata record follows the header
+                try:
+                    for m in NonSeekingReader(f, record_size_limit=1 << 30).iter_metadata():
+                        if m.name == METADATA_NAME:
+                            return dict(m.metadata)
+                except (McapError, struct.error):
+                    pass                 # cut off before or inside it
+                return {}
             try:
                 for m in make_reader(f).iter_metadata():
                     if m.name == METADATA_NAME:
                         return dict(m.metadata)
             except McapError as exc:
-                raise RecordingError(f"{self.files[0]}: {exc}") from exc
+                raise RecordingError(f"{path}: {exc}") from exc
         return {}
 
     def channels(self) -> dict[str, ChannelSummary]:

@@ -1,6 +1,7 @@
 """`aeb record`: everything on the vehicle's bus (or a selection of keys) into MCAP, with
 the Foxglove views derived beside it (tools/recording/format.py has the layout).
 
+    aeb record                                            # aeb_2026_12_02-15_18_08.mcap
     aeb record -o drive.mcap                              # every key, this host's router
     aeb record -o drive.mcap --connect tcp/192.168.10.1:7447
     aeb record -o drives/run.mcap --split-size 2000 --split-duration 600
@@ -16,32 +17,31 @@ writes on one more. Ctrl-C or SIGTERM ends it with a complete file
 readable. On exit it says what it wrote: messages and bytes per key, and how many
 messages each key's sequence numbers say never arrived.
 
-Exit codes: 0 after a signal or --duration, 2 for bad arguments or no bus.
+An existing file is never overwritten (as rosbag2: choose another name or remove it);
+without `-o` the file is named by the local date and time it starts.
+
+Exit codes: 0 after a signal or --duration, 2 for bad arguments, an existing output or no
+bus.
 """
 
 import argparse
 import json
 import os
 import sys
+import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from common.config.loader import ConfigError
 from common.log import setup_logging
 from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus, run_until
-from tools.recording.foxglove_views import Converter
-from tools.recording.recorder import (
-    RECORDER_STATUS,
-    Recorder,
-    RecordStats,
-    decision_settings,
-    selection,
-)
-from tools.recording.writer import RecordingWriter
+
+if TYPE_CHECKING:
+    from tools.recording.recorder import RecordStats
 
 
-def summary_text(stats: RecordStats) -> str:
+def summary_text(stats: "RecordStats") -> str:
     minutes = max(1e-9, (stats.ended_ns - stats.started_ns) / 60e9)
     lines = [f"wrote {len(stats.files)} file(s), {stats.bytes_on_disk / 1e6:.1f} MB in "
              f"{minutes * 60:.1f} s ({stats.bytes_on_disk / 1e6 / minutes:.1f} MB/min): "
@@ -62,10 +62,27 @@ def summary_text(stats: RecordStats) -> str:
     return "\n".join(lines)
 
 
+def default_name(now_s: float) -> str:
+    """The file a recording started at `now_s` (epoch seconds) gets without `-o`: its
+    local date and time, as rosbag2 names its bags."""
+    return time.strftime("aeb_%Y_%m_%d-%H_%M_%S.mcap", time.localtime(now_s))
+
+
+def existing_outputs(out: Path, split: bool) -> list[Path]:
+    """The files a recording into `out` would overwrite: `out` itself, or with splitting
+    any `<stem>_NNNN.mcap` beside it."""
+    if not split:
+        return [out] if out.exists() else []
+    stem = out.name.removesuffix(".mcap")
+    return sorted(out.parent.glob(f"{stem}_[0-9][0-9][0-9][0-9].mcap"))
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="aeb record", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("-o", "--out", default="recording.mcap", help="the MCAP file")
+    parser.add_argument("-o", "--out", default="",
+                        help="the MCAP file, never overwritten (default: "
+                             "aeb_YYYY_MM_DD-HH_MM_SS.mcap, the start's local time)")
     add_bus_args(parser, connect_timeout_s=0.0)
     parser.add_argument("--keys", default="",
                         help="comma-separated key names or expressions (default: every key)")
@@ -91,17 +108,31 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    # after the arguments: `--help` needs no extra installed
+    from tools.recording.foxglove_views import Converter
+    from tools.recording.recorder import RECORDER_STATUS, Recorder, decision_settings, selection
+    from tools.recording.writer import RecordingWriter
+
     setup_logging("record", args.log_level)
     stop = stop_event_on_signals()
+    out = Path(args.out or default_name(time.time()))
+    split = args.split_size is not None or args.split_duration is not None
+    existing = existing_outputs(out, split)
+    if existing:
+        print(f"error: {existing[0]} already exists"
+              + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
+              + ": aeb record never overwrites a recording; choose another -o or remove it",
+              file=sys.stderr)
+        return 2
     try:
         exprs = selection(args.keys, args.vehicle)
         converter = None if args.no_views else Converter(
             args.vehicle, decision_settings(args.fusion_config))
         writer = RecordingWriter(
-            args.out, split_bytes=None if args.split_size is None else int(args.split_size * 1e6),
+            out, split_bytes=None if args.split_size is None else int(args.split_size * 1e6),
             split_s=args.split_duration, compression=args.compression,
             metadata={"vehicle": args.vehicle, "keys": ",".join(exprs),
-                      "recorder": "aeb record"})
+                      "recorder": "aeb record"}, exclusive=True)
     except (ValueError, ConfigError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -130,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
         status = bus.declare_queryable(RECORDER_STATUS, recorder.status,
                                        instance=str(os.getpid()))
         token = bus.declare_health("record", str(os.getpid()))
-        print(f"recording {', '.join(exprs)} into {args.out} (Ctrl-C to stop)",
+        print(f"recording {', '.join(exprs)} into {out} (Ctrl-C to stop)",
               file=sys.stderr, flush=True)
         run_until(stop, args.duration, lambda: recorder.write_error is not None)
         token.undeclare()

@@ -26,7 +26,7 @@ from common.config.loader import load_config
 from common.keys import KeySpec, QoS
 from common.messages import DecodeError, decode
 from tools.keys import MESSAGE_KEYS
-from tools.recording.format import ChannelType, channel_of_topic, parse_topic
+from tools.recording.format import ChannelType, channel_of_topic, missed_between, parse_topic
 from tools.recording.foxglove_views import Converter, encode_derived
 from tools.recording.writer import WriterStats
 
@@ -210,8 +210,7 @@ class Recorder:
         try:
             head = _seq_decoder.decode(payload).header
             pub_ns, seq = head.stamp_ns, head.seq
-            if stats.last_seq is not None and seq > stats.last_seq + 1:
-                stats.dropped += seq - stats.last_seq - 1
+            stats.dropped += missed_between(stats.last_seq, seq)
             stats.last_seq = seq
         except (msgspec.DecodeError, msgspec.ValidationError):
             pass

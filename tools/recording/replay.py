@@ -21,6 +21,11 @@ real or virtual bus), or `--can-pty`, a pseudo-terminal that behaves as an slcan
 adapter (a SIMULATION of the adapter's wire: point `[radar.can]` at the printed path with
 interface "slcan").
 
+On a terminal, keys control it as `ros2 bag play`'s do (tools/recording/keyboard.py):
+space pauses and resumes, s or the right arrow sends the next message alone, the up and
+down arrows (or + and -) make it 10% faster or slower; `--no-keys` leaves the terminal
+alone.
+
 Exit codes: 0 at the end (or on a signal), 2 for bad arguments, recording or bus.
 """
 
@@ -29,11 +34,11 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
 import msgspec
 
 from common.bus import Bus, TypedPublisher
@@ -54,7 +59,11 @@ from common.service import stop_event_on_signals
 from tools.bus import add_bus_args, open_bus
 from tools.keys import MESSAGE_KEYS
 from tools.recording.format import DERIVED_PREFIX, parse_topic
-from tools.recording.reader import Record, Recording, RecordingError
+from tools.recording.keyboard import keyboard
+from tools.recording.playback import Playback, TimeMap
+
+if TYPE_CHECKING:      # mcap's reader waits for the arguments (`--help` needs no extra)
+    from tools.recording.reader import Record, Recording
 
 GENERIC: KeySpec[Any] = KeySpec("replayed", "**", None, None, None, QoS())
 
@@ -97,22 +106,6 @@ def _expr_match(expr: str, key: str) -> bool:
         return len(b) >= len(a) - 1 and all(x in ("*", y) for x, y in zip(a[:-1], b,
                                                                           strict=False))
     return len(a) == len(b) and all(x in ("*", y) for x, y in zip(a, b, strict=True))
-
-
-@dataclass
-class TimeMap:
-    """Recorded wall time -> replay wall time (`rate`; `fast`: each message keeps its
-    recorded age at the moment it is published)."""
-
-    rec0_ns: int
-    now0_ns: int
-    rate: float
-    fast: bool
-
-    def wall(self, t_ns: int, log_ns: int, now_ns: int) -> int:
-        if self.fast:
-            return t_ns + (now_ns - log_ns)
-        return self.now0_ns + round((t_ns - self.rec0_ns) / self.rate)
 
 
 def restamp(msg: Any, tm: TimeMap, log_ns: int, now_wall: int, now_mono: int,
@@ -158,6 +151,8 @@ class CanOut:
     @classmethod
     def bus(cls, spec: str) -> tuple["CanOut", Callable[[], None]]:
         """`INTERFACE:CHANNEL` through python-can. Raises ValueError, OSError."""
+        import can
+
         interface, sep, channel = spec.partition(":")
         if not sep or not interface or not channel:
             raise ValueError(f"--can-bus {spec!r}: expected INTERFACE:CHANNEL")
@@ -195,14 +190,17 @@ class CanOut:
 
 
 class Replayer:
-    def __init__(self, bus: Bus, recording: Recording, topics: list[str], rate: float,
-                 fast: bool, keep_stamps: bool, vehicle_map: Callable[[str], str],
+    """Publishes a recording's messages when `playback` lets each out (its rate, pauses
+    and steps)."""
+
+    def __init__(self, bus: Bus, recording: "Recording", topics: list[str], playback: Playback,
+                 keep_stamps: bool, vehicle_map: Callable[[str], str],
                  can_out: CanOut | None = None) -> None:
         self.bus = bus
         self.recording = recording
         self.topics = topics
-        self.rate = rate
-        self.fast = fast
+        self.playback = playback
+        self.fast = playback.fast
         self.keep_stamps = keep_stamps
         self.vehicle_map = vehicle_map
         self.can_out = can_out
@@ -229,18 +227,12 @@ class Replayer:
         t1 = end_ns if end_ns is not None else last + 1
         seq_offset = 0
         while not stop.is_set():
-            tm = TimeMap(t0, wall_ns(), self.rate, self.fast)
-            start_mono = mono_ns()
+            self.playback.start(t0)
             spans: dict[str, tuple[int, int]] = {}
             for rec in self.recording.records(self.topics, t0, t1):
-                if stop.is_set():
+                if not self.playback.wait_due(rec.log_time_ns, stop):
                     return
-                if not self.fast:
-                    due = start_mono + (rec.log_time_ns - t0) / self.rate
-                    wait_s = (due - mono_ns()) / 1e9
-                    if wait_s > 0 and stop.wait(wait_s):
-                        return
-                self._publish(rec, tm, seq_offset, spans)
+                self._publish(rec, self.playback.time_map(), seq_offset, spans)
                 progress(rec.log_time_ns - t0, t1 - t0)
             if not loop:
                 return
@@ -248,7 +240,7 @@ class Replayer:
             # The next pass numbers on from this one's highest sequence number.
             seq_offset += max((hi - lo + 1 for lo, hi in spans.values()), default=0)
 
-    def _publish(self, rec: Record, tm: TimeMap, seq_offset: int,
+    def _publish(self, rec: "Record", tm: TimeMap, seq_offset: int,
                  spans: dict[str, tuple[int, int]]) -> None:
         info = parse_topic(rec.topic)
         payload = rec.data
@@ -278,8 +270,9 @@ class Replayer:
         base = frames[0].rx_mono_ns
         start = mono_ns()
         group: list[CanFrame] = []
+        rate = self.playback.rate
         for f in frames:
-            due = start + (f.rx_mono_ns - base) / self.rate
+            due = start + (f.rx_mono_ns - base) / rate
             if due - mono_ns() > 1_000_000 and group:
                 self.can_out.send(group)
                 group = []
@@ -338,11 +331,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--wait-for", default="", metavar="SERVICE/INSTANCE",
                         help="start once this liveliness token is up (e.g. fusion/primary)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--no-keys", action="store_true",
+                        help="do not read keys from the terminal (pause, step, rate)")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    from tools.recording.reader import Recording, RecordingError
+
     setup_logging("replay", args.log_level)
     stop = stop_event_on_signals()
     if args.rate <= 0:
@@ -380,8 +377,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         if args.wait_for:
             _wait_for_token(bus, args.wait_for, stop)
-        replayer = Replayer(bus, rec, topics, args.rate, args.fast, args.keep_stamps, mapper,
-                            can_out)
+        playback = Playback(args.rate, args.fast, mono_ns, wall_ns)
+        replayer = Replayer(bus, rec, topics, playback, args.keep_stamps, mapper, can_out)
         span_s = ((end or last) - (start or first)) / 1e9
         print(f"replaying {len(topics)} keys, {span_s:.1f} s"
               + (" as fast as possible" if args.fast else f" at {args.rate:g}x"),
@@ -397,8 +394,12 @@ def main(argv: list[str] | None = None) -> int:
                       f"({100 * done_ns / max(1, total_ns):5.1f}%)  {n} messages",
                       file=sys.stderr, flush=True)
 
+        def say(text: str) -> None:
+            print(text, file=sys.stderr, flush=True)
+
         try:
-            replayer.run(stop, start, end, args.loop, progress)
+            with keyboard(playback, stop, say) if not args.no_keys else nullcontext():
+                replayer.run(stop, start, end, args.loop, progress)
         finally:
             for close in closers:
                 close()

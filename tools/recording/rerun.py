@@ -1,7 +1,7 @@
 """`aeb rerun`: one service's pure core over a recording, offline (process replay).
 
     aeb rerun fusion drive.mcap --compare                      # same config: no difference
-    aeb rerun fusion drive.mcap --compare --set fusion.verifier.params.tau=0.05
+    aeb rerun fusion drive.mcap --compare --set fusion.verifier.params.tau=2.0
     aeb rerun fusion drive.mcap -c my-fusion.toml -o rerun.mcap  # opens beside the original
     aeb rerun fusion drive.mcap --compare --expect declared.json  # CI: only what is declared
     aeb rerun radar drive.mcap -c deploy/radar.toml --compare  # needs the raw CAN recorded
@@ -17,7 +17,8 @@ with their Foxglove views: open it in Foxglove beside the original.
 
 Exit codes: 0 done (and, with --compare, no difference beyond those declared), 1 a
 difference not declared (or a declared one that did not happen), 2 bad arguments, config
-or recording.
+or recording, or nothing to compare with (the recording holds no output of the instance
+compared: the error names the instances it holds).
 """
 
 import argparse
@@ -25,7 +26,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 
@@ -37,12 +38,12 @@ from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import add_log_level, setup_logging
 from common.messages import encode
 from common.resources import DEPLOY
-from services.fusion.verifiers import VerifierConfigError
 from tools.recording.compare import Comparison, Difference, check_declared, summary_table
 from tools.recording.format import stack_channel
-from tools.recording.foxglove_views import Converter, encode_derived
-from tools.recording.reader import Recording, RecordingError
-from tools.recording.writer import RecordingWriter
+
+if TYPE_CHECKING:      # the re-runs' own imports wait for the arguments (`--help`, no extra)
+    from tools.recording.reader import Recording
+    from tools.recording.writer import RecordingWriter
 
 
 class Progress:
@@ -95,15 +96,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _window(rec: Recording, args: argparse.Namespace) -> tuple[int, int, int | None, int | None]:
+def _window(rec: "Recording", args: argparse.Namespace) -> tuple[int, int, int | None, int | None]:
     first, last = rec.time_range()
     start = None if args.start is None else first + round(args.start * 1e9)
     end = None if args.end is None else first + round(args.end * 1e9)
     return first, last, start, end
 
 
-def run_fusion(args: argparse.Namespace, rec: Recording,
+def run_fusion(args: argparse.Namespace, rec: "Recording",
                vehicle: str) -> tuple[Comparison, dict[str, Any]]:
+    from tools.recording.foxglove_views import Converter, encode_derived
     from tools.recording.rerun_fusion import FusionRerun, config_params, normalised
 
     cfg = load_config(args.config or DEPLOY / "fusion.toml", FusionConfig, args.overrides)
@@ -149,6 +151,7 @@ def run_fusion(args: argparse.Namespace, rec: Recording,
               "realtime_factor": span_s / wall_s if wall_s > 0 else None,
               "frames_in_recording": st.frames_in_recording,
               "frames_decoded": st.frames_decoded, "frames_pinned": st.frames_pinned,
+              "depth_pinned": st.depth_pinned, "depth_missing": st.depth_missing,
               "frames_undecodable": st.frames_undecodable, "failed_cycles": st.failed_cycles,
               "undecodable": st.undecodable, "instance": rerun.instance,
               "verifier": cfg.fusion.verifier.name,
@@ -158,11 +161,15 @@ def run_fusion(args: argparse.Namespace, rec: Recording,
           f"{timing['realtime_factor'] or 0:.1f}x real time; frames decoded "
           f"{st.frames_decoded} of {st.frames_in_recording}"
           + (f"; {st.failed_cycles} cycles failed" if st.failed_cycles else ""))
+    if st.depth_missing:
+        print(f"note: {st.depth_missing} frame(s) had their depth in the live instance, but "
+              "the recording does not hold it: the cycles checked in them may differ")
     return comparison, timing
 
 
-def run_radar(args: argparse.Namespace, rec: Recording,
+def run_radar(args: argparse.Namespace, rec: "Recording",
               vehicle: str) -> tuple[Comparison, dict[str, Any]]:
+    from tools.recording.foxglove_views import Converter, encode_derived
     from tools.recording.rerun_radar import RadarRerun
 
     cfg = load_config(args.config or DEPLOY / "radar.toml", RadarConfig, args.overrides)
@@ -201,7 +208,9 @@ def run_radar(args: argparse.Namespace, rec: Recording,
     return comparison, timing
 
 
-def _writer(args: argparse.Namespace, metadata: dict[str, str]) -> RecordingWriter | None:
+def _writer(args: argparse.Namespace, metadata: dict[str, str]) -> "RecordingWriter | None":
+    from tools.recording.writer import RecordingWriter
+
     if not args.out:
         return None
     # No time-based flush: the same outputs must make the same bytes.
@@ -234,7 +243,7 @@ def report(args: argparse.Namespace, comparison: Comparison, timing: dict[str, A
                   f"{len(undeclared)} difference(s)")
             for d in missing[:args.show]:
                 print("  declared, not found: " + d.text())
-        else:
+        elif comparison.cycles:
             print("no difference" + (" beyond those declared" if declared else ""))
         result["comparison"] = {"cycles": comparison.cycles,
                                 "cycles_differing": comparison.cycles_differing,
@@ -253,8 +262,28 @@ def report(args: argparse.Namespace, comparison: Comparison, timing: dict[str, A
     return code
 
 
+def nothing_compared(args: argparse.Namespace, rec: "Recording", vehicle: str,
+                     timing: dict[str, Any]) -> str:
+    """Why --compare found no recorded output to compare with, naming what is there."""
+    spec = FUSION_BRAKE_CMD if args.service == "fusion" else RADAR_TRACKS
+    param = "instance" if args.service == "fusion" else "sensor"
+    found = sorted({m[param] for topic in rec.channels()
+                    if (m := spec.match(topic, vehicle)) is not None})
+    what = (f"fusion instance {timing.get('instance')!r}" if args.service == "fusion"
+            else "the configured radar sensors")
+    there = (f"it holds {param} {', '.join(map(repr, found))}" if found
+             else f"it holds no {spec.name} of vehicle {vehicle!r} at all")
+    hint = (f" (--instance {found[0]} compares with it)" if args.service == "fusion"
+            and len(found) == 1 else "")
+    return (f"nothing compared: the recording holds no output of {what} in the "
+            f"{timing.get('cycles', 0)} radar cycles re-run; {there}{hint}")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    from services.fusion.verifiers import VerifierConfigError
+    from tools.recording.reader import Recording, RecordingError
+
     setup_logging("rerun", args.log_level)
     try:
         rec = Recording.open(args.recording)
@@ -264,7 +293,11 @@ def main(argv: list[str] | None = None) -> int:
     except (RecordingError, ConfigError, VerifierConfigError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    return report(args, comparison, timing)
+    code = report(args, comparison, timing)
+    if args.compare and comparison.cycles == 0:
+        print(f"error: {nothing_compared(args, rec, vehicle, timing)}", file=sys.stderr)
+        return 2
+    return code
 
 
 if __name__ == "__main__":

@@ -17,6 +17,13 @@ had. What the recording says about them, and so how exact the re-run is:
   had none in time, with the next frames the recorder received (they reached fusion
   first). Live fusion may still have held other frames (decoding lag, frames dropped on
   its link): the comparison then shows it, typically as another `unavailable_reason`;
+- the depth: live fusion pairs a frame with its depth only once the depth has arrived
+  and been decoded, so a frame checked just as its depth came may have had none. Where
+  the recorded output says whether the frame it was checked in had depth (the
+  `depth_available` of a verifier's gate detail), the re-run's frame has it or not as
+  live; elsewhere a frame has the depth the recorder had received by the cycle. A
+  frame that had depth live whose depth is not in the recording is counted
+  (`depth_missing`) and said: its cycles may differ;
 - with several cameras, each camera's frame is named only for the tracks it decided.
 
 The rings and their counters are fusion's decoder's as tools/recording/frame_source.py
@@ -74,6 +81,8 @@ class RerunStats:
     frames_decoded: int = 0
     frames_undecodable: int = 0
     frames_pinned: int = 0        # cycles whose frame was named by the recorded output
+    depth_pinned: int = 0         # frames whose depth followed the recorded output
+    depth_missing: int = 0        # ... of which had depth live that is not recorded
     failed_cycles: int = 0        # the core raised: answered as the shell does
     undecodable: dict[str, int] = field(default_factory=dict)
     first_log_ns: int | None = None
@@ -222,7 +231,30 @@ class FusionRerun:
         recorded = cycle.recorded
         if pinned is None and recorded is not None:
             ring = self._as_recorded(camera, ring, frames, cycle, recorded)
-        return self.frames.feed(camera, cycle.log_ns, ring)
+        return self.frames.feed(camera, cycle.log_ns, ring,
+                                self._depth_pins(camera, frames, recorded))
+
+    def _depth_pins(self, camera: str, frames: tuple[SourcedFrame, ...],
+                    recorded: VerifiedTargets | None) -> dict[int, bool]:
+        """Capture stamp -> whether live fusion had the frame's depth, for the frames
+        the recorded output says it of (counted; and counted missing when it had depth
+        the recording does not hold)."""
+        if recorded is None:
+            return {}
+        single = len(self.cameras) == 1
+        stamps = {f.seq: f.stamp_ns for f in frames}
+        pins: dict[int, bool] = {}
+        for t in recorded.targets:
+            had = t.gate_detail.get("depth_available")
+            stamp = stamps.get(t.frame_seq) if t.frame_seq is not None else None
+            if had is None or stamp is None or stamp in pins or not (
+                    t.camera == camera or (single and not t.camera)):
+                continue
+            pins[stamp] = bool(had)
+            self.stats.depth_pinned += 1
+            if had and not self.frames.depth.has(camera, stamp):
+                self.stats.depth_missing += 1
+        return pins
 
     def _as_recorded(self, camera: str, ring: tuple[SourcedFrame, ...],
                      frames: tuple[SourcedFrame, ...], cycle: Cycle,

@@ -49,7 +49,8 @@ class RecordingWriter:
     one or its messages span `split_s`). Every file carries its own schemas, channels and
     the `metadata`, so that each opens on its own. `flush_s`: the chunk in progress goes to
     disk at least this often (None: only when full, for files that must be the same
-    bytes for the same messages).
+    bytes for the same messages). `exclusive`: a file that exists already is never
+    replaced (FileExistsError instead).
 
     Not thread-safe: one writer thread. Raises OSError when a file cannot be written.
     """
@@ -57,7 +58,7 @@ class RecordingWriter:
     def __init__(self, path: str | Path, split_bytes: int | None = None,
                  split_s: float | None = None, compression: str = "zstd",
                  metadata: dict[str, str] | None = None, flush_s: float | None = 2.0,
-                 chunk_bytes: int = CHUNK_BYTES) -> None:
+                 chunk_bytes: int = CHUNK_BYTES, exclusive: bool = False) -> None:
         if compression not in COMPRESSION:
             raise ValueError(f"compression {compression!r}: one of {sorted(COMPRESSION)}")
         self.path = Path(path)
@@ -68,6 +69,7 @@ class RecordingWriter:
         self.metadata = dict(metadata or {})
         self.chunk_bytes = chunk_bytes
         self.flush_s = flush_s
+        self.exclusive = exclusive
         self.stats = WriterStats()
         self._file: IO[bytes] | None = None
         self._writer: Writer | None = None
@@ -86,7 +88,8 @@ class RecordingWriter:
     def _open(self, log_time_ns: int) -> Writer:
         path = self._next_path()
         path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(path, "wb")  # noqa: SIM115 (closed in _close_file)
+        mode = "xb" if self.exclusive else "wb"
+        self._file = open(path, mode)  # noqa: SIM115 (closed in _close_file)
         writer = Writer(self._file, chunk_size=self.chunk_bytes, compression=self.compression)
         writer.start(profile="", library="aeb-recorder")
         if self.metadata:

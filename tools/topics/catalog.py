@@ -2,9 +2,11 @@
 simulator's), looked up by the sample's encoding (``application/msgpack;aeb.<Type>``) or,
 for a publisher that sets none, by its key."""
 
+import difflib
 from typing import Any
 
 import msgspec
+import zenoh
 
 from common.keys import ROOT, KeySpec
 from common.messages.schema import MESSAGE_ENCODING, schema_name
@@ -48,3 +50,37 @@ class Catalog:
     def relative(self, key: str) -> str:
         """`key` without the ``aeb/<vehicle>/`` prefix."""
         return key.removeprefix(f"{ROOT}/{self.vehicle}/")
+
+    def known(self, expr: str) -> bool:
+        """Whether a key expression can match a key of the tools' registry."""
+        try:
+            wanted = zenoh.KeyExpr(expr)
+        except zenoh.ZError:
+            return False
+        return any(wanted.intersects(zenoh.KeyExpr(spec.wildcard(self.vehicle)))
+                   for spec in self.keys)
+
+    def suggest(self, text: str, n: int = 2) -> list[str]:
+        """The registry's keys nearest to what a user typed (a misspelt key), each once:
+        `radar/front/tracks (radar_tracks)`, or the name when the name was typed."""
+        rel = self.relative(text.strip("/"))
+        typed = rel.split("/")
+        candidates: dict[str, tuple[str, str]] = {}      # candidate -> (spec, shown)
+        for spec in self.keys:
+            candidates[spec.name] = (spec.name, spec.name)
+            parts = spec.pattern.split("/")
+            if len(parts) == len(typed):
+                # the parameters as typed: radar/front/trakcs -> radar/front/tracks
+                filled = "/".join(t if _is_param(p) else p
+                                  for p, t in zip(parts, typed, strict=True))
+                candidates[filled] = (spec.name, f"{filled} ({spec.name})")
+        out: dict[str, str] = {}
+        for close in difflib.get_close_matches(rel, list(candidates), n=len(candidates),
+                                               cutoff=0.6):
+            spec_name, shown = candidates[close]
+            out.setdefault(spec_name, shown)
+        return list(out.values())[:n]
+
+
+def _is_param(part: str) -> bool:
+    return part.startswith("{") and part.endswith("}")

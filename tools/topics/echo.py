@@ -6,7 +6,8 @@
     aeb echo '**' --table --duration 3 --connect tcp/192.168.10.1:7447
 
 KEY: a registry name (`radar_tracks`), a key under aeb/<vehicle>/ (wildcards allowed) or a
-full key. A sample's message type comes from its encoding (`application/msgpack;aeb.<Type>`),
+full key; one no registry key matches is warned about, with the registry's nearest names.
+A sample's message type comes from its encoding (`application/msgpack;aeb.<Type>`),
 else from its key. JSON lines: {"key", "type", "rx_wall_ns", "msg"}; byte fields (JPEG)
 show their length unless --bytes. Samples that do not decode are shown as such and
 counted on stderr at the end. Exit codes: 0, 1 when nothing arrived before --timeout, 2
@@ -28,10 +29,13 @@ from common.clock import wall_ns
 from common.log import setup_logging
 from common.messages import DecodeError, decode
 from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus
+from tools.bus import add_bus_args, non_negative, open_bus
 from tools.topics.catalog import Catalog
 
 Sample = tuple[bytes, str, str, int]       # payload, key, encoding, receipt wall ns
+# After this long without a sample, say so (as `ros2 topic echo` says a topic does not
+# appear to be published yet); every registry key publishes at least once a second.
+NO_PUBLISHER_S = 3.0
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -40,8 +44,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("key", help="registry name, key or key expression")
     parser.add_argument("--table", action="store_true", help="a short table, one row each")
     parser.add_argument("--count", type=int, default=0, help="exit after N messages")
-    parser.add_argument("--duration", type=float, default=None, help="exit after S seconds")
-    parser.add_argument("--timeout", type=float, default=None,
+    parser.add_argument("--duration", type=non_negative, default=None,
+                        help="exit after S seconds")
+    parser.add_argument("--timeout", type=non_negative, default=None,
                         help="exit 1 when no message arrived within S seconds")
     parser.add_argument("--bytes", action="store_true",
                         help="print byte fields in full (base64) instead of their length")
@@ -147,13 +152,23 @@ def main(argv: list[str] | None = None) -> int:
     start = time.monotonic()
     # a table row fits the terminal; piped, it is whole
     width = shutil.get_terminal_size().columns if sys.stdout.isatty() else None
+    said_silent = False
     with bus:
         bus.subscribe_expr(expr, on_sample)
         print(f"# {expr}", file=sys.stderr, flush=True)
+        if not catalog.known(expr):
+            close = catalog.suggest(args.key)
+            print(f"# warning: {expr} is no key of the registry"
+                  + (f"; did you mean {' or '.join(close)}?" if close else "")
+                  + " (`aeb list` shows the keys being published)", file=sys.stderr, flush=True)
         while not stop.is_set():
             now = time.monotonic()
             if args.duration is not None and now - start >= args.duration:
                 break
+            if not said_silent and shown == 0 and now - start >= NO_PUBLISHER_S:
+                said_silent = True
+                print(f"# nothing on {expr} in {NO_PUBLISHER_S:g} s: no publisher yet; still "
+                      "waiting", file=sys.stderr, flush=True)
             if args.timeout is not None and shown == 0 and now - start >= args.timeout:
                 print(f"error: nothing on {expr} within {args.timeout:g} s", file=sys.stderr)
                 return 1

@@ -27,7 +27,7 @@ from common.clock import mono_ns
 from common.log import setup_logging
 from common.messages import Header
 from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus
+from tools.bus import add_bus_args, non_negative, open_bus, positive
 from tools.topics.catalog import Catalog
 from tools.topics.rates import PeriodStats, RateReport
 
@@ -48,8 +48,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--window", type=int, default=100,
                         help="periods per key the statistics cover (default 100)")
     parser.add_argument("--clock", choices=["receipt", "stamp"], default="receipt")
-    parser.add_argument("--interval", type=float, default=1.0, help="report period (s)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--interval", type=positive, default=1.0, help="report period (s)")
+    parser.add_argument("--duration", type=non_negative, default=None,
                         help="exit after S seconds, with one last report")
     parser.add_argument("--json", action="store_true", help="JSON lines instead of a table")
     add_bus_args(parser)

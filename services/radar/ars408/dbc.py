@@ -8,11 +8,11 @@ A test checks that the shipped file equals what the table renders.
 
 import argparse
 import sys
-from pathlib import Path
 
+from common.resources import ARS408_DBC
 from services.radar.ars408.table import MESSAGES, MessageSpec, Signal
 
-DBC_PATH = Path(__file__).with_name("ars408_21.dbc")
+DBC_PATH = ARS408_DBC
 
 _NODES = {"ARS408": "HOST", "HOST": "ARS408"}
 
