@@ -58,6 +58,7 @@ def test_the_base_install_runs(command):
     ("camera", ["services.camera.main", "tools.sim.moving_box"]),
     ("fusion", ["services.fusion.main", "tools.calib.check"]),
     ("monitor", ["tools.monitor.main"]),
+    ("vehicle", ["services.vehicle.main"]),
     ("demo", ["tools.demo", "benchmarks.suite", "tools.sim.camera_source"]),
 ])
 def test_each_roles_extra_is_enough_for_its_commands(extra, modules):
