@@ -16,7 +16,8 @@ from common.messages.radar import BusState
 
 class EgoMotion(msgspec.Struct, frozen=True):
     """Ego speed (forward positive, reverse negative) and yaw rate (left positive).
-    `header.stamp_ns`: when the oldest of the values was received from the car."""
+    From the gateway, `header.stamp_ns` is when the newest of the values was received
+    from the car (each of the others within its own bound before it)."""
 
     header: Header
     speed_mps: float
@@ -34,7 +35,8 @@ class Gear(enum.Enum):
 
 class DriverInputs(msgspec.Struct, frozen=True, kw_only=True):
     """What the driver does with the wheel, the pedals and the gear selector.
-    `header.stamp_ns`: when the oldest of the values was received from the car."""
+    `header.stamp_ns`: when the newest of the values was received from the car (each of
+    the others within its own bound before it)."""
 
     header: Header
     steering_wheel_angle_deg: float | None      # left positive, 0 straight ahead

@@ -117,7 +117,8 @@ class VehicleCore:
             if not all(s.fresh(mono_ns) for s in slots):
                 self.withheld.add(KEYS[m.key])
                 continue
-            stamp = min(s.wall_ns for s in slots if s.wall_ns is not None)
+            # the newest value's receive time: the others are younger than their bounds
+            stamp = max(s.wall_ns for s in slots if s.wall_ns is not None)
             header = self._header(m.key, stamp, mono_ns)
             out.append((KEYS[m.key], self._motion(m, header) if m.key == MOTION
                         else self._driver(m, header)))
