@@ -5,8 +5,9 @@ active, silent, error, reopening, ended), the lines its reader dropped counted, 
 written under a lock from any thread.
 
 The service's shell is the `CanHandler`: it gets every frame, a housekeeping tick every
-`HOUSEKEEPING_NS` while frames flow (at least every `RECEIVE_TIMEOUT_NS` on an idle
-bus), and a call on every change of the bus state. Failures of the port are counted in
+`housekeeping_ns` (`HOUSEKEEPING_NS` unless the service says otherwise) while frames
+flow (at least every `RECEIVE_TIMEOUT_NS` on an idle bus), and a call on every change of
+the bus state. Failures of the port are counted in
 the service's own `rejected` counter (``bus_failure``, ``error_frame``,
 ``send_while_closed``, ``send_failed``, and ``<reader>_<reason>`` for dropped lines).
 """
@@ -65,8 +66,10 @@ class CanLink:
         rejected: ReasonCounter,
         port_factory: Callable[[], CanPort] | None = None,
         watchdog: Watchdog | None = None,
+        housekeeping_ns: int = HOUSEKEEPING_NS,
     ) -> None:
         self.settings = can_settings
+        self.housekeeping_ns = housekeeping_ns
         self.handler = handler
         self.rejected = rejected
         self.watchdog = watchdog or Watchdog(env={})
@@ -155,7 +158,7 @@ class CanLink:
             if mono >= next_housekeeping:
                 self._count_port_errors(port)
                 self.handler.tick(mono, wall)
-                next_housekeeping = mono + HOUSEKEEPING_NS
+                next_housekeeping = mono + self.housekeeping_ns
         return False
 
     def _count_port_errors(self, port: CanPort) -> None:

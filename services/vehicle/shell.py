@@ -5,7 +5,8 @@ stats line. The gateway never writes to the car's bus.
 
 One thread does everything: frames are few (a car's chassis bus carries a few thousand a
 second, of which the mapped messages are a few hundred) and the messages go out at their
-rates from the loop's housekeeping ticks (every 10 ms while frames flow).
+rates from the loop's housekeeping ticks, which come with the first frame a millisecond
+after the previous tick: a message goes out within a frame's spacing of its due time.
 """
 
 import logging
@@ -28,6 +29,7 @@ from common.systemd import Watchdog
 from services.vehicle.core import VehicleCore
 
 SERVICE = "vehicle"
+TICK_NS = 1_000_000
 _log = logging.getLogger(SERVICE)
 
 
@@ -62,7 +64,7 @@ class VehicleShell:
         self.watchdog = watchdog or Watchdog(env={})
         self.bus_rejected = ReasonCounter()
         self.link = CanLink(settings.can, settings.replay, SERVICE, self, self.bus_rejected,
-                            port_factory, self.watchdog)
+                            port_factory, self.watchdog, housekeeping_ns=TICK_NS)
         self.dbc = Path(settings.dbc).name
         self._served = False
         self._seq = 0
