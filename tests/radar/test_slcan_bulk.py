@@ -14,7 +14,7 @@ from common.slcan_bulk import MAX_LINE, BulkSlcanBus
 from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
 from services.radar.ports import open_port, radar_frame
 from services.radar.shell import RadarShell
-from tests.radar.test_shell import Output, running  # noqa: F401 (fixture)
+from tests.radar.test_shell import Output
 from tests.support import wait_for
 from tools.sim.can_links import SlcanPtyLink, slcan_line
 
@@ -112,7 +112,7 @@ def test_open_port_opens_slcan_with_the_bulk_reader():
             bus.shutdown()
 
 
-def test_the_service_reports_dropped_lines_in_its_status(running):  # noqa: F811
+def test_the_service_reports_dropped_lines_in_its_status(running):
     with SlcanPtyLink() as link:
         settings = RadarSettings(can=CanSettings(
             interface="slcan", channel=link.path, options={"sleep_after_open": 0}))

@@ -3,7 +3,6 @@ possible, a bus that goes silent and comes back over a real slcan pty, frames th
 itself spoils, and a fault in the core that must not stop the gateway."""
 
 import threading
-from collections.abc import Iterator
 
 import can
 import msgspec
@@ -44,24 +43,6 @@ class Sink:
 
 def gateway(**fields):
     return msgspec.structs.replace(SHIPPED, **fields)
-
-
-@pytest.fixture
-def running() -> Iterator:
-    threads: list[tuple[threading.Thread, threading.Event]] = []
-
-    def start(shell: VehicleShell) -> threading.Event:
-        stop = threading.Event()
-        t = threading.Thread(target=shell.run, args=(stop,), daemon=True)
-        t.start()
-        threads.append((t, stop))
-        return stop
-
-    yield start
-    for t, stop in threads:
-        stop.set()
-        t.join(10)
-        assert not t.is_alive(), "the gateway did not stop"
 
 
 def test_the_sample_drive_replayed_fast_is_counted_frame_by_frame():
