@@ -103,10 +103,6 @@ class MotionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # (needs [gateway.driver.gear]).
     reverse_from_gear: bool = False
 
-    def __post_init__(self) -> None:
-        if self.publish and (self.speed is None or self.yaw_rate is None):
-            raise ValueError("motion needs speed and yaw_rate mapped (or publish = false)")
-
 
 class DriverSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """`vehicle/driver` (DriverInputs): every field optional (None when not mapped),
@@ -135,10 +131,6 @@ class DriverSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         }
         return {name: m for name, m in fields.items() if m is not None}
 
-    def __post_init__(self) -> None:
-        if self.publish and not self.mapped():
-            raise ValueError("driver needs at least one field mapped (or publish = false)")
-
 
 class GatewaySettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     name: str = "main"               # vehicle/gateway/<name>/status, health/vehicle/<name>
@@ -164,9 +156,16 @@ class GatewaySettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError("can.interface = 'replay' needs replay.file")
         if not (self.motion.publish or self.driver.publish):
             raise ValueError("the gateway publishes nothing: motion and driver both off")
+        motion = self.motion
+        if motion.publish and (motion.speed is None or motion.yaw_rate is None):
+            raise ValueError("motion needs speed and yaw_rate mapped (or publish = false)")
+        if self.driver.publish and not self.driver.mapped():
+            raise ValueError("driver needs at least one field mapped (or publish = false)")
         if self.motion.reverse_from_gear and self.driver.gear is None:
             raise ValueError("motion.reverse_from_gear needs driver.gear mapped")
 
 
-class VehicleConfig(ServiceConfig, frozen=True, forbid_unknown_fields=True):
-    gateway: GatewaySettings = msgspec.field(default_factory=GatewaySettings)
+class VehicleConfig(ServiceConfig, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A gateway needs its car's DBC and mapping: the `[gateway]` table is required."""
+
+    gateway: GatewaySettings
