@@ -129,3 +129,10 @@ def test_a_dbc_that_cannot_be_read_is_a_mapping_error(tmp_path):
     garbage.write_bytes(b"BO_ this is not a DBC \xff\x00")
     with pytest.raises(MappingError, match="is not a CAN database cantools reads"):
         load_dbc(str(garbage))
+
+
+def test_without_a_gateway_table_the_error_names_it():
+    with pytest.raises(ConfigError, match="missing required field `gateway`"):
+        parse_config({}, VehicleConfig)
+    with pytest.raises(ConfigError, match="motion needs speed and yaw_rate"):
+        parse_config({"gateway": {"dbc": "car.dbc"}}, VehicleConfig)
