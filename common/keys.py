@@ -17,10 +17,12 @@ from common.messages import (
     CameraInfo,
     CompressedFrame,
     DepthFrame,
+    DriverInputs,
     EgoMotion,
     RadarStatus,
     RadarTracks,
     RawCanFrames,
+    VehicleStatus,
     VerifiedTargets,
 )
 
@@ -150,9 +152,24 @@ BRAKE_STATUS: KeySpec[BrakeStatus] = KeySpec(
     rate_hz=10.0, max_age_s=0.3, qos=QoS(Priority.INTERACTIVE_HIGH, Congestion.BLOCK),
     rate_is_minimum=True,      # at least 10 Hz, also on every command (13.3 Hz)
 )
+# The vehicle's own state (docs/vehicle.md): the newest sample is all that counts, so
+# dropped rather than queued; a consumer calls a key stale after five periods without one
+# (common/vehicle_state.py).
+VEHICLE_PERIOD_S = 0.02
 EGO_MOTION: KeySpec[EgoMotion] = KeySpec(
     "ego_motion", "vehicle/motion", EgoMotion,
-    rate_hz=50.0, max_age_s=0.1, qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
+    rate_hz=1 / VEHICLE_PERIOD_S, max_age_s=5 * VEHICLE_PERIOD_S,
+    qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
+)
+VEHICLE_DRIVER: KeySpec[DriverInputs] = KeySpec(
+    "vehicle_driver", "vehicle/driver", DriverInputs,
+    rate_hz=1 / VEHICLE_PERIOD_S, max_age_s=5 * VEHICLE_PERIOD_S,
+    qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
+)
+VEHICLE_STATUS: KeySpec[VehicleStatus] = KeySpec(
+    "vehicle_status", "vehicle/gateway/{gateway}/status", VehicleStatus,
+    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.BLOCK),
+    rate_is_minimum=True,      # 1 Hz and on every change
 )
 # The radar's raw CAN frames, per bus, for recordings that re-run the radar. Dropped
 # rather than queued when the link is congested: the radar's CAN loop must never wait.
@@ -170,7 +187,7 @@ REGISTRY: dict[str, KeySpec[Any]] = {
     spec.name: spec
     for spec in (
         RADAR_TRACKS, RADAR_STATUS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,
-        FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, HEALTH,
-        RADAR_CAN,
+        FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, EGO_MOTION, VEHICLE_DRIVER,
+        VEHICLE_STATUS, HEALTH, RADAR_CAN,
     )
 }

@@ -10,6 +10,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "camera": ("services.camera.main", "camera service: frames to JPEG on Zenoh"),
     "fusion": ("services.fusion.main", "fusion service: verify tracks in the image, decide"),
     "brake": ("services.brake.main", "brake service: commands to the actuator, fail-safe"),
+    "vehicle": ("services.vehicle.main", "vehicle gateway: the car's CAN via its DBC to its state"),
     "sim-actuator": ("tools.sim.actuator", "simulated brake actuator on a serial port"),
     "calib-check": ("tools.calib.check", "draw projected radar tracks over a frame (PNG)"),
     "calib-capture": ("tools.calib.capture", "save a frame and its nearest radar cycle"),
@@ -44,6 +45,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 # The extra (pyproject.toml) that installs what a command needs beyond the base install,
 # and the modules of those optional dependencies
 COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
+                 "vehicle": "vehicle",
                  "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
                  "faults": "demo",
                  "record": "record", "info": "record", "replay": "record", "rerun": "record",

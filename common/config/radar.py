@@ -7,12 +7,13 @@ updates). See docs/radar.md for each field.
 
 import enum
 import re
-from typing import Annotated, Any
+from typing import Annotated
 
 import msgspec
 
 from common.config.base import ServiceConfig
-from common.config.paths import ConfigPath
+from common.config.can import REPLAY, CanSettings, ReplaySettings
+from common.config.can import Pace as Pace  # the radar's users import it from here
 from common.config.realtime import RealtimeSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
@@ -20,11 +21,6 @@ _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
 PositiveFloat = Annotated[float, msgspec.Meta(gt=0)]
 NonNegFloat = Annotated[float, msgspec.Meta(ge=0)]
 PositiveInt = Annotated[int, msgspec.Meta(ge=1)]
-
-
-class Pace(enum.Enum):
-    REALTIME = "realtime"   # frames at their recorded spacing
-    FAST = "fast"           # as fast as the service can read them
 
 
 class Expect(enum.Enum):
@@ -38,38 +34,6 @@ class Expect(enum.Enum):
 class OutputTypeCfg(enum.Enum):
     OBJECTS = "objects"
     CLUSTERS = "clusters"
-
-
-class CanSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """The python-can bus. `interface` is any python-can interface name (socketcan, slcan,
-    socketcand, pcan, kvaser, ...) or ``replay`` (then `[radar.replay]` is used).
-    `options` are passed to `can.Bus` as keyword arguments (e.g. ``sleep_after_open`` for
-    slcan, ``host``/``port`` for socketcand)."""
-
-    interface: str = "socketcan"
-    channel: str = "can0"
-    bitrate: Annotated[int, msgspec.Meta(ge=0)] = 500_000   # 0: leave the adapter's setting
-    options: dict[str, Any] = msgspec.field(default_factory=dict)
-    silent_after_s: PositiveFloat = 0.5        # no frame for this long: bus_state = silent
-    error_hold_s: PositiveFloat = 1.0          # bus_state = error this long after an error frame
-    reopen_backoff_initial_s: PositiveFloat = 0.1
-    reopen_backoff_max_s: PositiveFloat = 5.0
-
-    def __post_init__(self) -> None:
-        if not self.interface:
-            raise ValueError("can.interface must not be empty")
-        if self.reopen_backoff_max_s < self.reopen_backoff_initial_s:
-            raise ValueError("can.reopen_backoff_max_s must be >= reopen_backoff_initial_s")
-
-
-class ReplaySettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """A recorded log (candump .log, .asc, .blf, ... anything python-can's LogReader reads).
-    A relative `file` is relative to the config file's folder."""
-
-    file: ConfigPath = ""
-    pace: Pace = Pace.REALTIME
-    loop: bool = False
-    exit_at_end: bool = False   # exit the service (code 0) when a non-looping replay ends
 
 
 class RadarWriteSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -195,7 +159,7 @@ class RadarSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError(f"radar.sensors: duplicate names {names}")
         if len(set(ids)) != len(ids):
             raise ValueError(f"radar.sensors: duplicate sensor_id {ids}")
-        if self.can.interface == "replay" and not self.replay.file:
+        if self.can.interface == REPLAY and not self.replay.file:
             raise ValueError("can.interface = 'replay' needs replay.file")
 
 

@@ -23,7 +23,7 @@ from common.messages.radar import (
     RadarTracks,
     RawCanFrames,
 )
-from common.messages.vehicle import EgoMotion
+from common.messages.vehicle import DriverInputs, EgoMotion, Gear, SignalHealth, VehicleStatus
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -38,8 +38,10 @@ __all__ = [
     "Decision",
     "DecodeError",
     "DepthFrame",
+    "DriverInputs",
     "EgoMotion",
     "FailsafePolicy",
+    "Gear",
     "Header",
     "OutputMode",
     "RadarState",
@@ -47,6 +49,8 @@ __all__ = [
     "RadarTrack",
     "RadarTracks",
     "RawCanFrames",
+    "SignalHealth",
+    "VehicleStatus",
     "Verification",
     "VerifiedTarget",
     "VerifiedTargets",

@@ -24,6 +24,15 @@ class BusState(enum.Enum):
     ENDED = "ended"            # a finite replay reached its end
 
 
+# Why a service reading a bus in each state is not ready (when ACTIVE: its own reasons).
+BUS_NOT_READY = {
+    BusState.SILENT: "no CAN frames received recently",
+    BusState.ERROR: "CAN bus reports errors",
+    BusState.REOPENING: "CAN bus lost, reopening",
+    BusState.ENDED: "replay ended",
+}
+
+
 # Unlike the other messages of many fields not keyword-only: the tracker builds hundreds
 # per cycle positionally, and 16 keyword arguments cost CPython about five times as much.
 class RadarTrack(msgspec.Struct, frozen=True):

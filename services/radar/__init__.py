@@ -4,6 +4,6 @@ See docs/radar.md. Modules: `ars408` (CAN database, decoder, encoder, transmissi
 `assembly` (a radar cycle's frames into one RawCycle), `detections` (decode, prefilter,
 merge), `neighbours` (near pairs), `tracker` (Kalman), `core` (one radar's pure
 pipeline, `RadarCore`), `configure` (0x200 write and confirmation), `ego` (0x300/0x301),
-`ports` (opening the bus, log replay), `slcan_bulk` (the slcan reader), `shell` (the I/O
-shell, `RadarShell`), `main` (`aeb radar`).
+`ports` (its frames as python-can messages, the bus opened or a log replayed), `shell`
+(the I/O shell, `RadarShell`), `main` (`aeb radar`).
 """

@@ -17,7 +17,14 @@ from statistics import median
 from common.config.radar import RadarSettings, SensorSettings
 from common.counters import ReasonCounter
 from common.messages.header import Header
-from common.messages.radar import BusState, OutputMode, RadarState, RadarStatus, RadarTrack
+from common.messages.radar import (
+    BUS_NOT_READY,
+    BusState,
+    OutputMode,
+    RadarState,
+    RadarStatus,
+    RadarTrack,
+)
 from services.radar.ars408.codec import RadarFrame, RadarFrameError, decode
 from services.radar.ars408.records import (
     ClusterListStatus,
@@ -56,13 +63,6 @@ _ERROR_BITS = (
     ("temporary_error", "temporary error"),
     ("voltage_error", "voltage error"),
 )
-
-_BUS_NOT_READY = {
-    BusState.SILENT: "no CAN frames received recently",
-    BusState.ERROR: "CAN bus reports errors",
-    BusState.REOPENING: "CAN bus lost, reopening",
-    BusState.ENDED: "replay ended",
-}
 
 _PERIODS_KEPT = 32
 
@@ -271,7 +271,7 @@ class RadarCore:
         """Empty when the radar is ready: bus active, cycles arriving, configuration
         confirmed (when written), no error bit in 0x201."""
         if bus_state is not BusState.ACTIVE:
-            return _BUS_NOT_READY[bus_state]
+            return BUS_NOT_READY[bus_state]
         if self.last_cycle_mono_ns is None:
             return "no radar cycle received yet"
         silent_ns = int(self.settings.can.silent_after_s * 1e9)

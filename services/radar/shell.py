@@ -1,10 +1,11 @@
-"""The radar service's I/O shell: reads the CAN bus, feeds each radar's core, publishes
-tracks as soon as a cycle is complete and status at a fixed period and on change, writes
-0x200 / 0x300 / 0x301, and reopens a lost bus with exponential backoff.
+"""The radar service's I/O shell: reads the CAN bus (common/can_link.py: reopened with
+exponential backoff when lost), feeds each radar's core, publishes tracks as soon as a
+cycle is complete and status at a fixed period and on change, writes 0x200 / 0x300 /
+0x301.
 
 One thread reads the bus and runs the cores (so a cycle is processed the moment its last
 frame arrives); ego-motion frames are written from the caller's thread (a Zenoh
-callback) under a lock shared with the configuration writes.
+callback) under the link's lock, which the configuration writes share.
 """
 
 import logging
@@ -16,6 +17,7 @@ from typing import Protocol
 
 import can
 
+from common.can_link import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, CanLink
 from common.clock import NS_PER_S, mono_ns, wall_ns
 from common.config.radar import RadarSettings
 from common.counters import ReasonCounter
@@ -35,15 +37,13 @@ from services.radar.ars408.codec import RadarFrame
 from services.radar.ars408.table import classify
 from services.radar.core import RadarCore, TrackedCycle
 from services.radar.ego import EgoMotionForwarder
-from services.radar.ports import CanPort, describe, open_port, radar_message
+from services.radar.ports import SERVICE, CanPort, radar_message
 
 _log = logging.getLogger("radar")
 
-# Timeouts, status, 0x200 re-sends and bus state are looked at every 10 ms while frames
-# flow; an idle bus wakes the loop at least every 50 ms for them. Public: a re-run
-# (tools/recording/rerun_radar.py) keeps house on the same schedule.
-HOUSEKEEPING_NS = 10_000_000
-RECEIVE_TIMEOUT_NS = 50_000_000
+# The link's schedule, also 0x200 re-sends; tools/recording/rerun_radar.py imports it from
+# here to keep house as the live loop does.
+__all__ = ["HOUSEKEEPING_NS", "RECEIVE_TIMEOUT_NS", "RadarOutput", "RadarShell"]
 # Raw frames not followed by a cycle (other traffic, a radar that stopped) still go out
 # once the oldest is one radar cycle old.
 _RAW_BATCH_MAX_AGE_NS = 75_000_000
@@ -84,20 +84,14 @@ class RadarShell:
         self.output = output
         self._raw_sink = raw_can
         self._raw: list[CanFrame] = []
-        self._factory = port_factory or (lambda: open_port(settings.can, settings.replay))
-        self.interface, self.channel = describe(settings.can, settings.replay)
         self.cores = {s.sensor_id: RadarCore(s, settings) for s in settings.sensors}
         self.bus_rejected = ReasonCounter()
+        self.link = CanLink(settings.can, settings.replay, SERVICE, self, self.bus_rejected,
+                            port_factory, self.watchdog)
+        self.interface, self.channel = self.link.interface, self.link.channel
         self.ego = EgoMotionForwarder(settings.ego_motion, list(self.cores))
         self.ego_sent: dict[int, int] = dict.fromkeys(self.cores, 0)
-        self.bus_state = BusState.SILENT
-        self.bus_reopens = 0
-        self.ended = False
-        self._port: CanPort | None = None
-        self._send_lock = threading.Lock()
         self._served = False
-        self._last_frame_mono: int | None = None
-        self._error_until = 0
         self._seq: dict[str, int] = {}
         self._status_due: dict[int, int] = dict.fromkeys(self.cores, 0)
         self._status_key: dict[int, object] = {}
@@ -105,7 +99,6 @@ class RadarShell:
         self._fps_sample: dict[int, tuple[int, int, float]] = {}
         self._rl = RateLimitedLog(_log)
         self._period_ns = int(settings.status_period_s * NS_PER_S)
-        self._port_errors: dict[int, dict[str, int]] = {}
         self._stats_period_ns = int(settings.stats_period_s * NS_PER_S)
         self._stats_due = 0
         # per radar, since the last stats line: (cycles, frames, mono) then, processing times
@@ -116,105 +109,39 @@ class RadarShell:
 
     # -- main loop ----------------------------------------------------------------------
 
+    @property
+    def bus_state(self) -> BusState:
+        return self.link.bus_state
+
     def run(self, stop: threading.Event) -> int:
         """Serve until `stop` is set (or a non-looping replay ends with exit_at_end)."""
-        can_cfg = self.settings.can
-        backoff = can_cfg.reopen_backoff_initial_s
-        lost = False
-        while not stop.is_set():
-            if lost:
-                self._status_tick(mono_ns(), wall_ns())
-                if self.watchdog.wait(stop, backoff):
-                    break
-                backoff = min(2 * backoff, can_cfg.reopen_backoff_max_s)
-            try:
-                port = self._factory()
-            except (can.CanError, OSError, ValueError) as exc:
-                self._set_bus_state(BusState.REOPENING, mono_ns())
-                self._rl.warning("open", "can_open_failed", interface=self.interface,
-                                 channel=self.channel, error=repr(exc), retry_s=backoff)
-                lost = True
-                continue
-            if lost:
-                self.bus_reopens += 1
-            _log.info(kv("can_open", interface=self.interface, channel=self.channel))
-            ended = self._serve_port(port, stop)
-            if ended:
-                return self._after_end(stop)
-            if self._last_frame_mono is not None:
-                backoff = can_cfg.reopen_backoff_initial_s   # it worked for a while
-            lost = True
+        if self.link.run(stop):
+            return self._after_end(stop)
         self._publish_raw()
         self._publish_all_status(mono_ns(), wall_ns())
         self.log_stats(mono_ns())
         return 0
 
-    def _serve_port(self, port: CanPort, stop: threading.Event) -> bool:
-        """Serve one open port; True when a replay ended, False on stop or bus failure."""
-        with self._send_lock:
-            self._port = port
-        try:
-            now = mono_ns()
-            self._last_frame_mono = None
-            self._set_bus_state(BusState.SILENT, now)
-            if not self._served:
-                self._served = True
-                self.output.serving()
-            for core in self.cores.values():
-                self._send_frames(core.config_frames(now, start=True))
-            return self._serve(port, stop)
-        except (can.CanError, OSError) as exc:
-            self.bus_rejected.add("bus_failure")
-            _log.warning(kv("can_lost", interface=self.interface, channel=self.channel,
-                            error=repr(exc)))
-            self._set_bus_state(BusState.REOPENING, mono_ns())
-            return False
-        finally:
-            with self._send_lock:
-                self._port = None
-            self._count_port_errors(port)
-            self._port_errors.pop(id(port), None)
-            try:
-                port.shutdown()
-            except (can.CanError, OSError) as exc:   # a lost bus often cannot say goodbye
-                _log.debug(kv("can_shutdown_failed", error=repr(exc)))
+    # -- the link's handler -------------------------------------------------------------
 
-    def _serve(self, port: CanPort, stop: threading.Event) -> bool:
-        next_housekeeping = 0
-        # The schedule of tools/recording/rerun_radar.py, which re-plays this loop.
-        while not stop.is_set():
-            msg = port.recv(RECEIVE_TIMEOUT_NS / NS_PER_S)
-            mono, wall = mono_ns(), wall_ns()
-            if msg is not None:
-                self._on_message(msg, wall, mono)
-            elif getattr(port, "ended", False):
-                return True
-            if mono >= next_housekeeping:
-                self._count_port_errors(port)
-                self._housekeeping(mono, wall)
-                next_housekeeping = mono + HOUSEKEEPING_NS
-        return False
+    def opened(self, mono: int) -> None:
+        if not self._served:
+            self._served = True
+            self.output.serving()
+        for core in self.cores.values():
+            self._send_frames(core.config_frames(mono, start=True))
 
-    def _count_port_errors(self, port: CanPort) -> None:
-        """Lines the interface dropped (BulkSlcanBus.line_errors, ReplayPort.line_errors)
-        into `bus_rejected`, as ``<port's line_error_prefix>_<reason>`` (``slcan_`` when it
-        names none): never silent, never a reason to drop the bus."""
-        errors = getattr(port, "line_errors", None)
-        if errors is None:
-            return
-        prefix = getattr(port, "line_error_prefix", "slcan")
-        seen = self._port_errors.setdefault(id(port), {})
-        for reason, n in errors.snapshot().items():
-            if n > seen.get(reason, 0):
-                self.bus_rejected.add(f"{prefix}_{reason}", n - seen.get(reason, 0))
-                seen[reason] = n
+    def waiting(self, mono: int, wall: int) -> None:
+        self._status_tick(mono, wall)
+
+    def bus_state_changed(self, mono: int) -> None:
+        self._publish_all_status(mono, wall_ns())
 
     def _after_end(self, stop: threading.Event) -> int:
-        self.ended = True
         for core in self.cores.values():
             self._publish_results(core, core.flush(), 0)
         self._publish_raw()
-        self._set_bus_state(BusState.ENDED, mono_ns())
+        self.link.end(mono_ns())
         _log.info(kv("replay_ended", cycles=sum(c.cycles_total for c in self.cores.values())))
         self.log_stats(mono_ns())
         if not self.settings.replay.exit_at_end:
@@ -237,14 +164,8 @@ class RadarShell:
     def _on_message(self, msg: can.Message, wall: int, mono: int) -> None:
         if self._raw_sink is not None:
             self._raw.append(can_frame(msg, wall, mono))
-        if msg.is_error_frame:
-            self.bus_rejected.add("error_frame")
-            self._error_until = mono + int(self.settings.can.error_hold_s * NS_PER_S)
-            self._rl.warning("error_frame", "can_error_frame", channel=self.channel)
+        if not self.link.accept(msg, mono):
             return
-        self._last_frame_mono = mono
-        if self.bus_state is not BusState.ACTIVE and mono >= self._error_until:
-            self._set_bus_state(BusState.ACTIVE, mono)
         if msg.is_remote_frame or msg.is_extended_id:
             self.bus_rejected.add("remote_frame" if msg.is_remote_frame else "extended_id")
             return
@@ -321,22 +242,7 @@ class RadarShell:
 
     def _send_frames(self, frames: list[RadarFrame]) -> int:
         """Write frames if the bus is open; returns how many went out."""
-        sent = 0
-        with self._send_lock:
-            port = self._port
-            if port is None:
-                if frames:
-                    self.bus_rejected.add("send_while_closed", len(frames))
-                return 0
-            for f in frames:
-                try:
-                    port.send(radar_message(f))
-                    sent += 1
-                except (can.CanError, OSError) as exc:
-                    self.bus_rejected.add("send_failed")
-                    self._rl.warning("send", "can_send_failed", arb_id=hex(f.arb_id),
-                                     error=repr(exc))
-        return sent
+        return self.link.send([radar_message(f) for f in frames])
 
     def on_ego_motion(self, msg: EgoMotion) -> None:
         """EgoMotion from the bus (any thread): forward as 0x300/0x301 when enabled."""
@@ -366,27 +272,11 @@ class RadarShell:
                 processing_us_p50=statistics.median(times) if times else 0.0,
                 processing_us_max=max(times, default=0.0), rejected=core.rejected.total(),
                 bus_state=self.bus_state.value, bus_rejected=self.bus_rejected.total(),
-                bus_reopens=self.bus_reopens))
+                bus_reopens=self.link.reopens))
             self._stats_from[sid] = (core.cycles_total, core.frames_total, mono)
             times.clear()
 
     # -- status -------------------------------------------------------------------------
-
-    def _set_bus_state(self, state: BusState, mono: int) -> None:
-        if state is not self.bus_state:
-            _log.info(kv("bus_state", old=self.bus_state.value, new=state.value))
-            self.bus_state = state
-            self._publish_all_status(mono, wall_ns())
-
-    def _current_bus_state(self, mono: int) -> BusState:
-        if self.ended:
-            return BusState.ENDED
-        if mono < self._error_until:
-            return BusState.ERROR
-        silent_ns = int(self.settings.can.silent_after_s * NS_PER_S)
-        if self._last_frame_mono is None or mono - self._last_frame_mono > silent_ns:
-            return BusState.SILENT
-        return BusState.ACTIVE
 
     def _housekeeping(self, mono: int, wall: int) -> None:
         self._publish_raw(older_than_mono_ns=mono - _RAW_BATCH_MAX_AGE_NS)
@@ -403,7 +293,7 @@ class RadarShell:
             if results:
                 self._publish_results(core, results, 0)
             self._send_frames(core.config_frames(mono))
-        self._set_bus_state(self._current_bus_state(mono), mono)
+        self.link.refresh(mono)
         self._status_tick(mono, wall)
 
     def _status_tick(self, mono: int, wall: int) -> None:
@@ -430,7 +320,7 @@ class RadarShell:
         msg = core.status(
             self._header(f"status/{core.sensor.name}", core.sensor.name, wall),
             self.bus_state, mono, self.interface, self.channel,
-            self._frames_per_s(core, mono), self.bus_reopens, {**bus, **ego},
+            self._frames_per_s(core, mono), self.link.reopens, {**bus, **ego},
             self.ego_sent[sid],
         )
         self._status_key[sid] = (msg.not_ready_reason, self.bus_state, core.radar_state,

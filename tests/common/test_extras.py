@@ -61,6 +61,7 @@ def test_the_base_install_runs(command):
     ("camera", ["services.camera.main", "tools.sim.moving_box"]),
     ("fusion", ["services.fusion.main", "tools.calib.check"]),
     ("monitor", ["tools.monitor.main"]),
+    ("vehicle", ["services.vehicle.main"]),
     ("demo", ["tools.demo", "benchmarks.suite", "tools.sim.camera_source"]),
     ("dbc", ["tools.can_export", "cantools", "can"]),
     # what the recording commands import once their arguments are read

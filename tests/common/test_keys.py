@@ -34,8 +34,8 @@ def test_wildcard_and_match_are_inverse():
 def test_registry_has_every_key_of_the_design_with_rates_and_ages():
     assert set(REGISTRY) == {
         "radar_tracks", "radar_status", "camera_jpeg", "camera_depth", "camera_info",
-        "fusion_targets", "fusion_brake_cmd", "brake_status", "ego_motion", "health",
-        "radar_can",
+        "fusion_targets", "fusion_brake_cmd", "brake_status", "ego_motion", "vehicle_driver",
+        "vehicle_status", "health", "radar_can",
     }
     for spec in REGISTRY.values():
         if spec.msg_type is not None:

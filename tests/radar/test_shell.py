@@ -4,7 +4,6 @@ pty, ego motion forwarding."""
 
 import threading
 import time
-from collections.abc import Iterator
 
 import can
 import msgspec
@@ -105,24 +104,6 @@ class ScriptedPort:
 
     def shutdown(self):
         pass
-
-
-@pytest.fixture
-def running() -> Iterator:
-    threads: list[tuple[threading.Thread, threading.Event]] = []
-
-    def start(service: RadarShell) -> threading.Event:
-        stop = threading.Event()
-        t = threading.Thread(target=service.run, args=(stop,), daemon=True)
-        t.start()
-        threads.append((t, stop))
-        return stop
-
-    yield start
-    for t, stop in threads:
-        stop.set()
-        t.join(10)
-        assert not t.is_alive(), "the service did not stop"
 
 
 def test_replay_as_fast_as_possible_publishes_every_cycle_then_ends():

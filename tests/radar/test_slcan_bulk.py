@@ -1,4 +1,4 @@
-"""The bulk slcan reader (services/radar/slcan_bulk.py) on a real pty: whole bursts in one
+"""The bulk slcan reader (common/slcan_bulk.py) on a real pty: whole bursts in one
 read, lines cut in two, noise counted and skipped, a port that vanishes, an idle wait
 that blocks instead of polling; and the radar service counting what it dropped."""
 
@@ -10,11 +10,11 @@ import can
 import pytest
 
 from common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
+from common.slcan_bulk import MAX_LINE, BulkSlcanBus
 from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
 from services.radar.ports import open_port, radar_frame
 from services.radar.shell import RadarShell
-from services.radar.slcan_bulk import MAX_LINE, BulkSlcanBus
-from tests.radar.test_shell import Output, running  # noqa: F401 (fixture)
+from tests.radar.test_shell import Output
 from tests.support import wait_for
 from tools.sim.can_links import SlcanPtyLink, slcan_line
 
@@ -112,7 +112,7 @@ def test_open_port_opens_slcan_with_the_bulk_reader():
             bus.shutdown()
 
 
-def test_the_service_reports_dropped_lines_in_its_status(running):  # noqa: F811
+def test_the_service_reports_dropped_lines_in_its_status(running):
     with SlcanPtyLink() as link:
         settings = RadarSettings(can=CanSettings(
             interface="slcan", channel=link.path, options={"sleep_after_open": 0}))

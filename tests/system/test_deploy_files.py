@@ -161,9 +161,10 @@ def _config_types() -> dict[str, type]:
     from common.config.camera import CameraConfig
     from common.config.fusion import FusionConfig
     from common.config.radar import RadarConfig
+    from common.config.vehicle import VehicleConfig
 
     return {"radar": RadarConfig, "camera": CameraConfig, "fusion": FusionConfig,
-            "brake": BrakeConfig}
+            "brake": BrakeConfig, "vehicle": VehicleConfig}
 
 
 @pytest.mark.parametrize("name", TABLES)

@@ -1,6 +1,6 @@
-"""Radar, camera and fusion, and the bus tools, started with no router reachable: each
-says which endpoint it waits for, keeps waiting, and stops cleanly (exit 0) on SIGTERM or
-SIGINT."""
+"""Radar, camera, fusion and the vehicle gateway, and the bus tools, started with no
+router reachable: each says which endpoint it waits for, keeps waiting, and stops
+cleanly (exit 0) on SIGTERM or SIGINT."""
 
 import signal
 import subprocess
@@ -14,6 +14,7 @@ SERVICES = {
     "radar": ("services.radar", "deploy/radar-replay.toml"),
     "camera": ("services.camera", "deploy/camera-sim.toml"),
     "fusion": ("services.fusion", "deploy/fusion.toml"),
+    "vehicle": ("services.vehicle", "deploy/vehicle-replay.toml"),
 }
 
 

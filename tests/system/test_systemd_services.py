@@ -91,8 +91,9 @@ def test_the_brake_is_ready_and_watched_without_a_bus(tmp_path):
     ("radar", DEPLOY / "radar-replay.toml"),
     ("camera", DEPLOY / "camera-sim.toml"),
     ("fusion", None),
+    ("vehicle", DEPLOY / "vehicle-replay.toml"),
 ])
-def test_radar_camera_and_fusion_are_ready_once_serving_and_watched(tmp_path, router,
+def test_radar_camera_fusion_and_the_gateway_are_ready_once_serving_and_watched(tmp_path, router,
                                                                     service, config):
     if config is None:
         config = tmp_path / "fusion.toml"

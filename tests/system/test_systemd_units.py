@@ -180,7 +180,7 @@ def installed_units(tmp_path, capsys):
 @needs_analyze
 def test_systemd_analyze_verify_is_clean(installed_units):
     units = ["aeb-router.service", *(f"aeb@{s}.service" for s in
-                                     ("radar", "camera", "fusion", "brake")),
+                                     ("radar", "camera", "fusion", "brake", "vehicle")),
              *(f"aeb-up@{t}.service" for t in TABLES)]
     done = verify(installed_units, *units)
     assert done.returncode == 0, done.stderr

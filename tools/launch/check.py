@@ -16,7 +16,7 @@ from common.systemd import NOTIFY_ENV
 from tools.launch.table import Launch
 
 # the commands with a `--check` option
-CHECKABLE = frozenset({"radar", "camera", "fusion", "brake", "router"})
+CHECKABLE = frozenset({"radar", "camera", "fusion", "brake", "vehicle", "router"})
 CHECK_TIMEOUT_S = 120.0      # a cold start imports OpenCV and numpy on a loaded machine
 
 

@@ -5,8 +5,8 @@ polling: a cycle's last frames queue behind the bytes of the ones before, and an
 keeps waking the reader. With it the radar service would not stay within its CPU budget
 (docs/performance.md). `BulkSlcanBus` keeps python-can's slcan commands, parsing and
 Message objects and replaces only the read: one `select` with the caller's whole
-timeout, then one `read` of everything available, split into lines. The radar opens it
-for `interface = "slcan"` (services/radar/ports.py).
+timeout, then one `read` of everything available, split into lines. Every service that
+reads CAN opens it for `interface = "slcan"` (common/can_port.py).
 
 Lines that are not valid (bad hex, a length that disagrees with the DLC, bytes that are
 not ASCII, a run longer than any slcan line) are dropped, counted in `line_errors` by
@@ -30,8 +30,6 @@ from common.counters import ReasonCounter
 from common.log import RateLimitedLog
 from common.serial_read import PortGone, read_available
 
-_log = logging.getLogger("radar.slcan")
-
 # 'D' + 8-digit ID + DLC + 64 data bytes (CAN FD), the longest line an adapter sends
 MAX_LINE = 1 + 8 + 1 + 128
 _LINE = re.compile(rb"[^\r\x07]*[\r\x07]")
@@ -51,13 +49,14 @@ def _kind(line: str) -> str:
 
 
 class BulkSlcanBus(slcanBus):
-    """slcanBus with a bulk, select-based read. Same constructor arguments."""
+    """slcanBus with a bulk, select-based read. Same constructor arguments, plus
+    `log_name`: the logger of the dropped-line warnings (``<service>.slcan``)."""
 
-    def __init__(self, channel: Any, **kwargs: Any) -> None:
+    def __init__(self, channel: Any, log_name: str = "slcan", **kwargs: Any) -> None:
         self._lines: deque[str] = deque()
         self._last_line: str | None = None
         self.line_errors = ReasonCounter()
-        self._rl = RateLimitedLog(_log)
+        self._rl = RateLimitedLog(logging.getLogger(log_name))
         super().__init__(channel, **kwargs)
 
     # -- reading ----------------------------------------------------------------------

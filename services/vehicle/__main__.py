@@ -1,0 +1,5 @@
+import sys
+
+from services.vehicle.main import main
+
+sys.exit(main())
