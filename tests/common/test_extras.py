@@ -89,7 +89,7 @@ def test_a_missing_extra_is_named_not_a_traceback():
 
 # Commands whose module imports what only their extra installs: --help gives their
 # description and what to install for the options (services and modules owned elsewhere).
-DESCRIBED_ONLY = {"radar", "camera", "fusion", "calib-check", "demo", "faults", "eval",
+DESCRIBED_ONLY = {"radar", "camera", "fusion", "vehicle", "calib-check", "demo", "faults", "eval",
                   "train-verifier"}
 
 
