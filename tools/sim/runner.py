@@ -10,6 +10,7 @@ rest), as a real radar never stops: fusion keeps its heartbeat and the brake sta
 """
 
 import logging
+import math
 import random
 import threading
 import time
@@ -69,7 +70,7 @@ class LoopSettings:
     stopped_hold_s: float = 1.0        # a run ends after the ego stood still this long
     passed_margin_m: float = 5.0       # ... or drove this far past every object
     radar_period_s: tuple[float, float] = (0.072, 0.076)
-    vehicle_motion: bool = True        # also publish vehicle/motion (ego speed)
+    vehicle_motion: bool = True        # also publish vehicle/motion (ego speed, yaw rate)
 
 
 @dataclass
@@ -158,7 +159,7 @@ class Simulator:
         """Play one scenario to its end; returns the timeline and the verdict."""
         with self._lock:
             self._runs += 1
-            self.feed.reset(scenario.radar, scenario.seed)
+            self.feed.reset(scenario.radar_look(), scenario.seed)
             run = _Run(scenario, World(scenario), self._runs)
             self._run = run
             start = mono_ns()
@@ -205,11 +206,12 @@ class Simulator:
 
     def _radar_cycle(self, run: _Run | None) -> None:
         if run is None or run.done.is_set():
-            bodies, ego_x, speed = [], 0.0, 0.0
+            bodies, speed, yaw_rate = [], 0.0, 0.0
         else:
-            bodies, ego_x, speed = run.world.bodies(), run.world.ego.x_m, run.world.ego.speed_mps
+            w = run.world
+            bodies, speed, yaw_rate = w.vehicle_bodies(), w.ego.speed_mps, w.yaw_rate_dps()
         try:
-            self.feed.cycle(bodies, ego_x, speed)
+            self.feed.cycle(bodies, 0.0, speed, yaw_rate)
         except (OSError, can.CanError) as exc:   # a vanished link must not end the loop
             self.radar_errors += 1
             if self.radar_errors in (1, 10, 100) or self.radar_errors % 1000 == 0:
@@ -223,30 +225,33 @@ class Simulator:
                              active=False, t_s=0.0, ego_x_m=0.0, ego_speed_mps=0.0,
                              ego_accel_mps2=0.0, gap_m=None, ttc_s=None, objects=(), seed=0,
                              brightness=1.0, noise=2.0)
-            speed = 0.0
+            speed = yaw_rate = 0.0
         else:
             w = run.world
             threat = w.threat()
             objects: tuple[SimObject, ...] = tuple(w.bodies())
-            speed = w.ego.speed_mps
+            speed, yaw_rate, pose = w.ego.speed_mps, w.yaw_rate_dps(), w.ego_pose()
             world = SimWorld(
                 header=Header(seq, "sim", stamp, mono), scenario=run.scenario.name,
-                run=run.number, active=not run.done.is_set(), t_s=w.t_s, ego_x_m=w.ego.x_m,
+                run=run.number, active=not run.done.is_set(), t_s=w.t_s, ego_x_m=pose.x_m,
                 ego_speed_mps=speed, ego_accel_mps2=-w.ego.decel_mps2 if speed > 0 else 0.0,
                 gap_m=threat.gap_m if threat else None, ttc_s=threat.ttc_s if threat else None,
                 objects=objects, seed=run.scenario.seed,
-                brightness=run.scenario.camera.brightness, noise=run.scenario.camera.noise)
+                brightness=run.scenario.camera.brightness, noise=run.scenario.camera.noise,
+                ego_y_m=pose.y_m, ego_heading_deg=math.degrees(pose.heading_rad),
+                ego_yaw_rate_dps=yaw_rate, ego_s_m=w.ego.s_m, ego_d_m=w.ego.d_m,
+                road=run.scenario.road, lighting=run.scenario.lighting)
         self._world_pub.put(world)
         if self._motion_pub is not None:
             self._motion_pub.put(EgoMotion(header=Header(self.bus.next_seq("vehicle/motion"),
                                                          "sim", stamp, mono),
-                                           speed_mps=speed, yaw_rate_dps=0.0))
+                                           speed_mps=speed, yaw_rate_dps=yaw_rate))
 
     def _record(self, run: _Run, position: float, now: float) -> None:
         w = run.world
         threat = w.threat()
         gap = w.in_path_gap()
-        sample = Sample(w.t_s, w.ego.x_m, w.ego.speed_mps,
+        sample = Sample(w.t_s, w.ego.s_m, w.ego.speed_mps,
                         gap if gap is not None else (threat.gap_m if threat else None),
                         threat.ttc_s if threat else None,
                         self.decision, self.brake_state, self.actuator.commanded_pct(), position,
