@@ -262,20 +262,20 @@ class World:
 
     def bodies(self) -> list[Body]:
         """Every object now, in the world frame."""
-        out = []
-        for i, m in enumerate(self._movers):
-            length, width, height = m.spec.size()
-            heading = self.road.heading_at(m.s_m)
-            x, y = self.road.to_world(np.array([m.s_m]), np.array([m.d_m]))[0]
-            vx = vy = 0.0
-            motion = m.spec.motion
-            if motion is not None and m.moving:
-                h = heading + math.radians(motion.heading_deg)
-                vx, vy = m.speed_mps * math.cos(h), m.speed_mps * math.sin(h)
-            out.append(Body(i, m.spec.kind, float(x), float(y),
-                            m.spec.yaw_deg + math.degrees(heading), length, width, height,
-                            vx, vy, m.spec.elevation()))
-        return out
+        return [self._body(i, m) for i, m in enumerate(self._movers)]
+
+    def _body(self, index: int, m: _Mover) -> Body:
+        length, width, height = m.spec.size()
+        heading = self.road.heading_at(m.s_m)
+        x, y = self.road.to_world(np.array([m.s_m]), np.array([m.d_m]))[0]
+        vx = vy = 0.0
+        motion = m.spec.motion
+        if motion is not None and m.moving:
+            h = heading + math.radians(motion.heading_deg)
+            vx, vy = m.speed_mps * math.cos(h), m.speed_mps * math.sin(h)
+        return Body(index, m.spec.kind, float(x), float(y),
+                    m.spec.yaw_deg + math.degrees(heading), length, width, height, vx, vy,
+                    m.spec.elevation())
 
     def vehicle_bodies(self) -> list[Body]:
         """Every object now in the vehicle frame (velocities over ground, in its axes):
@@ -296,10 +296,20 @@ class World:
                         s_rate, d_rate)
 
     def _check_collision(self) -> None:
-        ego = self.ego_corners()
-        for body in self.obstacles():
+        spec = self.scenario.ego
+        ego_mid = self.ego.s_m - spec.length_m / 2
+        reach = math.hypot(spec.length_m, spec.width_m) / 2 + 0.5
+        ego: np.ndarray | None = None
+        for i, m in enumerate(self._movers):
+            if not m.spec.kind.is_obstacle:
+                continue
+            length, width, _ = m.spec.size()
+            # Far along the road is far (a station apart shrinks by at most 1 - |d|/R).
+            if 0.8 * abs(m.s_m - ego_mid) > reach + math.hypot(length, width) / 2:
+                continue
+            ego = self.ego_corners() if ego is None else ego
+            body = self._body(i, m)
             if rectangles_overlap(ego, body.corners()):
-                m = self._movers[body.index]
                 along = m.speed_mps * math.cos(math.radians(m.spec.motion.heading_deg)) \
                     if m.spec.motion is not None and m.moving else 0.0
                 self.collision = Collision(self.t_s, body.index, body.kind, self.ego.speed_mps,
