@@ -41,6 +41,12 @@ class Pose:
         return np.column_stack([self.x_m + p[:, 0] * c - p[:, 1] * s,
                                 self.y_m + p[:, 0] * s + p[:, 1] * c])
 
+    def point_to_local(self, x: float, y: float) -> tuple[float, float]:
+        """One world point in this frame."""
+        c, s = math.cos(self.heading_rad), math.sin(self.heading_rad)
+        dx, dy = x - self.x_m, y - self.y_m
+        return dx * c + dy * s, -dx * s + dy * c
+
     def rotate_to_local(self, vx: float, vy: float) -> tuple[float, float]:
         """A world vector (a velocity) in this frame's axes."""
         c, s = math.cos(self.heading_rad), math.sin(self.heading_rad)
@@ -72,8 +78,16 @@ class Road:
 
     def pose_at(self, s: float, d: float = 0.0) -> Pose:
         """The world pose of the point (s, d), heading along the centre line's tangent."""
-        xy = self.to_world(np.array([s]), np.array([d]))[0]
-        return Pose(float(xy[0]), float(xy[1]), self.heading_at(s))
+        return Pose(*self.point(s, d), self.heading_at(s))
+
+    def point(self, s: float, d: float = 0.0) -> tuple[float, float]:
+        """The world point of one (s, d): `to_world` without arrays (per object, per step)."""
+        if self.straight or s <= self.s0:
+            return s, d
+        r = self.radius
+        assert r is not None
+        theta = self.k * (s - self.s0)
+        return self.s0 + (r - d) * math.sin(theta), r - (r - d) * math.cos(theta)
 
     def to_world(self, s: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(N, 2) world points of road coordinates (arrays of N)."""

@@ -43,10 +43,10 @@ class Body(SimObject, frozen=True):
     def seen_from(self, pose: Pose, x_offset_m: float = 0.0) -> "Body":
         """This body in the frame of `pose` (position, yaw and velocity), shifted by
         `x_offset_m` along that frame's x: with the ego's pose, the vehicle frame."""
-        xy = pose.to_local(np.array([[self.x_m, self.y_m]]))[0]
+        x, y = pose.point_to_local(self.x_m, self.y_m)
         vx, vy = pose.rotate_to_local(self.vx_mps, self.vy_mps)
         return msgspec.structs.replace(
-            self, x_m=float(xy[0]) + x_offset_m, y_m=float(xy[1]),
+            self, x_m=x + x_offset_m, y_m=y,
             yaw_deg=self.yaw_deg - math.degrees(pose.heading_rad), vx_mps=vx, vy_mps=vy)
 
 
@@ -267,13 +267,13 @@ class World:
     def _body(self, index: int, m: _Mover) -> Body:
         length, width, height = m.spec.size()
         heading = self.road.heading_at(m.s_m)
-        x, y = self.road.to_world(np.array([m.s_m]), np.array([m.d_m]))[0]
+        x, y = self.road.point(m.s_m, m.d_m)
         vx = vy = 0.0
         motion = m.spec.motion
         if motion is not None and m.moving:
             h = heading + math.radians(motion.heading_deg)
             vx, vy = m.speed_mps * math.cos(h), m.speed_mps * math.sin(h)
-        return Body(index, m.spec.kind, float(x), float(y),
+        return Body(index, m.spec.kind, x, y,
                     m.spec.yaw_deg + math.degrees(heading), length, width, height, vx, vy,
                     m.spec.elevation())
 
@@ -287,12 +287,18 @@ class World:
         """The bodies the ego can hit: false targets (plates, signs, rails) are not."""
         return [b for b in self.bodies() if b.kind.is_obstacle]
 
-    def _road_box(self, body: Body) -> _RoadBox:
-        c = body.corners()
-        s, d = self.road.to_road(c[:, 0], c[:, 1])
-        m = self._movers[body.index]
+    def _road_box(self, m: _Mover) -> _RoadBox:
+        """A mover's extent in road coordinates: its turned footprint about its station
+        and offset (the road taken as straight across the body: a few cm off on the
+        tightest bend; collisions use the exact footprints)."""
+        length, width, _ = m.spec.size()
+        a = math.radians(m.spec.yaw_deg)
+        c, s = abs(math.cos(a)), abs(math.sin(a))
+        stretch = max(1.0 - self.road.curvature_at(m.s_m) * m.d_m, 0.1)
+        half_s = (length / 2 * c + width / 2 * s) / stretch
+        half_d = length / 2 * s + width / 2 * c
         s_rate, d_rate = self._road_rates(m, m.speed_mps) if m.moving else (0.0, 0.0)
-        return _RoadBox(float(s.min()), float(s.max()), float(d.min()), float(d.max()),
+        return _RoadBox(m.s_m - half_s, m.s_m + half_s, m.d_m - half_d, m.d_m + half_d,
                         s_rate, d_rate)
 
     def _check_collision(self) -> None:
@@ -325,8 +331,10 @@ class World:
         half = spec.width_m / 2
         ego_s, v = self.ego.s_m, self.ego.speed_mps
         best: Threat | None = None
-        for body in self.obstacles():
-            box = self._road_box(body)
+        for index, m in enumerate(self._movers):
+            if not m.spec.kind.is_obstacle:
+                continue
+            box = self._road_box(m)
             # Overlap along the road: s0 <= ego front and ego rear <= s1, with the
             # relative motion; across it, the ego's width.
             ts = _interval(box.s0 - ego_s, box.s1 - ego_s + spec.length_m, v - box.s_rate)
@@ -338,28 +346,30 @@ class World:
             if start > min(ts[1], td[1]):
                 continue
             if best is None or start < best.ttc_s:
-                best = Threat(body.index, box.s0 - ego_s, v - box.s_rate, start)
+                best = Threat(index, box.s0 - ego_s, v - box.s_rate, start)
         return best
 
     def in_path_gap(self) -> float | None:
         """Gap along the road to the nearest obstacle ahead that overlaps the ego's
         width now."""
-        return self._gap_in_width(self.obstacles())
+        return self._gap_in_width(obstacles=True)
 
     def false_target_gap(self) -> float | None:
         """Gap to the nearest false target (plate, sign, rail, ghost) ahead that overlaps
         the ego's width now: what the radar sees in the path with nothing to hit."""
-        return self._gap_in_width([b for b in self.bodies() if not b.kind.is_obstacle])
+        return self._gap_in_width(obstacles=False)
 
-    def _gap_in_width(self, bodies: list[Body]) -> float | None:
+    def _gap_in_width(self, obstacles: bool) -> float | None:
         half = self.scenario.ego.width_m / 2
         gaps = []
-        for body in bodies:
-            box = self._road_box(body)
+        for m in self._movers:
+            if m.spec.kind.is_obstacle is not obstacles:
+                continue
+            box = self._road_box(m)
             if box.d1 < self.ego.d_m - half or box.d0 > self.ego.d_m + half:
                 continue
             gap = box.s0 - self.ego.s_m
-            if gap > -body.length_m:
+            if gap > -m.spec.size()[0]:
                 gaps.append(gap)
         return min(gaps) if gaps else None
 
@@ -367,4 +377,4 @@ class World:
         """The ego's rear is beyond every object along the road (a no-threat run is
         over)."""
         rear = self.ego.s_m - self.scenario.ego.length_m
-        return all(self._road_box(b).s1 + margin_m < rear for b in self.bodies())
+        return all(self._road_box(m).s1 + margin_m < rear for m in self._movers)
