@@ -95,6 +95,7 @@ class _PixelRays:
     slope: np.ndarray
     inv_h: np.ndarray
     backdrop_t: np.ndarray
+    clear: np.ndarray           # 1 - the haze over the ground at its distance
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,7 @@ class _Backdrop:
     colour: np.ndarray
     alpha: np.ndarray
     depth: np.ndarray
+    rows: tuple[int, int]       # the rows it shows in
 
 
 # (texture level, rows y0:y1, columns x0:x1, map x, map y, blend weight)
@@ -285,10 +287,11 @@ class Renderer:
             ahead = hx > 1e-9
             backdrop_t = np.where(ahead, BACKDROP_M / np.where(ahead, hx, 1.0), np.inf)
             f32 = np.float32
+            clear = np.exp(-np.where(ground, dist, MAX_GROUND_M) / HAZE_M)   # 1 - haze
             self._rays = _PixelRays(
                 ground, gx.astype(f32), gy.astype(f32), dist.astype(f32), self._ground_z,
                 hx.astype(f32), hy.astype(f32), (rays[..., 2] / horizontal).astype(f32),
-                (1.0 / horizontal).astype(f32), backdrop_t.astype(f32))
+                (1.0 / horizontal).astype(f32), backdrop_t.astype(f32), clear.astype(f32))
             del self._ground_z
         return self._rays
 
@@ -359,7 +362,9 @@ class Renderer:
             alpha[r0:r1] = np.where(opaque, 1.0, a)
             colour[r0:r1] = sampled[..., :3]
             depth[r0:r1] = np.where(opaque, tb * rays.inv_h[r0:r1], 0.0)
-        return _Backdrop(colour, alpha, depth)
+        shown = np.flatnonzero(alpha.any(axis=1))
+        rows = (int(shown[0]), int(shown[-1]) + 1) if len(shown) else (0, 0)
+        return _Backdrop(colour, alpha, depth, rows)
 
     def _view_key(self, view: RoadView | None) -> tuple[float, float] | None:
         """What the road looks like from the ego, rounded: None for the straight view,
@@ -447,12 +452,15 @@ class Renderer:
                  for lv, r0, r1 in self._band_rows]
         del col0, row0
         # out = road * weight + background * (1 - weight): haze over distant ground.
-        fog = 1.0 - np.exp(-np.where(visible, rays.gdist, MAX_GROUND_M) / HAZE_M)
-        weight = np.where(visible, 1.0 - fog, 0.0).astype(np.float32)
+        weight = np.where(visible, rays.clear, np.float32(0.0))
         background = self._sky
         if self.roadside:
-            a = np.where(wall, np.float32(0.0), self._backdrop.alpha * np.float32(BACKDROP_CLARITY))
-            background = cv2.blendLinear(self._backdrop.colour, self._sky, a, 1.0 - a)
+            background = self._sky.copy()
+            b0, b1 = self._backdrop.rows
+            a = np.where(wall[b0:b1], np.float32(0.0),
+                         self._backdrop.alpha[b0:b1] * np.float32(BACKDROP_CLARITY))
+            background[b0:b1] = cv2.blendLinear(self._backdrop.colour[b0:b1],
+                                                self._sky[b0:b1], a, 1.0 - a)
             del a
         walls = self._wall_layers(wall, level, left, wx, wz, wt) if self.roadside else []
         return _Geometry(bands, weight, (1.0 - weight).astype(np.float32), walls, background,
@@ -509,16 +517,20 @@ class Renderer:
                      wx: np.ndarray, wz: np.ndarray, wt: np.ndarray) -> list[_WallLayer]:
         """The walls' texture coordinates (rows along the road, columns up) at their
         texture level, in a box per level and side; the haze from the distance."""
-        layers = []
+        layers: list[_WallLayer] = []
+        rows_any = np.flatnonzero(wall.any(axis=1))
+        if not len(rows_any):
+            return layers
+        top, bottom = int(rows_any[0]), int(rows_any[-1]) + 1     # the walls' rows only
         for (lv, f), on_left in itertools.product(enumerate(_MIP_FACTORS), (True, False)):
-            mask = wall & (level == lv) & (left == on_left)
+            mask = wall[top:bottom] & (level[top:bottom] == lv) & (left[top:bottom] == on_left)
             rows_i = np.flatnonzero(mask.any(axis=1))
             if not len(rows_i):
                 continue
             cols_i = np.flatnonzero(mask.any(axis=0))
-            y0, y1 = int(rows_i[0]), int(rows_i[-1]) + 1
+            y0, y1 = top + int(rows_i[0]), top + int(rows_i[-1]) + 1
             x0, x1 = int(cols_i[0]), int(cols_i[-1]) + 1
-            m = mask[y0:y1, x0:x1]
+            m = mask[y0 - top:y1 - top, x0:x1]
             mx = wz[y0:y1, x0:x1] / np.float32(sprites.SCENERY_RES_M * f)
             my = wx[y0:y1, x0:x1] / np.float32(sprites.SCENERY_RES_M * f)
             fog = np.exp(-wt[y0:y1, x0:x1] / HAZE_M)
