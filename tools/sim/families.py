@@ -534,6 +534,19 @@ STANDING = (tuple((("object", "box"), ("size_m", s), ("pose", p), ("light", li))
                                      ("car", (1.5,)))
                     for s in sizes for p in STANDING_POSES for li in ("day", "dusk")))
 
+def _ahead(name: str, kind: ObjectKind, speed_mps: float, impact: float,
+           lights: tuple[str, ...] = ()) -> Family:
+    """A Euro NCAP longitudinal family: the target ahead in the ego's direction."""
+    who = "An adult walks" if kind is ObjectKind.PEDESTRIAN else "A cyclist rides"
+    axes: dict[str, Sequence[ParamValue]] = {"impact": (impact,)}
+    if lights:
+        axes["light"] = lights
+    return Family(name, ScenarioKind.THREAT, "euro_ncap",
+                  f"{who} ({speed_mps * 3.6:.0f} km/h) ahead in the ego's direction, at "
+                  f"{impact:g} % of its width.", ALL_SPEEDS[1:], _points(**axes),
+                  _longitudinal(kind, speed_mps))
+
+
 _FAMILY_LIST = [
     Family("CCRs", ScenarioKind.THREAT, "euro_ncap",
            "Car-to-car rear, stationary: a car stopped in the lane, offset by the overlap.",
@@ -557,25 +570,13 @@ _FAMILY_LIST = [
     Family("CPNC-50", ScenarioKind.THREAT, "euro_ncap",
            "A child runs (5 km/h) out from in front of cars parked on the near side, hit at "
            "50 %.", ALL_SPEEDS, NO_PARAMS, _child_behind_cars),
-    Family("CPLA-25", ScenarioKind.THREAT, "euro_ncap",
-           "An adult walks (5 km/h) ahead in the ego's direction, at 25 % of its width.",
-           ALL_SPEEDS[1:], _points(impact=(25.0,), light=("day", "night")),
-           _longitudinal(ObjectKind.PEDESTRIAN, WALK_MPS)),
-    Family("CPLA-50", ScenarioKind.THREAT, "euro_ncap",
-           "An adult walks (5 km/h) ahead in the ego's direction, at 50 % of its width.",
-           ALL_SPEEDS[1:], _points(impact=(50.0,)),
-           _longitudinal(ObjectKind.PEDESTRIAN, WALK_MPS)),
+    _ahead("CPLA-25", ObjectKind.PEDESTRIAN, WALK_MPS, 25.0, ("day", "night")),
+    _ahead("CPLA-50", ObjectKind.PEDESTRIAN, WALK_MPS, 50.0),
     Family("CBNA-50", ScenarioKind.THREAT, "euro_ncap",
            "A cyclist (15 km/h) crosses from the near side, hit at 50 % of the ego's front.",
            ALL_SPEEDS, NO_PARAMS, _bicycle_crossing),
-    Family("CBLA-25", ScenarioKind.THREAT, "euro_ncap",
-           "A cyclist (15 km/h) rides ahead in the ego's direction, at 25 % of its width.",
-           ALL_SPEEDS[1:], _points(impact=(25.0,)),
-           _longitudinal(ObjectKind.BICYCLE, CYCLE_MPS)),
-    Family("CBLA-50", ScenarioKind.THREAT, "euro_ncap",
-           "A cyclist (15 km/h) rides ahead in the ego's direction, at 50 % of its width.",
-           ALL_SPEEDS[1:], _points(impact=(50.0,)),
-           _longitudinal(ObjectKind.BICYCLE, CYCLE_MPS)),
+    _ahead("CBLA-25", ObjectKind.BICYCLE, CYCLE_MPS, 25.0),
+    _ahead("CBLA-50", ObjectKind.BICYCLE, CYCLE_MPS, 50.0),
     Family("bend_stopped_car", ScenarioKind.THREAT, "bend",
            "A car stopped in the lane on a bend (radius signed: positive left) the ego "
            "follows.", ALL_SPEEDS, _points(radius_m=RADII), _bend_car,
