@@ -43,19 +43,23 @@ def bend_world(*objects: SceneObject) -> World:
 
 
 def test_on_a_bend_the_road_ahead_is_off_to_the_side_and_the_outside_edge_ahead():
-    """Left bend: a car on the lane 40 m further along is well to the left in the radar's
-    frame; a guard-rail post beside the road on the outside, 17 m along, is in the
+    """Left bend: a car on the lane 40 m further along, and a box beside the road on the
+    outside 45 m along, are well to the left in the radar's frame; a guard-rail post
+    beside the road on the outside, 17 m along, is in the
     straight line ahead, closing at the ego's speed and drifting right (the radar
     turns)."""
     world = bend_world(SceneObject(ObjectKind.CAR, 10.0 + 42.2, 0.0),
                        SceneObject(ObjectKind.GUARD_RAIL, 10.0 + 17.0, -3.0,
-                                   size_m=(0.2, 0.1, 0.75)))
+                                   size_m=(0.2, 0.1, 0.75)),
+                       SceneObject(ObjectKind.BOX, 10.0 + 45.0, -3.5))
     v, omega = world.ego.speed_mps, math.radians(world.yaw_rate_dps())
     assert omega == pytest.approx(v / R)
     got = {r.source: r for r in RadarModel(QUIET).cycle(world.vehicle_bodies(), 0.0, v,
                                                        world.yaw_rate_dps())}
-    car, rail = got[0], got[1]
+    car, rail, far_outside = got[0], got[1], got[2]
     assert car.y_m > 10.0 and car.x_m < 40.0
+    # Far ahead on the outside of the bend, beside the road: off to the (bend's) side.
+    assert far_outside.y_m > 10.0
     assert abs(rail.y_m) < 0.3 and rail.x_m == pytest.approx(17.6, abs=0.3)
     # A stationary point seen from a turning radar: x' = -v + w y, y' = -w x.
     assert rail.vx_mps == pytest.approx(-v + omega * rail.y_m, abs=1e-6)
