@@ -8,7 +8,6 @@ beside what the stack perceived.
 """
 
 import enum
-from typing import Annotated
 
 import msgspec
 
@@ -47,20 +46,13 @@ class Lighting(enum.Enum):
     RAIN = "rain"              # overcast daylight: lower contrast, noise, streaks; radar clutter
 
 
-MIN_RADIUS_M = 50.0
-
-
-class RoadGeometry(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+class RoadGeometry(msgspec.Struct, frozen=True):
     """The ego lane's centre line: straight from the start, then (with `radius_m`) an arc
-    of that signed radius (positive: a left bend) from station `curve_start_m` on."""
+    of that signed radius (positive: a left bend) from station `curve_start_m` on. (The
+    scenario files' `[road]`, validated there: tools/sim/scenario.py.)"""
 
-    curve_start_m: Annotated[float, msgspec.Meta(ge=0)] = 0.0
+    curve_start_m: float = 0.0
     radius_m: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.radius_m is not None and abs(self.radius_m) < MIN_RADIUS_M:
-            raise ValueError(f"road.radius_m {self.radius_m:g}: at least {MIN_RADIUS_M:g} m "
-                             "either way (negative: a right bend)")
 
 
 class SimObject(msgspec.Struct, frozen=True):

@@ -9,14 +9,21 @@ import pytest
 
 from tools.messages import ObjectKind, RoadGeometry
 from tools.sim.road import Pose, Road
-from tools.sim.scenario import EgoSpec, Motion, Scenario, ScenarioKind, SceneObject
+from tools.sim.scenario import (
+    EgoSpec,
+    Motion,
+    RoadSpec,
+    Scenario,
+    ScenarioKind,
+    SceneObject,
+)
 from tools.sim.world import World
 
 R = 50.0
-BEND = RoadGeometry(curve_start_m=10.0, radius_m=R)
+BEND = RoadSpec(curve_start_m=10.0, radius_m=R)
 
 
-def scenario(*objects: SceneObject, road: RoadGeometry = BEND, speed_kph: float = 36.0
+def scenario(*objects: SceneObject, road: RoadSpec = BEND, speed_kph: float = 36.0
              ) -> Scenario:
     return Scenario(name="t", kind=ScenarioKind.THREAT, ego=EgoSpec(speed_kph=speed_kph),
                     object=objects, road=road)
@@ -79,7 +86,7 @@ def test_the_vehicle_frame_turns_with_the_ego():
     assert (parked.x_m, parked.y_m) == pytest.approx(
         ((R + 3.0) * math.sin(phi), R - (R + 3.0) * math.cos(phi)), abs=1e-6)
     assert abs(parked.y_m) < 0.1                          # in the straight line ahead
-    straight = World(scenario(ahead, outside, road=RoadGeometry()))
+    straight = World(scenario(ahead, outside, road=RoadSpec()))
     straight.step(5.0, 0.0)
     assert [(b.x_m, b.y_m) for b in straight.vehicle_bodies()] == [(30.0, 0.0), (17.0, -3.0)]
 
@@ -123,3 +130,15 @@ def test_a_lead_car_follows_its_lane_through_the_bend_and_a_crossing_one_crosses
     # The lead pulls away along the lane, the walker has crossed it: nothing to hit.
     assert world.threat() is None
     assert world.in_path_gap() == pytest.approx(52.0 - 2.2 - 20.0, abs=0.1)
+
+
+def test_a_road_tighter_than_50_m_or_unknown_road_fields_are_refused(tmp_path):
+    from common.config.loader import ConfigError
+    from tools.sim.scenario import load_scenario
+
+    for road, match in (("radius_m = 40.0", "at least 50 m"), ("radius = 80.0", "radius")):
+        f = tmp_path / "bad.toml"
+        f.write_text(f'name = "bad"\nkind = "threat"\n[ego]\nspeed_kph = 30.0\n[road]\n{road}\n'
+                     '[[object]]\nkind = "car"\nx_m = 20.0\n')
+        with pytest.raises(ConfigError, match=match):
+            load_scenario(f)

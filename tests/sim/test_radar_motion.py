@@ -14,7 +14,7 @@ from common.messages import EgoMotion, Header
 from services.radar.ars408 import decode_frame, ego_motion_frames, encode
 from services.radar.ars408.records import ObjectGeneral
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
-from tools.messages import ObjectKind, RoadGeometry
+from tools.messages import ObjectKind
 from tools.sim.can_links import SlcanPtyLink
 from tools.sim.radar_feed import HostMotion, RadarFeed, state_frames
 from tools.sim.radar_model import DynProp, RadarModel, ReceivedMotion
@@ -22,6 +22,7 @@ from tools.sim.scenario import (
     EgoSpec,
     Motion,
     RadarLook,
+    RoadSpec,
     Scenario,
     ScenarioKind,
     SceneObject,
@@ -36,7 +37,7 @@ R = 50.0
 
 def bend_world(*objects: SceneObject) -> World:
     sc = Scenario(name="t", kind=ScenarioKind.NO_THREAT, ego=EgoSpec(speed_kph=36.0),
-                  object=objects, road=RoadGeometry(curve_start_m=0.0, radius_m=R))
+                  object=objects, road=RoadSpec(curve_start_m=0.0, radius_m=R))
     world = World(sc)
     world.step(1.0, 0.0)
     return world

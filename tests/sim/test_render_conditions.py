@@ -13,7 +13,14 @@ from tools.messages import Lighting, ObjectKind, RoadGeometry, SimWorld
 from tools.sim.camera_source import scene_at
 from tools.sim.render import ROADSIDE_Y_M, Renderer
 from tools.sim.road import Road, RoadView
-from tools.sim.scenario import CameraLook, EgoSpec, Scenario, ScenarioKind, SceneObject
+from tools.sim.scenario import (
+    CameraLook,
+    EgoSpec,
+    RoadSpec,
+    Scenario,
+    ScenarioKind,
+    SceneObject,
+)
 from tools.sim.sprites import LANE_WIDTH_M
 from tools.sim.world import Body, World
 
@@ -122,7 +129,7 @@ def test_the_camera_source_draws_the_vehicle_frame_along_the_road():
     sc = Scenario(name="t", kind=ScenarioKind.THREAT, ego=EgoSpec(speed_kph=36.0),
                   object=(SceneObject(ObjectKind.CAR, 60.0, 0.0),
                           SceneObject(ObjectKind.BOX, 45.0, -3.0)),
-                  road=RoadGeometry(curve_start_m=5.0, radius_m=50.0))
+                  road=RoadSpec(curve_start_m=5.0, radius_m=50.0))
     world = World(sc)
     world.step(2.5, 0.0)
     pose = world.ego_pose()

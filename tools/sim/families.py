@@ -36,13 +36,14 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from tools.messages import Lighting, ObjectKind, RoadGeometry
+from tools.messages import Lighting, ObjectKind
 from tools.sim.scenario import (
     DEFAULT_SIZE,
     CameraLook,
     EgoSpec,
     Motion,
     RadarLook,
+    RoadSpec,
     Scenario,
     ScenarioKind,
     SceneObject,
@@ -190,7 +191,7 @@ class Build:
         self.draw = Draw(case)
         self.v = case.speed_kph * KPH
         self.objects: list[SceneObject] = []
-        self.road = RoadGeometry()
+        self.road = RoadSpec()
         self.duration_s = 10.0
         light = case.params and dict(case.params).get("light")
         self.lighting = Lighting(str(light)) if light else Lighting(
@@ -358,7 +359,7 @@ def _bicycle_crossing(b: Build) -> None:
 
 def _bend_car(b: Build) -> None:
     """A car stopped in the lane on a bend the ego is already driving through."""
-    b.road = RoadGeometry(curve_start_m=0.0, radius_m=b.pf("radius_m"))
+    b.road = RoadSpec(curve_start_m=0.0, radius_m=b.pf("radius_m"))
     gap = b.approach()
     car = b.scaled(ObjectKind.CAR, 0.05)
     b.add(ObjectKind.CAR, gap + car[0] / 2, b.draw.jitter(0.0, 0.2), 0.0, car,
@@ -423,7 +424,7 @@ def _pedestrian_clears(b: Build) -> None:
 def _parked_bend(b: Build) -> None:
     """Cars parked along the right edge of a bend the ego drives through (the outside of
     a left bend crosses the straight line ahead)."""
-    b.road = RoadGeometry(curve_start_m=0.0, radius_m=b.pf("radius_m"))
+    b.road = RoadSpec(curve_start_m=0.0, radius_m=b.pf("radius_m"))
     d = -(LANE_WIDTH_M / 2 + DEFAULT_SIZE[ObjectKind.CAR][1] / 2 + 0.1)
     start = b.approach(minimum_m=25.0)
     for i in range(4):
@@ -457,7 +458,7 @@ def guard_rail(b: Build, radius_m: float, curve_start_m: float, first_m: float,
                last_m: float, offset_m: float = 2.6, segment_m: float = 4.0) -> None:
     """A guard rail of straight segments along the outside edge of a bend, from station
     `first_m` to `last_m` (also for the demo's rail scenario)."""
-    b.road = RoadGeometry(curve_start_m=curve_start_m, radius_m=radius_m)
+    b.road = RoadSpec(curve_start_m=curve_start_m, radius_m=radius_m)
     d = -offset_m if radius_m > 0 else offset_m
     n = max(1, round((last_m - first_m) / segment_m))
     length = (last_m - first_m) / n

@@ -124,6 +124,21 @@ class RadarLook(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError(f"radar.mode {self.mode!r}: expected 'objects' or 'clusters'")
 
 
+MIN_RADIUS_M = 50.0
+
+
+class RoadSpec(RoadGeometry, frozen=True, forbid_unknown_fields=True):
+    """`[road]`: the lane centre line (RoadGeometry, as `sim/world` carries it), checked:
+    a bend of at least MIN_RADIUS_M either way."""
+
+    def __post_init__(self) -> None:
+        if self.curve_start_m < 0:
+            raise ValueError(f"road.curve_start_m {self.curve_start_m:g}: not before the start")
+        if self.radius_m is not None and abs(self.radius_m) < MIN_RADIUS_M:
+            raise ValueError(f"road.radius_m {self.radius_m:g}: at least {MIN_RADIUS_M:g} m "
+                             "either way (negative: a right bend)")
+
+
 # What rain does to the radar: clutter returns per cycle and noise (times the look's).
 RAIN_CLUTTER_PER_CYCLE = 3.0
 RAIN_NOISE_FACTOR = 1.5
@@ -138,7 +153,7 @@ class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     duration_s: Annotated[float, msgspec.Meta(gt=0, le=120)] = 20.0
     seed: int = 0
     lighting: Lighting = Lighting.DAY
-    road: RoadGeometry = msgspec.field(default_factory=RoadGeometry)
+    road: RoadSpec = msgspec.field(default_factory=RoadSpec)
     radar: RadarLook = msgspec.field(default_factory=RadarLook)
     camera: CameraLook = msgspec.field(default_factory=CameraLook)
 
