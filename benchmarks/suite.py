@@ -14,7 +14,8 @@ Sections (each a module with `run(quick, out_dir) -> list[Figure]`):
 - eval: `aeb eval` on a recording, ROIs/s per core, the paper's 131,603 frames projected;
 - record: `aeb record` at nominal rates, messages published vs recorded per key (30 s
   here; `python -m benchmarks.bench_record --minutes 10` for the 10-minute run);
-- rerun: `aeb rerun fusion` in multiples of real time per core.
+- rerun: `aeb rerun fusion` in multiples of real time per core;
+- sim: the simulator's rendered frame (day, dusk, night, rain, bend) and world step.
 """
 
 import argparse
@@ -41,6 +42,7 @@ SECTIONS: dict[str, str] = {
     "eval": "benchmarks.bench_eval",
     "record": "benchmarks.bench_record",
     "rerun": "benchmarks.bench_rerun",
+    "sim": "benchmarks.bench_sim",
 }
 
 

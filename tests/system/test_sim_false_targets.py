@@ -44,7 +44,8 @@ def radar_tracks_through_the_core(name: str, mode: str
     out = []
     k = 0
     while world.t_s < sc.duration_s and not world.passed_everything():
-        returns = model.cycle(world.bodies(), world.ego.x_m, world.ego.speed_mps)
+        returns = model.cycle(world.vehicle_bodies(), 0.0, world.ego.speed_mps,
+                              world.yaw_rate_dps())
         frames = (object_frames if mode == "objects" else cluster_frames)(returns, k, look)
         t = 100.0 + k * RADAR_PERIOD_S
         results = feed(core, [(f, t + 1e-4 * i) for i, f in enumerate(frames)],

@@ -71,7 +71,7 @@ def test_threats_collide_without_braking_and_no_threats_do_not(path):
 
 def test_invalid_scenarios_name_the_field(tmp_path):
     bad = tmp_path / "bad.toml"
-    bad.write_text('name = "x"\nkind = "threat"\n[ego]\nspeed_kph = 50.0\n'
+    bad.write_text('name = "x"\nkind = "threat"\n[ego]\nspeed_kph = 70.0\n'
                    '[[object]]\nkind = "car"\nx_m = 20.0\n')
     with pytest.raises(ConfigError, match=r"\$\.ego\.speed_kph"):
         load_scenario(bad)

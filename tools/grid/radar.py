@@ -60,12 +60,12 @@ class LockstepRadar:
         self.feed.reset(look, seed)
 
     def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float,
-              t_ns: int) -> list[tuple[int, bytes]]:
+              yaw_rate_dps: float, t_ns: int) -> list[tuple[int, bytes]]:
         """One cycle sent at `t_ns`: each frame received by the radar service a CAN link
         after it was written, and (time, payload) of every RadarTracks published."""
         ev = self.events
         self._cursor = ev.mono_ns(t_ns)
-        self.feed.cycle(bodies, ego_x_m, ego_speed_mps)
+        self.feed.cycle(bodies, ego_x_m, ego_speed_mps, yaw_rate_dps)
         sent, self._sent = self._sent, []
         out: list[tuple[int, bytes]] = []
         for written, frame in sent:

@@ -24,6 +24,7 @@ once the simulator has been seen, a world older than `stale_after_s` is a camera
 import threading
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,23 +37,43 @@ from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError,
 from tools.keys import SIM_WORLD
 from tools.messages import SimWorld
 from tools.sim.render import Renderer
+from tools.sim.road import Road, RoadView
 from tools.sim.scenario import CameraLook
 from tools.sim.world import Body
 
 MAX_EXTRAPOLATION_S = 0.25
 
 
-def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
-    """The world's bodies and ego x extrapolated to `stamp_ns` (at most 0.25 s ahead)."""
+@dataclass(frozen=True)
+class SceneView:
+    """What the camera sees at one instant: the bodies in the frame along the ego's
+    heading with the radar at (`ego_x_m`, 0) (the vehicle frame shifted by the ego's
+    station: on a straight road the world frame), and where on the road the ego is."""
+
+    bodies: list[Body]
+    ego_x_m: float
+    road: RoadView
+
+
+def scene_at(world: SimWorld, stamp_ns: int) -> SceneView:
+    """The world extrapolated to `stamp_ns` (at most 0.25 s ahead): objects at their
+    velocities, the ego along the road with its acceleration."""
     dt = min(max((stamp_ns - world.header.stamp_ns) / 1e9, 0.0), MAX_EXTRAPOLATION_S)
     v = world.ego_speed_mps
     a = world.ego_accel_mps2
-    if a < 0 and v + a * dt < 0:          # stops within dt
-        ego_x = world.ego_x_m + v * v / (-2 * a)
-    else:
-        ego_x = world.ego_x_m + v * dt + 0.5 * a * dt * dt
-    bodies = [Body.of(o).shifted(dt) for o in world.objects]
-    return bodies, ego_x
+    stops = a < 0 and v + a * dt < 0      # within dt
+    ds = v * v / (-2 * a) if stops else v * dt + 0.5 * a * dt * dt
+    station = world.ego_station() + ds
+    view = RoadView(Road(world.road), station, world.ego_d_m)
+    pose = view.pose
+    bodies = [Body.of(o).shifted(dt).seen_from(pose, station) for o in world.objects]
+    return SceneView(bodies, station, view)
+
+
+def bodies_at(world: SimWorld, stamp_ns: int) -> tuple[list[Body], float]:
+    """`scene_at`'s bodies and the ego's station (see SceneView for their frame)."""
+    view = scene_at(world, stamp_ns)
+    return view.bodies, view.ego_x_m
 
 
 class SimCameraSource(FrameSource):
@@ -129,11 +150,15 @@ class SimCameraSource(FrameSource):
                 self._scene = (world.run, world.seed)
                 self.renderer.new_scene(world.seed)
                 self._noise_rng = np.random.default_rng((world.seed, 2))
-            self.renderer.set_look(CameraLook(brightness=world.brightness, noise=world.noise))
-            bodies, ego_x = bodies_at(world, stamp_ns)
+            self.renderer.set_look(CameraLook(brightness=world.brightness, noise=world.noise),
+                                   world.lighting)
+            view = scene_at(world, stamp_ns)
+            bodies, ego_x, road = view.bodies, view.ego_x_m, view.road
+        else:
+            road = None
         if with_depth:
-            return self.renderer.render_rgbd(bodies, ego_x, millimetres)
-        return self.renderer.render(bodies, ego_x), None
+            return self.renderer.render_rgbd(bodies, ego_x, millimetres, road=road)
+        return self.renderer.render(bodies, ego_x, road=road), None
 
     def read(self) -> Frame:
         self._pacer.wait()

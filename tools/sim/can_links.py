@@ -28,8 +28,9 @@ log (any format python-can reads) into a link.
 
 Both links: `send(frames)` writes radar -> service frames (thread-safe; blocks while the
 reader lags, as a real bus would back-pressure nothing but a pty does); `on_frame`
-(constructor argument) is called from the link's reader thread for every frame the
-service writes (e.g. answer a 0x200 with a 0x201); `wait_frame(predicate, timeout_s)`
+(constructor argument, or `add_listener` later) is called from the link's reader thread
+for every frame the service writes (e.g. answer a 0x200 with a 0x201; the simulated
+radar reads the ego motion the service forwards); `wait_frame(predicate, timeout_s)`
 returns the first received frame matching, or raises TimeoutError; `close()` (or leaving
 the `with` block) ends the link: the service sees its bus vanish.
 """
@@ -64,18 +65,23 @@ class _Link:
     """Received-frame bookkeeping shared by the links."""
 
     def __init__(self, on_frame: FrameCallback | None) -> None:
-        self._on_frame = on_frame
+        self._listeners: list[FrameCallback] = [on_frame] if on_frame is not None else []
         self._frames: Arrivals[RadarFrame] = Arrivals()
         self._stop = threading.Event()
         self._opened = threading.Event()
         self.commands: list[str] = []
         self.callback_errors = 0
 
+    def add_listener(self, callback: FrameCallback) -> None:
+        """Call `callback` (on the link's reader thread) for every frame the service
+        writes from now on, as the constructor's `on_frame`."""
+        self._listeners = [*self._listeners, callback]
+
     def _got(self, frame: RadarFrame) -> None:
         self._frames.add(frame)
-        if self._on_frame is not None:
+        for listener in self._listeners:
             try:
-                self._on_frame(frame)
+                listener(frame)
             except Exception:
                 # The caller's callback must not stop the link's reader: count and log it.
                 self.callback_errors += 1

@@ -7,7 +7,10 @@ can0: `PythonCanSink`), or through socketcand. It runs unchanged.
 
 Per cycle: status, N general, N quality, N extended (object mode) or status, N general,
 N quality (cluster mode); about once a second the radar state (0x201) and firmware
-version (0x700), as the real sensor sends them.
+version (0x700), as the real sensor sends them. What the host writes to the radar is
+read back off the link (where the sink offers `add_listener`): the ego speed and yaw rate
+(0x300 / 0x301, which the radar service forwards from `vehicle/motion`) set the dynamic
+property of every return and the 0x201's MotionRxState, as on the real sensor.
 """
 
 import os
@@ -16,7 +19,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import can
 
@@ -26,18 +29,22 @@ from services.radar.ars408 import (
     RMS_CODE_VALUES,
     ClusterGeneral,
     ClusterQuality,
+    Kind,
     ObjectExtended,
     ObjectGeneral,
     ObjectQuality,
     RadarFrame,
+    RadarFrameError,
     RadarStateFrame,
     Version,
+    classify,
     cluster_cycle_frames,
+    decode,
     encode,
     object_cycle_frames,
 )
-from services.radar.ports import radar_message
-from tools.sim.radar_model import RadarModel, RadarReturn
+from services.radar.ports import radar_frame, radar_message
+from tools.sim.radar_model import RadarModel, RadarReturn, ReceivedMotion
 from tools.sim.scenario import RadarLook
 from tools.sim.world import Body
 
@@ -59,8 +66,19 @@ BURST_FRAMES = 4
 _yield_cpu: Callable[[], None] = getattr(os, "sched_yield", lambda: None)
 
 
+# The radar forgets an ego speed or yaw rate it has not had for this long.
+MOTION_TIMEOUT_S = 0.5
+
+
 class FrameSink(Protocol):
     def send(self, frames: Sequence[RadarFrame]) -> None: ...
+
+
+@runtime_checkable
+class HostFrames(Protocol):
+    """A link that also hands over what the host writes to the radar."""
+
+    def add_listener(self, callback: Callable[[RadarFrame], None]) -> None: ...
 
 
 class PythonCanSink:
@@ -72,6 +90,77 @@ class PythonCanSink:
     def send(self, frames: Iterable[RadarFrame]) -> None:
         for f in frames:
             self.bus.send(radar_message(f))
+
+
+class ListeningCanSink(PythonCanSink):
+    """A PythonCanSink that also reads what the host writes, through a python-can
+    Notifier (its own thread): `stop()` it before shutting the bus down."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        super().__init__(bus)
+        self._notifier: can.Notifier | None = None
+
+    def add_listener(self, callback: Callable[[RadarFrame], None]) -> None:
+        def on_message(msg: can.Message) -> None:
+            callback(radar_frame(msg))
+
+        if self._notifier is None:
+            self._notifier = can.Notifier(self.bus, [on_message], timeout=0.1)
+        else:
+            self._notifier.add_listener(on_message)
+
+    def stop(self) -> None:
+        """Stop listening (the bus stays the caller's)."""
+        if self._notifier is not None:
+            self._notifier.stop()
+            self._notifier = None
+
+
+class HostMotion:
+    """The ego speed (0x300) and yaw rate (0x301) the simulated radar has received, with
+    when (thread-safe: frames arrive on the link's reader thread). Frames that are not
+    the radar's, or do not decode, are counted in `errors` and otherwise ignored."""
+
+    def __init__(self, sensor_id: int = 0, clock: Callable[[], int] = mono_ns,
+                 timeout_s: float = MOTION_TIMEOUT_S) -> None:
+        self.sensor_id = sensor_id
+        self._clock = clock
+        self._timeout_ns = int(timeout_s * 1e9)
+        self._lock = threading.Lock()
+        self._speed: tuple[float, int] | None = None     # (value, mono ns)
+        self._yaw: tuple[float, int] | None = None
+        self.frames = 0
+        self.errors = 0
+
+    def on_frame(self, frame: RadarFrame) -> None:
+        found = classify(frame.arb_id)
+        if found is None or found[1] != self.sensor_id or found[0].kind not in (
+                Kind.SPEED, Kind.YAW_RATE):
+            return          # configuration and other traffic: not the motion input
+        try:
+            record = decode(found[0], frame.data)
+        except RadarFrameError:
+            with self._lock:
+                self.errors += 1
+            return
+        now = self._clock()
+        with self._lock:
+            self.frames += 1
+            if found[0].kind is Kind.SPEED:
+                sign = -1.0 if record.direction == 2 else 0.0 if record.direction == 0 else 1.0
+                self._speed = (sign * record.speed_mps, now)
+            else:
+                self._yaw = (record.yaw_rate_dps, now)
+
+    def received(self) -> ReceivedMotion:
+        """What the radar knows now (None where the input is missing or stale)."""
+        now = self._clock()
+        with self._lock:
+            speed, yaw = self._speed, self._yaw
+        fresh = [v if v is not None and now - v[1] <= self._timeout_ns else None
+                 for v in (speed, yaw)]
+        return ReceivedMotion(fresh[0][0] if fresh[0] else None,
+                              fresh[1][0] if fresh[1] else None)
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:
@@ -123,12 +212,14 @@ def cluster_frames(returns: Sequence[RadarReturn], meas_counter: int, look: Rada
     return cluster_cycle_frames(general, meas_counter, quality, sensor_id=sensor_id)
 
 
-def state_frames(look: RadarLook, sensor_id: int = 0) -> list[RadarFrame]:
-    """0x201 (no error, configuration as simulated) and 0x700."""
+def state_frames(look: RadarLook, sensor_id: int = 0, motion_rx_state: int = 0
+                 ) -> list[RadarFrame]:
+    """0x201 (no error, configuration as simulated, the motion input's state) and 0x700."""
     state = RadarStateFrame(
         nvm_read_ok=1, max_distance_m=196, persistent_error=0, interference=0,
         temperature_error=0, temporary_error=0, voltage_error=0, sensor_id=sensor_id,
-        sort_index=1, motion_rx_state=0, send_ext_info=int(look.mode == "objects"),
+        sort_index=1, motion_rx_state=motion_rx_state,
+        send_ext_info=int(look.mode == "objects"),
         send_quality=1, output_type=1 if look.mode == "objects" else 2, rcs_threshold=0)
     return [encode(state, sensor_id), encode(Version(*FIRMWARE), sensor_id)]
 
@@ -164,6 +255,9 @@ class RadarFeed:
         self.sensor_id = sensor_id
         self.model = RadarModel(look, seed)
         self._clock = clock
+        self.host = HostMotion(sensor_id, clock)
+        if isinstance(sink, HostFrames):
+            sink.add_listener(self.host.on_frame)
         self.meas_counter = 0
         self._last_state_ns: int | None = None
         self.sent: deque[CycleSent] = deque(maxlen=history)
@@ -178,10 +272,14 @@ class RadarFeed:
         self.look = look
         self.model = RadarModel(look, seed)
 
-    def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float) -> CycleSent:
-        """Model one cycle and write its frames. Raises OSError/can.CanError when the
-        link is gone (the caller decides whether that ends the run)."""
-        returns = self.model.cycle(bodies, ego_x_m, ego_speed_mps)
+    def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float,
+              yaw_rate_dps: float = 0.0) -> CycleSent:
+        """Model one cycle (`RadarModel.cycle`: bodies in the vehicle frame, or the world
+        frame of a straight road with the ego's x) with the motion the host last sent,
+        and write its frames. Raises OSError/can.CanError when the link is gone (the
+        caller decides whether that ends the run)."""
+        received = self.host.received()
+        returns = self.model.cycle(bodies, ego_x_m, ego_speed_mps, yaw_rate_dps, received)
         if self.look.mode == "objects":
             frames = object_frames(returns, self.meas_counter, self.look, self.sensor_id)
         else:
@@ -189,7 +287,7 @@ class RadarFeed:
         now = self._clock()
         if self._last_state_ns is None or now - self._last_state_ns >= STATE_PERIOD_S * 1e9:
             self._last_state_ns = now
-            self.sink.send(state_frames(self.look, self.sensor_id))
+            self.sink.send(state_frames(self.look, self.sensor_id, received.rx_state))
         first = self._clock()
         last = self._send_paced(frames, first)
         sent = CycleSent(self.meas_counter, first, last, len(returns))

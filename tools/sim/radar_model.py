@@ -2,10 +2,15 @@
 
 A SIMULATION of the sensor's output (the real path is the radar on CAN). Per radar cycle
 it returns the objects (object mode) or clusters (cluster mode) in the radar frame: x
-forward, y left, origin at the radar on the ego's front; velocities relative to the ego.
-Imperfections, from `RadarLook`: measurement noise, occasional ghost returns, dropouts,
-several returns per large object (split objects, several clusters), occlusion by nearer
-objects, object IDs that are stable but sometimes swap.
+forward, y left, origin at the radar on the ego's front (the vehicle frame of
+tools/sim/world.py: on a bend it turns with the ego); velocities relative to the radar,
+its rotation included (a stationary point ahead drifts sideways at -yaw rate x range).
+The dynamic property (stationary, moving, oncoming, crossing) is the radar's own
+judgement from the ego speed and yaw rate its host sent it (0x300 / 0x301,
+`ReceivedMotion`): without them it takes the ego to stand still, as the ARS408 does.
+Imperfections, from `RadarLook`: measurement noise, occasional ghost returns, clutter
+(rain), dropouts, several returns per large object (split objects, several clusters),
+occlusion by nearer objects, object IDs that are stable but sometimes swap.
 
 Persistent false targets are returns like any other: the ARS408 measures no elevation,
 so a metal plate on the road, an overhead sign and a guard rail segment ahead are
@@ -75,6 +80,20 @@ class RadarReturn:
     prob_of_exist: int          # 0x60C code, 7: <= 100 %
     meas_state: int             # 0x60C code: 1 new, 2 measured
     source: int                 # the scene object's index, -1 for a ghost
+
+
+@dataclass(frozen=True)
+class ReceivedMotion:
+    """The ego motion the radar has from its host (0x300 speed, 0x301 yaw rate); None
+    where it has none (or only a stale one)."""
+
+    speed_mps: float | None = None
+    yaw_rate_dps: float | None = None
+
+    @property
+    def rx_state(self) -> int:
+        """0x201 MotionRxState: 0 ok, 1 speed missing, 2 yaw missing, 3 both missing."""
+        return (1 if self.speed_mps is None else 0) + (2 if self.yaw_rate_dps is None else 0)
 
 
 def dyn_prop(vx_abs: float, vy_abs: float) -> int:
@@ -198,21 +217,31 @@ class RadarModel:
                 vy + rng.normal(0, look.velocity_sigma_mps),
                 rcs + rng.normal(0, look.rcs_sigma_dbsm))
 
-    def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float
+    def cycle(self, bodies: list[Body], ego_x_m: float, ego_speed_mps: float,
+              yaw_rate_dps: float = 0.0, received: ReceivedMotion | None = None
               ) -> list[RadarReturn]:
-        """The returns of one radar cycle for the world as it is now."""
+        """The returns of one radar cycle for the world as it is now.
+
+        `bodies` in a frame along the ego's heading with the radar at (`ego_x_m`, 0):
+        the vehicle frame (`World.vehicle_bodies()`, `ego_x_m` 0), or on a straight road
+        the world frame with the ego's x. Velocities over ground; the ego moves at
+        `ego_speed_mps` and turns at `yaw_rate_dps`. `received`: the motion the radar's
+        host sent it, for the dynamic property; None: the true motion.
+        """
         visible = _visible(bodies, ego_x_m)
+        motion = _EgoMotion(ego_speed_mps, math.radians(yaw_rate_dps), received)
         if self.look.mode == "objects":
-            returns = self._objects(visible, ego_speed_mps)
+            returns = self._objects(visible, motion)
         else:
-            returns = self._clusters(visible, ego_speed_mps)
+            returns = self._clusters(visible, motion)
         returns += self._ghost_returns(ego_speed_mps)
+        returns += self._clutter_returns(ego_speed_mps)
         returns.sort(key=lambda r: math.hypot(r.x_m, r.y_m))   # sort index 1: by range
         if self.look.mode == "clusters":
             returns = [_with_id(r, i) for i, r in enumerate(returns)]
         return returns
 
-    def _objects(self, visible: list[_Seen], ego_speed: float) -> list[RadarReturn]:
+    def _objects(self, visible: list[_Seen], motion: "_EgoMotion") -> list[RadarReturn]:
         look, rng = self.look, self.rng
         out = []
         alive_keys: set[tuple[int, int]] = set()
@@ -228,10 +257,10 @@ class RadarModel:
                 alive_keys.add((b.index, 1))
             for part, (px, py) in enumerate(points):
                 oid, new = self._object_id((b.index, part))
-                x, y, vx, vy, rcs = self._noisy(px, py, b.vx_mps - ego_speed, b.vy_mps,
-                                                RCS_DBSM[b.kind] - 3.0 * part)
+                rvx, rvy = motion.relative(b, px, py)
+                x, y, vx, vy, rcs = self._noisy(px, py, rvx, rvy, RCS_DBSM[b.kind] - 3.0 * part)
                 out.append(RadarReturn(
-                    oid, x, y, vx, vy, rcs, dyn_prop(b.vx_mps, b.vy_mps), OBJ_CLASS[b.kind],
+                    oid, x, y, vx, vy, rcs, motion.dyn_prop(b, px, py), OBJ_CLASS[b.kind],
                     b.length_m, b.width_m, b.yaw_deg, 7, 1 if new else 2, b.index))
         for key in [k for k in self._ids if k not in alive_keys and k[1] == 0]:
             del self._ids[key]
@@ -244,7 +273,7 @@ class RadarModel:
             self._ids[ka], self._ids[kb] = self._ids[kb], self._ids[ka]
         return out
 
-    def _clusters(self, visible: list[_Seen], ego_speed: float) -> list[RadarReturn]:
+    def _clusters(self, visible: list[_Seen], motion: "_EgoMotion") -> list[RadarReturn]:
         rng = self.rng
         out = []
         for s in visible:
@@ -256,8 +285,9 @@ class RadarModel:
             points = [s.near] + (_face_points(s, n - 1, rng) if n > 1 else [])
             rcs0 = RCS_DBSM[b.kind] - 10 * math.log10(n)
             for px, py in points:
-                x, y, vx, vy, rcs = self._noisy(px, py, b.vx_mps - ego_speed, b.vy_mps, rcs0)
-                out.append(RadarReturn(0, x, y, vx, vy, rcs, dyn_prop(b.vx_mps, b.vy_mps), 0,
+                rvx, rvy = motion.relative(b, px, py)
+                x, y, vx, vy, rcs = self._noisy(px, py, rvx, rvy, rcs0)
+                out.append(RadarReturn(0, x, y, vx, vy, rcs, motion.dyn_prop(b, px, py), 0,
                                        0.0, 0.0, 0.0, 7, 2, b.index))
         return out
 
@@ -276,6 +306,45 @@ class RadarModel:
                 DynProp.STATIONARY, 0, 0.5, 0.5, 0.0, int(rng.integers(1, 4)), 1, -1)
             self._ghosts.append((2 if self.look.mode == "objects" else 1, ghost))
         return [g for _, g in self._ghosts]
+
+
+    def _clutter_returns(self, ego_speed: float) -> list[RadarReturn]:
+        """Rain and spray: weak returns near the radar, one cycle each, closing at about
+        the ego's speed (drops and spray hang in the air)."""
+        rng = self.rng
+        out = []
+        for _ in range(int(rng.poisson(self.look.clutter_per_cycle))):
+            r = 1.0 + rng.exponential(6.0)
+            az = math.radians(rng.uniform(-50.0, 50.0))
+            out.append(RadarReturn(
+                self._new_id() if self.look.mode == "objects" else 0,
+                r * math.cos(az), r * math.sin(az), -ego_speed + rng.normal(0, 1.0),
+                rng.normal(0, 1.0), rng.uniform(-30.0, -12.0), DynProp.STATIONARY, 0, 0.2,
+                0.2, 0.0, int(rng.integers(0, 3)), 1, -1))
+        return out
+
+
+@dataclass(frozen=True)
+class _EgoMotion:
+    """The ego's true motion (relative velocities) and the radar's view of it (the
+    dynamic property)."""
+
+    speed_mps: float
+    yaw_rate_rps: float
+    received: ReceivedMotion | None
+
+    def relative(self, b: Body, x: float, y: float) -> tuple[float, float]:
+        """The velocity of the point (x, y) of `b` as the turning radar sees it."""
+        return (b.vx_mps - self.speed_mps + self.yaw_rate_rps * y,
+                b.vy_mps - self.yaw_rate_rps * x)
+
+    def dyn_prop(self, b: Body, x: float, y: float) -> int:
+        if self.received is None:
+            return dyn_prop(b.vx_mps, b.vy_mps)
+        speed = self.received.speed_mps or 0.0
+        yaw = math.radians(self.received.yaw_rate_dps or 0.0)
+        rvx, rvy = self.relative(b, x, y)
+        return dyn_prop(rvx + speed - yaw * y, rvy + yaw * x)
 
 
 def _with_id(r: RadarReturn, new_id: int) -> RadarReturn:

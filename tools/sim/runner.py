@@ -149,7 +149,7 @@ class Simulator:
         """Play one scenario to its end; returns the timeline and the verdict."""
         with self._lock:
             self._runs += 1
-            self.feed.reset(scenario.radar, scenario.seed)
+            self.feed.reset(scenario.radar_look(), scenario.seed)
             run = _Run(scenario, World(scenario), self._runs)
             self._run = run
             start = mono_ns()
@@ -203,12 +203,12 @@ class Simulator:
         seq = self.bus.next_seq("sim/world")
         stamp, mono = wall_ns(), mono_ns()
         world = world_message(run, Header(seq, "sim", stamp, mono), self._runs)
-        speed = world.ego_speed_mps
+        speed, yaw_rate = world.ego_speed_mps, world.ego_yaw_rate_dps
         self._world_pub.put(world)
         if self._motion_pub is not None:
             self._motion_pub.put(EgoMotion(header=Header(self.bus.next_seq("vehicle/motion"),
                                                          "sim", stamp, mono),
-                                           speed_mps=speed, yaw_rate_dps=0.0))
+                                           speed_mps=speed, yaw_rate_dps=yaw_rate))
 
     def _record(self, run: _Run, position: float) -> None:
         sample = run.record(self.decision, self.brake_state, self.actuator.commanded_pct(),

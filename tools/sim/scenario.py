@@ -1,19 +1,22 @@
-"""Scenarios as data: TOML files under tools/sim/scenarios/, validated at load.
+"""Scenarios as data: TOML files under tools/sim/scenarios/ (and the cases of the family
+generator, tools/sim/families.py), validated at load.
 
-World frame: x along the road (forward), y left, z up, origin on the ground below the
-ego's radar at t = 0. The ego drives along y = 0 and never steers. An object's `x_m`,
-`y_m` is the centre of its footprint; `yaw_deg` turns its body (0: lengthwise along the
-road, 90: across it). See docs/simulator.md for the format.
+Objects are placed in road coordinates (tools/sim/road.py): `x_m` is the station along
+the ego lane's centre line (from below the ego's radar at t = 0), `y_m` the lateral
+offset from it (left positive), `yaw_deg` turns the body from the road's tangent there
+(0: lengthwise along the road, 90: across it), a motion's `heading_deg` likewise. On a
+straight road (no `[road]` radius) these are the world frame: x along the road, y left.
+The ego follows the lane centre (lane keeping). See docs/simulator.md for the format.
 """
 
 import enum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import msgspec
 
 from common.config.loader import ConfigError, load_config
-from tools.messages import ObjectKind
+from tools.messages import Lighting, ObjectKind, RoadGeometry
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -42,13 +45,22 @@ DEFAULT_Z_M: dict[ObjectKind, float] = {ObjectKind.SIGN: 5.0}
 
 
 class Motion(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """Constant-speed motion, optionally started by the ego's approach and limited in
-    distance (a pedestrian who steps into the lane and stops)."""
+    """Motion at `speed_mps` in a direction relative to the road (a car with heading 0
+    follows its lane through a bend), optionally started by the ego's approach, limited in
+    distance (a pedestrian who steps into the lane and stops), and ended by braking at
+    `decel_mps2` to a stop, `brake_after_s` after it started (a lead car that brakes)."""
 
     speed_mps: NonNeg
     heading_deg: float = 0.0             # direction of travel: 0 forward, 90 left, -90 right
-    trigger_gap_m: NonNeg | None = None  # start when ego radar x >= object x - gap; None: t=0
+    trigger_gap_m: NonNeg | None = None  # start when ego station >= object station - gap;
+    #                                      None: at t = 0
     distance_m: Positive | None = None   # stop after this far; None: never
+    brake_after_s: NonNeg | None = None  # then brake at decel_mps2 to a stop
+    decel_mps2: Annotated[float, msgspec.Meta(gt=0, le=12)] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.brake_after_s is None) != (self.decel_mps2 is None):
+            raise ValueError("motion.brake_after_s and motion.decel_mps2 go together")
 
 
 class SceneObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -77,7 +89,7 @@ class EgoSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     braking.
     """
 
-    speed_kph: Annotated[float, msgspec.Meta(ge=10, le=30)]   # the paper's test range
+    speed_kph: Annotated[float, msgspec.Meta(ge=10, le=60)]   # Euro NCAP's AEB range
     width_m: Positive = 1.8
     length_m: Positive = 4.2
     max_decel_mps2: Positive = 6.0
@@ -104,10 +116,32 @@ class RadarLook(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     split_probability: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.15   # objects mode
     dropout_probability: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.02
     id_swap_probability: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.01
+    # Short-lived low-RCS returns near the radar per cycle (rain, spray); rain adds its own.
+    clutter_per_cycle: Annotated[float, msgspec.Meta(ge=0, le=20)] = 0.0
 
     def __post_init__(self) -> None:
         if self.mode not in ("objects", "clusters"):
             raise ValueError(f"radar.mode {self.mode!r}: expected 'objects' or 'clusters'")
+
+
+MIN_RADIUS_M = 50.0
+
+
+class RoadSpec(RoadGeometry, frozen=True, forbid_unknown_fields=True):
+    """`[road]`: the lane centre line (RoadGeometry, as `sim/world` carries it), checked:
+    a bend of at least MIN_RADIUS_M either way."""
+
+    def __post_init__(self) -> None:
+        if self.curve_start_m < 0:
+            raise ValueError(f"road.curve_start_m {self.curve_start_m:g}: not before the start")
+        if self.radius_m is not None and abs(self.radius_m) < MIN_RADIUS_M:
+            raise ValueError(f"road.radius_m {self.radius_m:g}: at least {MIN_RADIUS_M:g} m "
+                             "either way (negative: a right bend)")
+
+
+# What rain does to the radar: clutter returns per cycle and noise (times the look's).
+RAIN_CLUTTER_PER_CYCLE = 3.0
+RAIN_NOISE_FACTOR = 1.5
 
 
 class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -118,8 +152,20 @@ class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     description: str = ""
     duration_s: Annotated[float, msgspec.Meta(gt=0, le=120)] = 20.0
     seed: int = 0
+    lighting: Lighting = Lighting.DAY
+    road: RoadSpec = msgspec.field(default_factory=RoadSpec)
     radar: RadarLook = msgspec.field(default_factory=RadarLook)
     camera: CameraLook = msgspec.field(default_factory=CameraLook)
+
+    def radar_look(self) -> RadarLook:
+        """The radar's look in this scenario's weather: rain adds clutter and noise."""
+        if self.lighting is not Lighting.RAIN:
+            return self.radar
+        r = self.radar
+        return msgspec.structs.replace(
+            r, clutter_per_cycle=r.clutter_per_cycle + RAIN_CLUTTER_PER_CYCLE,
+            range_sigma_m=r.range_sigma_m * RAIN_NOISE_FACTOR,
+            lateral_sigma_m=r.lateral_sigma_m * RAIN_NOISE_FACTOR)
 
     def __post_init__(self) -> None:
         if not self.object:
@@ -133,6 +179,41 @@ class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file. Raises ConfigError naming the file and field."""
     return load_config(path, Scenario, what="scenario")
+
+
+def _plain(value: Any) -> Any:
+    """A struct as TOML data without the fields at their defaults (TOML has no null:
+    absent fields take their defaults again when read back)."""
+    if isinstance(value, msgspec.Struct):
+        out = {}
+        for f in msgspec.structs.fields(value):
+            v = getattr(value, f.name)
+            default = (f.default if f.default is not msgspec.NODEFAULT else
+                       f.default_factory() if f.default_factory is not msgspec.NODEFAULT
+                       else msgspec.NODEFAULT)
+            if v is None or (default is not msgspec.NODEFAULT and v == default):
+                continue
+            out[f.encode_name] = _plain(v)
+        return out
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, enum.Enum):
+        return value.value
+    return value
+
+
+def scenario_toml(scenario: Scenario) -> str:
+    """The scenario as a TOML file's text, fields at their defaults left out
+    (`load_scenario` reads it back equal)."""
+    return msgspec.toml.encode(_plain(scenario)).decode()
+
+
+def write_scenario(scenario: Scenario, folder: str | Path) -> Path:
+    """Write `<folder>/<name>.toml`; returns its path. Raises OSError."""
+    path = Path(folder) / f"{scenario.name}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(scenario_toml(scenario))
+    return path
 
 
 def find_scenario(name_or_path: str) -> Path:

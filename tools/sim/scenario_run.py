@@ -8,6 +8,7 @@ processes, ticks on the monotonic clock) and the lockstep loop (tools/grid/locks
 the services' cores in one process, ticks on a simulated clock).
 """
 
+import math
 import random
 from dataclasses import dataclass, field
 
@@ -27,7 +28,7 @@ class LoopSettings:
     stopped_hold_s: float = 1.0        # a run ends after the ego stood still this long
     passed_margin_m: float = 5.0       # ... or drove this far past every object
     radar_period_s: tuple[float, float] = (0.072, 0.076)
-    vehicle_motion: bool = True        # also publish vehicle/motion (ego speed)
+    vehicle_motion: bool = True        # also publish vehicle/motion (ego speed, yaw rate)
 
 
 class RadarSchedule:
@@ -82,7 +83,7 @@ class ScenarioRun:
         w = self.world
         threat = w.threat()
         gap = w.in_path_gap()
-        sample = Sample(w.t_s, w.ego.x_m, w.ego.speed_mps,
+        sample = Sample(w.t_s, w.ego.s_m, w.ego.speed_mps,
                         gap if gap is not None else (threat.gap_m if threat else None),
                         threat.ttc_s if threat else None, decision, brake_state,
                         commanded_pct, position_pct, w.false_target_gap())
@@ -105,13 +106,14 @@ class ScenarioRun:
                      self.world.collision)
 
 
-def radar_view(run: ScenarioRun | None) -> tuple[list[Body], float, float]:
-    """What the radar sees this cycle: the bodies, the ego's x and speed; the empty road
-    with the ego at rest between runs (a real radar never stops cycling)."""
+def radar_view(run: ScenarioRun | None) -> tuple[list[Body], float, float, float]:
+    """What the radar sees this cycle: the bodies in the vehicle frame (so the radar's x
+    is 0), the ego's speed and yaw rate; the empty road with the ego at rest between runs
+    (a real radar never stops cycling)."""
     if run is None or run.ended:
-        return [], 0.0, 0.0
+        return [], 0.0, 0.0, 0.0
     w = run.world
-    return w.bodies(), w.ego.x_m, w.ego.speed_mps
+    return w.vehicle_bodies(), 0.0, w.ego.speed_mps, w.yaw_rate_dps()
 
 
 def world_message(run: ScenarioRun | None, header: Header, runs: int) -> SimWorld:
@@ -124,11 +126,14 @@ def world_message(run: ScenarioRun | None, header: Header, runs: int) -> SimWorl
     w = run.world
     threat = w.threat()
     objects: tuple[SimObject, ...] = tuple(w.bodies())
-    speed = w.ego.speed_mps
+    speed, yaw_rate, pose = w.ego.speed_mps, w.yaw_rate_dps(), w.ego_pose()
     return SimWorld(
         header=header, scenario=run.scenario.name, run=run.number, active=not run.ended,
-        t_s=w.t_s, ego_x_m=w.ego.x_m, ego_speed_mps=speed,
+        t_s=w.t_s, ego_x_m=pose.x_m, ego_speed_mps=speed,
         ego_accel_mps2=-w.ego.decel_mps2 if speed > 0 else 0.0,
         gap_m=threat.gap_m if threat else None, ttc_s=threat.ttc_s if threat else None,
         objects=objects, seed=run.scenario.seed,
-        brightness=run.scenario.camera.brightness, noise=run.scenario.camera.noise)
+        brightness=run.scenario.camera.brightness, noise=run.scenario.camera.noise,
+        ego_y_m=pose.y_m, ego_heading_deg=math.degrees(pose.heading_rad),
+        ego_yaw_rate_dps=yaw_rate, ego_s_m=w.ego.s_m, ego_d_m=w.ego.d_m,
+        road=run.scenario.road, lighting=run.scenario.lighting)

@@ -69,7 +69,9 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
         "# SIMULATION: the radar service on the simulated ARS408's CAN link.\n"
         f'vehicle = "ego"\n{zenoh}\n[radar.can]\ninterface = "{can_interface}"\n'
         f'channel = "{can_channel}"\nbitrate = {bitrate}\noptions = {options}\n\n'
-        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n' + rt.format("radar")
+        '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n'
+        # the simulator publishes vehicle/motion: the radar forwards it as 0x300 / 0x301
+        '\n[radar.ego_motion]\nforward = true\n' + rt.format("radar")
         + ("\n[radar.raw_can]\npublish = true\n" if raw_can else ""))
     camera = folder / "camera.toml"
     camera.write_text(

@@ -28,6 +28,7 @@ from services.fusion.roi import ColumnGeometry, ColumnProjector
 from services.fusion.verifiers import Observation, available, create
 from tools.sim.radar_model import RadarModel
 from tools.sim.render import Renderer
+from tools.sim.road import RoadView
 from tools.sim.scenario import DEMO_SCENARIOS, Scenario, pick_scenarios
 from tools.sim.world import World
 
@@ -47,18 +48,19 @@ def probe(scenario: Scenario, renderer: Renderer, verifiers: list[str],
     checks = {name: create(name) for name in verifiers}
     counts = {name: [0, 0] for name in verifiers}
     world = World(scenario)
-    model = RadarModel(scenario.radar, scenario.seed)
+    model = RadarModel(scenario.radar_look(), scenario.seed)
     renderer.new_scene(scenario.seed)
-    renderer.set_look(scenario.camera)
+    renderer.set_look(scenario.camera, scenario.lighting)
     cycle = 0
     while world.t_s < scenario.duration_s and not world.passed_everything() and \
             world.collision is None:
-        bodies = world.bodies()
-        returns = [r for r in model.cycle(bodies, world.ego.x_m, world.ego.speed_mps)
+        bodies = world.vehicle_bodies()
+        returns = [r for r in model.cycle(bodies, 0.0, world.ego.speed_mps, world.yaw_rate_dps())
                    if r.source >= 0 and 3.0 <= r.x_m <= 25.0 and abs(r.y_m) < LATERAL_M]
         cycle += 1
         if returns and cycle % every == 0:
-            image, depth_mm = renderer.render_rgbd(bodies, world.ego.x_m, millimetres=True)
+            image, depth_mm = renderer.render_rgbd(bodies, 0.0, millimetres=True,
+                                                   road=RoadView(world.road, world.ego.s_m))
             gray = decode_gray(encode_jpeg(image, 80))
             small = np.ascontiguousarray(depth_mm[::DECIMATION, ::DECIMATION])
             msg = DepthFrame(header=Header(0, "probe", wall_ns(), 0), camera="front",
