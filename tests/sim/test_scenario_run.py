@@ -72,13 +72,13 @@ def test_a_no_threat_run_ends_past_every_object_and_any_run_at_its_duration():
 
 
 def test_the_radar_and_the_camera_see_the_empty_road_between_runs():
-    assert radar_view(None) == ([], 0.0, 0.0)
+    assert radar_view(None) == ([], 0.0, 0.0, 0.0)
     idle = world_message(None, HEADER, 3)
     assert (idle.active, idle.run, idle.objects, idle.ego_speed_mps) == (False, 3, (), 0.0)
     run = ScenarioRun.start(scenario(ScenarioKind.THREAT, 10.0), 4)
-    bodies, ego_x, speed = radar_view(run)
-    assert len(bodies) == 1 and ego_x == 0.0 and speed > 5.0
+    bodies, ego_x, speed, yaw_rate = radar_view(run)
+    assert len(bodies) == 1 and ego_x == 0.0 and speed > 5.0 and yaw_rate == 0.0
     live = world_message(run, HEADER, 4)
     assert live.active and live.run == 4 and live.gap_m is not None and len(live.objects) == 1
     play(run)
-    assert radar_view(run) == ([], 0.0, 0.0) and not world_message(run, HEADER, 4).active
+    assert radar_view(run) == ([], 0.0, 0.0, 0.0) and not world_message(run, HEADER, 4).active
