@@ -2,6 +2,7 @@
 camera plugin, publishes a DepthFrame beside each JPEG with the same capture stamp, and
 its pixels are the scene's geometry."""
 
+import os
 import threading
 
 import numpy as np
@@ -40,6 +41,9 @@ def test_the_camera_publishes_the_simulated_depth_with_each_frame(tmp_path):
         sc = load_scenario(find_scenario("no_threat_manhole_30kph"))
         loop.sim.run(sc, timeout_s=3.0)
         assert enough.wait(60.0), f"{len(depths)} depth frames"
+        assert (tmp_path / "run" / "actuator").is_symlink()
+    # the session removed the actuator's pty link with the pty: nothing dangles in run/
+    assert not os.path.lexists(tmp_path / "run" / "actuator")
     with lock:
         paired = [d for d in depths if d.header.stamp_ns in jpeg_stamps]
         assert len(paired) >= 0.8 * len(depths)        # the JPEGs' own stamps

@@ -149,7 +149,7 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     log_path = out / "stack.log"
     endpoint = f"tcp/127.0.0.1:{port or free_port()}"
     link = SlcanPtyLink()
-    actuator, _pair = SimActuator.on_pty(run_dir / "actuator")
+    actuator, actuator_pty = SimActuator.on_pty(run_dir / "actuator")
     actuator.start()
     log_file = open(log_path, "w")  # noqa: SIM115 (closed in finally)
     supervisor: Supervisor | None = None
@@ -203,4 +203,5 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
             supervisor.shutdown()
         link.close()
         actuator.stop()
+        actuator_pty.remove()   # no dangling run/actuator link once the pty is gone
         log_file.close()
