@@ -5,7 +5,7 @@ against its folder (common/config/paths.py)."""
 import math
 import sys
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -33,6 +33,12 @@ def parse_config(data: dict[str, Any], config_type: type[T], origin: str = "<con
         raise ConfigError(f"{origin}: invalid configuration: {bad[0]} is {bad[1]!r}: "
                           f"every number in a configuration must be finite and at most "
                           f"{MAX_MAGNITUDE:g} in magnitude")
+    nul = first_value(cfg, lambda v: isinstance(v, str) and "\x00" in v)
+    if nul is not None:
+        # Any string may become a path, a key expression or a log line: the OS and Zenoh
+        # would raise on it far from the file (a verifier's weights path: ValueError)
+        raise ConfigError(f"{origin}: invalid configuration: {nul[0]} holds a NUL byte "
+                          f"({nul[1]!r}): no setting may contain one")
     return cfg
 
 
@@ -49,8 +55,16 @@ def first_unusable_number(value: Any, where: str = "$") -> tuple[str, float] | N
     No setting means "unlimited" by infinity: an `inf` or `nan` that passed a range check
     (``inf > 0``) would otherwise reach arithmetic that raises (``round(inf)``) or timers
     that never fire."""
-    if isinstance(value, float):
-        return None if math.isfinite(value) and abs(value) <= MAX_MAGNITUDE else (where, value)
+    return first_value(value, lambda v: isinstance(v, float) and not (
+        math.isfinite(v) and abs(v) <= MAX_MAGNITUDE), where)
+
+
+def first_value(value: Any, bad: Callable[[Any], bool],
+                where: str = "$") -> tuple[str, Any] | None:
+    """The path and value of the first leaf of a config (struct fields, tables, arrays,
+    at any depth) for which `bad` holds, or None."""
+    if bad(value):
+        return where, value
     if isinstance(value, msgspec.Struct):
         items: list[tuple[str, Any]] = [(f"{where}.{f}", getattr(value, f))
                                         for f in value.__struct_fields__]
@@ -61,7 +75,7 @@ def first_unusable_number(value: Any, where: str = "$") -> tuple[str, float] | N
     else:
         return None
     for path, item in items:
-        found = first_unusable_number(item, path)
+        found = first_value(item, bad, path)
         if found is not None:
             return found
     return None

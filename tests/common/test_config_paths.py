@@ -1,6 +1,8 @@
 """Relative paths inside a config file resolve against the file's folder, whatever the
 current directory: every path field of every service's config, at any depth."""
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -8,7 +10,7 @@ import pytest
 from common.calibration import Calibration
 from common.config.camera import CameraConfig, FolderSource, OpenCVSource, RealSenseSource
 from common.config.fusion import FusionConfig
-from common.config.loader import load_config, parse_config
+from common.config.loader import ConfigError, load_config, parse_config
 from common.config.radar import RadarConfig
 from common.resources import DEPLOY, EXAMPLE_CALIBRATION
 
@@ -107,3 +109,24 @@ def test_a_verifiers_weights_file_resolves_against_the_files_folder(tmp_path, el
                       "appearance": "hog_linear"}
     # Other parameters that happen to be strings stay as written.
     assert params["appearance"] == "hog_linear"
+
+
+def test_a_nul_byte_in_any_setting_is_a_config_error_naming_the_field(tmp_path):
+    (tmp_path / "fusion.toml").write_text(
+        '[fusion.verifier]\nname = "combined"\n'
+        'params = { weights = "verifiers/w\\u0000.json", appearance = "hog_linear" }\n')
+    with pytest.raises(ConfigError, match=r"\$\.fusion\.verifier\.params\.weights holds a NUL"):
+        load_config(tmp_path / "fusion.toml", FusionConfig)
+
+
+def test_the_fusion_service_exits_2_on_a_nul_byte_in_its_weights_path(tmp_path):
+    # exit 2 is "configuration rejected": `aeb up` and systemd do not restart it
+    (tmp_path / "fusion.toml").write_text(
+        '[fusion.verifier]\nname = "combined"\n'
+        'params = { weights = "verifiers/w\\u0000.json", appearance = "hog_linear" }\n')
+    for argv in (["--check"], []):
+        run = subprocess.run([sys.executable, "-m", "services.fusion.main", "-c",
+                              str(tmp_path / "fusion.toml"), *argv],
+                             capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2, run.stderr
+        assert "NUL byte" in run.stderr and "Traceback" not in run.stderr
