@@ -6,6 +6,7 @@ radar, the vehicle gateway); `service` names the config table in errors and the 
 
 import io
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -22,6 +23,9 @@ from common.slcan_bulk import BulkSlcanBus
 SLCAN = "slcan"
 _LOOP_GAP_S = 0.075   # time inserted between the end of a log and its restart (one radar cycle)
 # what python-can's log readers raise on a malformed line or record
+# A recorded stamp further than this from the previous frame's (or before it) is not the
+# log's time line: a radar transmits every 75 ms, a log with a gap of minutes was cut
+_MAX_STAMP_GAP_S = 10.0
 _BAD_RECORD = (ValueError, IndexError, TypeError, OverflowError, UnicodeDecodeError)
 
 
@@ -100,7 +104,10 @@ class ReplayPort:
     skipped, counted in `line_errors` (``bad_line``) and logged with its line number
     (rate-limited). Other formats are read by python-can's reader as a whole, which
     cannot go on after a bad record: the rest of that pass is skipped and counted
-    (``bad_record``).
+    (``bad_record``). A frame whose stamp is not finite is skipped (``bad_stamp``); one
+    more than 10 s after the previous frame, or before it, is re-based one radar cycle
+    after it, with the frames that follow (``stamp_jump``): the replay never waits for a
+    time that will not come.
     """
 
     line_error_prefix = REPLAY    # the shell counts `line_errors` as ``replay_<reason>``
@@ -169,7 +176,11 @@ class ReplayPort:
         while True:
             msg = next(self._frames, None)
             if msg is not None:
-                break
+                if math.isfinite(msg.timestamp):
+                    break
+                # an infinite wait for its time would stall the replay without a word
+                self._bad("bad_stamp", stamp=msg.timestamp, arbitration_id=msg.arbitration_id)
+                continue
             if not self.loop or self._first_t is None:
                 self.ended = True
                 return None
@@ -177,6 +188,13 @@ class ReplayPort:
             self.loops += 1
             self._offset = self._last_t + _LOOP_GAP_S - self._first_t_raw
             self._frames = self._open()
+        if self._first_t is not None:
+            gap = msg.timestamp + self._offset - self._last_t
+            if not 0.0 <= gap <= _MAX_STAMP_GAP_S:
+                # Re-based one radar cycle after the previous frame, the frames after it
+                # with it: the replay goes on at the log's own spacing
+                self._bad("stamp_jump", gap_s=round(gap, 3), arbitration_id=msg.arbitration_id)
+                self._offset += _LOOP_GAP_S - gap
         if self._first_t is None:
             self._first_t = msg.timestamp
             self._first_t_raw = msg.timestamp

@@ -74,3 +74,68 @@ def test_a_looping_replay_counts_the_bad_line_on_every_pass(tmp_path):
     assert all(f is not None for f in frames) and port.loops >= 2
     assert port.line_errors.get("bad_line") == port.loops + 1
     port.shutdown()
+
+
+BAD_STAMPS = {
+    "infinite": b"(inf) can1 60B#384F04028020019C\n",
+    "not_a_number": b"(nan) can1 60B#384F04028020019C\n",
+    "a_million_seconds_ahead": b"(1782308579.164027) can1 60B#384F04028020019C\n",
+    "an_hour_back": b"(1782304979.164027) can1 60B#384F04028020019C\n",
+}
+
+
+def first_cycles(tmp_path, line: bytes, seconds: float = 2.0) -> tuple[str, int]:
+    """The recording's first `seconds` with `line` in the middle (its stamp made to
+    differ from its neighbours' as the key says); the number of frames in it."""
+    lines = RECORDING.read_bytes().splitlines(keepends=True)
+    t0 = float(lines[0].split(b")")[0][1:])
+    kept = [ln for ln in lines if float(ln.split(b")")[0][1:]) - t0 < seconds]
+    if line.startswith(b"(1782308579"):      # re-stamped relative to the recording
+        shift = 1e6 if line == BAD_STAMPS["a_million_seconds_ahead"] else -3600.0
+        line = b"(%.6f" % (t0 + seconds / 2 + shift) + line[line.index(b")"):]
+    path = tmp_path / "stamps.log"
+    middle = len(kept) // 2
+    path.write_bytes(b"".join(kept[:middle]) + line + b"".join(kept[middle:]))
+    return str(path), len(kept)
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_STAMPS))
+def test_a_bad_stamp_never_stalls_a_paced_replay(tmp_path, kind, caplog):
+    caplog.set_level(logging.WARNING, logger="radar.replay")
+    now = [0.0]
+
+    def sleep(s: float) -> None:   # a fake clock: the test sees a wait as time passing
+        now[0] += s
+
+    path, n = first_cycles(tmp_path, BAD_STAMPS[kind])
+    port = ReplayPort(path, Pace.REALTIME, clock=lambda: now[0], sleep=sleep)
+    frames = []
+    for _ in range(100 * n):
+        if port.ended:
+            break
+        if (msg := port.recv(0.1)) is not None:
+            frames.append(msg)
+    assert port.ended, f"stalled after {len(frames)} of {n} frames"
+    stamps = [f.timestamp for f in frames]
+    assert stamps == sorted(stamps) and stamps[-1] - stamps[0] < 5.0
+    if kind in ("infinite", "not_a_number"):
+        assert len(frames) == n and port.line_errors.snapshot() == {"bad_stamp": 1}
+    else:   # the jump frame and the rest kept, re-based once there and once back
+        assert len(frames) == n + 1 and port.line_errors.snapshot() == {"stamp_jump": 2}
+    assert caplog.records, "a bad stamp is logged"
+
+
+def test_the_service_replays_past_an_infinite_stamp_in_real_time(tmp_path):
+    path, _ = first_cycles(tmp_path, BAD_STAMPS["infinite"])
+    s = RadarSettings(can=CanSettings(interface="replay"),
+                      replay=ReplaySettings(file=path, pace=Pace.REALTIME, exit_at_end=True))
+    out, stop, result = Output(), threading.Event(), []
+    runner = threading.Thread(target=lambda: result.append(RadarShell(s, out).run(stop)))
+    runner.start()
+    runner.join(timeout=60.0)     # 2 s of recording; the stall was forever
+    stop.set()
+    runner.join()
+    assert result == [0]
+    final = out.last_status()
+    assert final.cycles_total >= 20
+    assert final.rejected == {"bus:replay_bad_stamp": 1}
