@@ -32,11 +32,13 @@ from services.brake.protocol import (
     HostMode,
     Nak,
     ProtocolError,
+    Query,
+    Report,
     decode,
     level_to_wire,
 )
 
-HOST_ACCEPTS = frozenset("AFN")
+HOST_ACCEPTS = frozenset("AFNR")
 MAX_UNACKED = 64
 
 _MODE = {
@@ -54,9 +56,10 @@ def _ns(ms: float) -> int:
 
 @dataclass(frozen=True, slots=True)
 class Outgoing:
-    """A command line to write to the actuator now."""
+    """A line to write to the actuator now: a command, or the query a starting host
+    sends before any command."""
 
-    frame: Command
+    frame: Command | Query
     cmd: BrakeCommand | None   # the accepted command that caused it (None: timer, link)
 
 
@@ -125,6 +128,11 @@ class BrakeCore:
         self._unacked: deque[tuple[int, int]] = deque()
         self._last_tx_ns: int | None = None
         self._last_tx: tuple[int, HostMode] | None = None
+        # A starting host asks what the actuator holds before it commands anything (a
+        # restart mid-stop must not release it): sent at the first link-up only, waited
+        # for up to the ack timeout; an actuator that does not know the query says TYPE
+        self._queried = False
+        self._query_sent_ns: int | None = None
         self.ack_rtt_ns: int | None = None
         self.position_pct: float | None = None
         self.actuator_state = "disconnected"
@@ -182,9 +190,14 @@ class BrakeCore:
             self.counters["fault_lines"] += 1
             self._ok_acks = 0
             self._fault = f"actuator fault {frame.code}: {frame.text}"
+        elif isinstance(frame, Report):
+            self._on_report(frame, now)
         elif isinstance(frame, Nak):
             self.counters["naks"] += 1
             self.counters[f"nak_{frame.reason.value}"] += 1
+            if self._query_sent_ns is not None and frame.reason is BadLine.TYPE:
+                self.counters["query_unsupported"] += 1
+                self._query_sent_ns = None
         self._evaluate(now)
         return self._send_if_due(now)
 
@@ -193,6 +206,7 @@ class BrakeCore:
         if up == self._link_up:
             return None
         self._link_up = up
+        self._query_sent_ns = None
         self._unacked.clear()
         self._ok_acks = 0
         self._last_tx = None
@@ -207,6 +221,11 @@ class BrakeCore:
             self.actuator_state = "disconnected"
             self.position_pct = None
         self._evaluate(now)
+        if up and not self._queried:
+            self._queried = True
+            self._query_sent_ns = now
+            self.counters["queries"] += 1
+            return Outgoing(Query(), None)
         return self._send(now, None)
 
     def next_due_ns(self, now: int) -> int | None:
@@ -219,7 +238,9 @@ class BrakeCore:
             due.append(self._held_until)
         if self._failsafe and self._fs_hold_end > now:
             due.append(self._fs_hold_end)
-        if self._link_up:
+        if self._query_sent_ns is not None:
+            due.append(self._query_sent_ns + self._ack_timeout)
+        elif self._link_up:
             due.append(now if self._last_tx_ns is None else self._last_tx_ns + self._heartbeat)
         if self._unacked:
             due.append(self._unacked[0][1] + self._ack_timeout)
@@ -336,6 +357,9 @@ class BrakeCore:
             if self._failsafe:
                 self._failsafe = False
                 self.counters["failsafe_exits"] += 1
+        if self._query_sent_ns is not None and now - self._query_sent_ns >= self._ack_timeout:
+            self.counters["query_timeouts"] += 1
+            self._query_sent_ns = None
         if self._unacked and now - self._unacked[0][1] >= self._ack_timeout:
             self.counters["ack_timeouts"] += 1
             self._unacked.clear()
@@ -404,8 +428,29 @@ class BrakeCore:
             self._fault = None
             self.counters["fault_recoveries"] += 1
 
+    def _on_report(self, report: Report, now: int) -> None:
+        if self._query_sent_ns is None:
+            self.counters["report_unexpected"] += 1
+            return
+        self._query_sent_ns = None
+        self.counters["reports"] += 1
+        self.position_pct = report.position_pct
+        self.actuator_state = report.state.value
+        if report.target_pct > 0 and self.settings.policy is not FailsafePolicy.RELEASE:
+            # the previous host stopped mid-stop: this one starts where a missed deadline
+            # would have left it, holding that level under the fail-safe policy until
+            # the stream is trusted again and the hold is over
+            self.counters["restart_holds"] += 1
+            self._failsafe = True
+            self._rx_in_failsafe = False
+            self._trusted = False
+            self._fs_level = max(self._fs_level, float(report.target_pct))
+            self._fs_hold_end = now + self._fs_hold
+            self._fs_why = (f"started while the actuator held {report.target_pct} %: "
+                            f"not released mid-stop")
+
     def _send_if_due(self, now: int) -> Outgoing | None:
-        if not self._link_up:
+        if not self._link_up or self._query_sent_ns is not None:
             return None
         if (self._last_tx_ns is None or now - self._last_tx_ns >= self._heartbeat
                 or (self._wire_level, _MODE[self.state]) != self._last_tx):
@@ -413,7 +458,7 @@ class BrakeCore:
         return None
 
     def _send(self, now: int, cmd: BrakeCommand | None) -> Outgoing | None:
-        if not self._link_up:
+        if not self._link_up or self._query_sent_ns is not None:
             return None
         mode = _MODE[self.state]
         seq = self._tx_seq

@@ -101,8 +101,25 @@ class Nak:
     reason: BadLine
 
 
+@dataclass(frozen=True, slots=True)
+class Query:
+    """Host to actuator: `$Q,1`: what do you hold? Sent by a host that starts, before it
+    commands anything, so that a restarted host never releases a brake mid-stop."""
+
+
+@dataclass(frozen=True, slots=True)
+class Report:
+    """Actuator to host: `$R,1,<target>,<position>,<state>`: the answer to a query: the
+    level it holds as its target (0..100), its measured position, its state. Changes
+    nothing on the actuator (not the target, not the watchdog)."""
+
+    target_pct: int
+    position_pct: float
+    state: ActuatorState
+
+
 # What one line of the protocol carries, parsed (either direction).
-SerialFrame = Command | Ack | Fault | Nak
+SerialFrame = Command | Ack | Fault | Nak | Query | Report
 
 # Fault codes of version 1 (docs/actuator-protocol.md); 100..999 are vendor-specific.
 FAULT_WATCHDOG = 1
@@ -153,6 +170,13 @@ def encode(frame: SerialFrame) -> bytes:
         if not (1 <= frame.code <= 999 and _FAULT_TEXT.match(frame.text)):
             raise ValueError(f"fault out of range: {frame}")
         return _frame(f"F,{VERSION},{frame.code},{frame.text}")
+    if isinstance(frame, Query):
+        return _frame(f"Q,{VERSION}")
+    if isinstance(frame, Report):
+        if not (0 <= frame.target_pct <= 100 and 0.0 <= frame.position_pct <= 100.0):
+            raise ValueError(f"report out of range: {frame}")
+        return _frame(f"R,{VERSION},{frame.target_pct},{frame.position_pct:.1f},"
+                      f"{frame.state.value}")
     seq = "" if frame.seq is None else str(frame.seq)
     return _frame(f"N,{VERSION},{seq},{frame.reason.value.upper()}")
 
@@ -166,17 +190,33 @@ def _uint(text: str, lo: int, hi: int) -> int:
     return value
 
 
+def _position(text: str) -> float:
+    if not _POSITION.match(text):
+        raise ProtocolError(BadLine.FORMAT, f"position {text!r}")
+    pos = float(text)
+    if pos > 100.0:
+        raise ProtocolError(BadLine.RANGE, f"position {pos}")
+    return pos
+
+
+def _state(text: str) -> ActuatorState:
+    try:
+        return ActuatorState(text)
+    except ValueError:
+        raise ProtocolError(BadLine.FORMAT, f"state {text!r}") from None
+
+
 def _fields(fields: list[str], n: int) -> list[str]:
     if len(fields) != n:
         raise ProtocolError(BadLine.FORMAT, f"{len(fields)} fields, expected {n}")
     return fields
 
 
-def decode(line: bytes, accept: frozenset[str] = frozenset("CAFN")) -> SerialFrame:
+def decode(line: bytes, accept: frozenset[str] = frozenset("CAFNQR")) -> SerialFrame:
     """Parse one line (from '$' to the CRC; a trailing '\\r' is ignored).
 
-    `accept` lists the frame types this side receives (the host: "AFN", the actuator:
-    "C"). Raises ProtocolError with the reason the line is unusable.
+    `accept` lists the frame types this side receives (the host: "AFNR", the actuator:
+    "CQ"). Raises ProtocolError with the reason the line is unusable.
     """
     if line.endswith(b"\r"):
         line = line[:-1]
@@ -208,16 +248,15 @@ def decode(line: bytes, accept: frozenset[str] = frozenset("CAFN")) -> SerialFra
                        _uint(ttl, TTL_MIN_MS, TTL_MAX_MS), host_mode)
     if kind == "A":
         _, _, seq, position, state = _fields(fields, 5)
-        if not _POSITION.match(position):
-            raise ProtocolError(BadLine.FORMAT, f"position {position!r}")
-        pos = float(position)
-        if pos > 100.0:
-            raise ProtocolError(BadLine.RANGE, f"position {pos}")
-        try:
-            act_state = ActuatorState(state)
-        except ValueError:
-            raise ProtocolError(BadLine.FORMAT, f"state {state!r}") from None
+        pos, act_state = _position(position), _state(state)
         return Ack(_uint(seq, 0, SEQ_MODULO - 1), pos, act_state)
+    if kind == "Q":
+        _fields(fields, 2)
+        return Query()
+    if kind == "R":
+        _, _, target, position, state = _fields(fields, 5)
+        target_pct = _uint(target, 0, 100)
+        return Report(target_pct, _position(position), _state(state))
     if kind == "F":
         _, _, code, text = _fields(fields, 4)
         if not _FAULT_TEXT.match(text):

@@ -37,7 +37,7 @@ from common.messages import BrakeState, BrakeStatus, Header
 from common.realtime import ThreadRealtime, apply_process, set_fifo
 from common.systemd import Watchdog
 from services.brake.core import BrakeCore, Outgoing
-from services.brake.protocol import SEQ_MODULO, BadLine, Command, encode
+from services.brake.protocol import SEQ_MODULO, BadLine, Command, Query, encode
 from services.brake.serial_link import SerialLink
 
 SERVICE = "brake"
@@ -57,7 +57,7 @@ class LineAhead:
     def __init__(self) -> None:
         self._ready: tuple[Command, bytes] | None = None
 
-    def line(self, frame: Command) -> bytes:
+    def line(self, frame: Command | Query) -> bytes:
         ready, self._ready = self._ready, None
         if ready is not None and ready[0] == frame:
             return ready[1]
@@ -306,7 +306,8 @@ class BrakeShell:
         if not self.link.write(self._lines.line(out.frame)):
             self.core.on_link(False, mono_ns(), "write failed")
             return
-        self._last_frame = out.frame
+        if isinstance(out.frame, Command):
+            self._last_frame = out.frame
         if out.cmd is None or rx_mono_ns is None:
             return
         written = mono_ns()

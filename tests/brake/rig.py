@@ -166,10 +166,13 @@ def brake_rig(log_dir: Path, secure: bool = False, **brake: Any) -> Iterator[Bra
             watch.wait_alive("brake", "main", START_TIMEOUT_S)
         except TimeoutError:
             raise AssertionError(f"brake did not start:\n{proc.output()}") from None
-        yield BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
+        rig = BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
                        float(brake.get("deadline_ms", 200.0)),
                        TIMER_PERIOD_S * 1000, profile)
-        assert proc.alive(), f"brake process died:\n{proc.output()}"
+        yield rig
+        # the test may have replaced the process (a restart): the one running now
+        assert rig.brake.alive(), f"brake process died:\n{rig.brake.output()}"
+        rig.brake.stop()
 
 
 def last_command_before(rig: BrakeRig, t_ns: int) -> BrakeCommand | None:

@@ -19,6 +19,8 @@ from services.brake.protocol import (
     Fault,
     HostMode,
     Nak,
+    Query,
+    Report,
     decode,
 )
 from tests.brake.helpers import SIGNER, TEST_KEY, command, keyring, payload
@@ -43,6 +45,8 @@ class Rig:
         self.lines: list[tuple[int, Command]] = []
         self.auto_ack = auto_ack
         self.position = 0.0
+        self.held_pct = 0          # the level the actuator holds when the host starts
+        self.queries: list[int] = []
         self.seq = 0
         self.signer = SIGNER
 
@@ -59,6 +63,11 @@ class Rig:
             return
         frame = decode(encode_line(out.frame))   # a valid line, checksum included
         assert frame == out.frame
+        if isinstance(frame, Query):
+            self.queries.append(self.t)
+            if self.auto_ack:   # the actuator answers with what it holds
+                self.rx(encode_line(Report(self.held_pct, self.position, ActuatorState.OK)))
+            return
         assert isinstance(frame, Command)
         self.lines.append((self.t, frame))
         if self.auto_ack:
@@ -114,7 +123,7 @@ class Rig:
         return self
 
 
-def encode_line(frame: Command | Ack | Fault | Nak) -> bytes:
+def encode_line(frame: Command | Ack | Fault | Nak | Query | Report) -> bytes:
     from services.brake.protocol import encode as encode_frame
 
     return encode_frame(frame)[:-1]
@@ -505,3 +514,55 @@ def test_each_line_carries_the_next_sequence_number_the_level_and_the_mode():
     rig.send(60.0)
     sent = rig.lines[-1][1]
     assert (sent.seq, sent.level_pct, sent.mode) == (before + 3, 60, HostMode.BRAKING)
+
+
+# ---- a host that starts while the actuator holds a brake --------------------------------
+
+def test_a_starting_host_asks_what_the_actuator_holds_before_any_command():
+    rig = Rig()
+    rig._record(rig.core.on_link(True, rig.t))
+    assert rig.queries == [T0] and rig.lines and rig.lines[0][0] == T0
+    assert rig.core.view().counters["reports"] == 1
+
+
+@pytest.mark.parametrize("policy", ["hold", "stop"])
+def test_a_host_restarted_mid_stop_never_releases_the_brake(policy):
+    rig = Rig(policy=policy, failsafe_hold_s=1.0, min_brake_hold_ms=0)
+    rig.held_pct = 100
+    rig.connect()
+    assert {line.level_pct for _, line in rig.lines} == {100}, "released mid-stop"
+    assert rig.state is BrakeState.FAILSAFE and "held 100 %" in rig.core.reason
+    rig.stream(3, 100.0)                 # fusion still says BRAKE: followed at 100
+    assert rig.level == 100
+    assert rig.core.view().counters["restart_holds"] == 1
+    if policy == "hold":                 # fusion says NONE: held for failsafe_hold_s
+        rig.stream(20, 0.0)
+        assert rig.t - T0 < 1000 * MS and rig.level == 100
+        rig.stream(40, 0.0)
+        assert rig.state is BrakeState.ARMED and rig.level == 0
+
+
+def test_a_restart_with_nothing_held_starts_released_as_before():
+    rig = Rig()
+    rig.connect()
+    assert {line.level_pct for _, line in rig.lines} == {0}
+    assert "restart_holds" not in rig.core.view().counters
+
+
+def test_an_actuator_that_does_not_know_the_query_gets_commands_at_once():
+    rig = Rig(auto_ack=False)
+    rig._record(rig.core.on_link(True, rig.t))
+    assert rig.queries and not rig.lines
+    assert rig.core.on_tick(rig.t) is None              # waiting for the answer
+    rig.rx(encode_line(Nak(None, BadLine.TYPE)))
+    assert rig.lines and rig.core.view().counters["query_unsupported"] == 1
+
+
+def test_an_unanswered_query_gives_way_to_commands_after_the_ack_timeout():
+    rig = Rig(auto_ack=False)
+    rig._record(rig.core.on_link(True, rig.t))
+    due = rig.core.next_due_ns(rig.t)
+    assert due == T0 + round(rig.settings.actuator.ack_timeout_ms * MS)
+    rig.advance(rig.settings.actuator.ack_timeout_ms + 1)
+    assert rig.lines and rig.core.view().counters["query_timeouts"] == 1
+    assert len(rig.queries) == 1                        # asked once per process

@@ -16,6 +16,8 @@ from services.brake.protocol import (
     LineReader,
     Nak,
     ProtocolError,
+    Query,
+    Report,
     command_line,
     crc16,
     decode,
@@ -33,6 +35,9 @@ DOC_EXAMPLES = [
     (Fault(1, "watchdog ttl expired"), b"$F,1,1,watchdog ttl expired*3E4A\n"),
     (Nak(None, BadLine.CRC), b"$N,1,,CRC*A02A\n"),
     (Nak(44, BadLine.RANGE), b"$N,1,44,RANGE*ECB0\n"),
+    (Query(), b"$Q,1*C09B\n"),
+    (Report(100, 98.7, ActuatorState.OK), b"$R,1,100,98.7,OK*031E\n"),
+    (Report(0, 0.0, ActuatorState.OK), b"$R,1,0,0.0,OK*4840\n"),
 ]
 
 

@@ -2,6 +2,7 @@
 the simulated actuator on a pty, commands over Zenoh, bytes checked on the line."""
 
 import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -237,3 +238,21 @@ def test_every_accepted_command_gets_its_own_status_soon_after(rig):
     # the actuator's acknowledgement: far below the timer's 50 ms period
     assert 0 < median < 25.0, delays_ms
     print(f"\nstatus after a command: median {median:.1f} ms, max {delays_ms[-1]:.1f} ms")
+
+
+def test_a_brake_killed_mid_stop_and_restarted_never_releases_the_actuator(rig):
+    """SIGKILL while braking at 100 %, a new process on the same port: its first line
+    holds the level the actuator held (it asks first), never `E 0`, while the command
+    stream still says BRAKE."""
+    start = len(rig.status)
+    with Stream(rig.bus, level=100.0) as stream:
+        rig.wait_live(start, 100.0, since_ns=stream.started_ns)
+        rig.brake.signal(signal.SIGKILL)
+        rig.brake.proc.wait(timeout=30)
+        t_restart = time.monotonic_ns()
+        rig.brake = ServiceProcess("brake-restarted", rig.brake.argv, rig.log_dir)
+        i = len(rig.status)
+        rig.wait_status(lambda s: s.state is BrakeState.BRAKING, i, 60.0, "braking again")
+        levels = _levels_since(rig, t_restart)
+    assert levels and min(levels) == 100, f"released after the restart: {levels[:10]}"
+    assert rig.sim.queries >= 1

@@ -65,12 +65,15 @@ from services.brake.protocol import (
     LineReader,
     Nak,
     ProtocolError,
+    Query,
+    Report,
     decode,
     encode,
+    level_to_wire,
 )
 from tools.sim.pty_pair import PtyPair
 
-ACTUATOR_ACCEPTS = frozenset("C")
+ACTUATOR_ACCEPTS = frozenset("CQ")
 HISTORY = 100_000
 _log = logging.getLogger("sim_actuator")
 
@@ -279,6 +282,7 @@ class SimActuator:
         self.naks_sent = 0
         self.watchdog_trips = 0
         self.connects = 0
+        self.queries = 0
 
     @classmethod
     def on_pty(cls, path: str | Path, **kw: Any) -> tuple["SimActuator", PtyPair]:
@@ -515,6 +519,12 @@ class SimActuator:
             self.bad_lines[exc.reason.value] += 1
             self._nak(None, exc.reason)
             return
+        pos = min(100.0, max(0.0, round(self._position(now), 1)))
+        if isinstance(frame, Query):
+            # what it holds, changing nothing: not the target, not the watchdog
+            self.queries += 1
+            self._write(encode(Report(level_to_wire(self._target), pos, self._state())))
+            return
         assert isinstance(frame, Command)
         self._last_cmd_ns = now
         self._ttl_ns = min(frame.ttl_ms * 1_000_000, self.max_ttl_ns)
@@ -530,7 +540,7 @@ class SimActuator:
             return
         if self._noise_p and self._rng.random() < self._noise_p:
             self._write(self._garbage(self._rng.randint(1, 48)))
-        pos = min(100.0, max(0.0, round(self._position(now), 1)))
+        pos = min(100.0, max(0.0, round(self._position(now), 1)))   # after the new target
         line = encode(Ack(frame.seq, pos, self._state()))
         self.acks_sent += 1
         if self._ack_delay_ns:
