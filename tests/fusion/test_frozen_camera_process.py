@@ -13,7 +13,14 @@ import numpy as np
 from common.clock import wall_ns
 from common.imaging import encode_jpeg, jpeg_crc32
 from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.messages import CompressedFrame, Decision, Header, VerifierStatus
+from common.messages import (
+    BrakeCommand,
+    CompressedFrame,
+    Decision,
+    Header,
+    VerifiedTargets,
+    VerifierStatus,
+)
 from services.fusion.frames import FROZEN_REASON
 from tests.fusion.helpers import CAL, CALIBRATION, track
 from tests.fusion.test_fusion_processes import INSTANCE, Radar
@@ -88,9 +95,14 @@ radar_max_age_s = 1.0
                 assert tgt.cameras_unavailable == {}
             # The car closes at 30 km/h, 10 m ahead: a live picture would show it grow
             closing = track(x=10.0, vx=-8.3)
-            cmd, tgt = wait_for(lambda: (c := radar.cycle(closing))[1].unavailable_reason
-                                == FROZEN_REASON and c, 30, interval_s=0.0,
-                                what="camera reported frozen")
+            seen: list[tuple[BrakeCommand, VerifiedTargets]] = []
+
+            def frozen_reported() -> bool:
+                seen.append(radar.cycle(closing))
+                return seen[-1][1].unavailable_reason == FROZEN_REASON
+
+            wait_for(frozen_reported, 30, interval_s=0.0, what="camera reported frozen")
+            cmd, tgt = seen[-1]
             assert tgt.verifier_status is VerifierStatus.UNAVAILABLE
             assert cmd.decision is Decision.WARNING, cmd.reason
             assert FROZEN_REASON in cmd.reason
