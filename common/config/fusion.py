@@ -48,8 +48,8 @@ class FrameSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # True: the frame nearest the radar cycle, with each track predicted (constant
     # velocity) to that frame's capture time. False (paper): the newest frame, no prediction.
     align: bool = True
-    # A camera whose picture has not changed for this long while the radar sees the scene
-    # move relative to the ego is frozen: unavailable ("camera frozen"). 0: never.
+    # A camera whose picture has not changed (up to sensor noise) for this long while the
+    # tracks moved in its image is frozen: unavailable ("camera frozen"). 0: never.
     frozen_after_s: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.5
 
 

@@ -41,7 +41,14 @@ from services.fusion.decision import (
     decide,
     severity,
 )
-from services.fusion.frames import FROZEN_REASON, MOVING_MIN_SPEED_MPS, FrameFeed, frozen
+from services.fusion.frames import (
+    EXPECTED_CHANGE_SPAN,
+    FROZEN_REASON,
+    FrameFeed,
+    expected_change_px,
+    frozen,
+    unchanged_for_ns,
+)
 from services.fusion.roi import ColumnProjector
 from services.fusion.verifiers import Verifier
 
@@ -224,14 +231,18 @@ class FusionCore:
     def _usable(self, feeds: tuple[FrameFeed, ...],
                 confirmed: list[RadarTrack]) -> tuple[FrameFeed, ...]:
         """The feeds with each frozen camera marked unusable (counted in `frozen_cycles`,
-        by camera)."""
-        moving = any(math.hypot(t.vx_mps, t.vy_mps) >= MOVING_MIN_SPEED_MPS
-                     for t in confirmed)
+        by camera): one picture for `frozen_after_s` while the tracks say it must have
+        changed. The tracks are projected only for a camera whose picture stood that long."""
         out = []
         for cam, feed in zip(self.cameras, feeds, strict=True):
-            if frozen(feed, moving, self._frozen_after_ns):
-                self.frozen_cycles[cam.name] = self.frozen_cycles.get(cam.name, 0) + 1
-                feed = replace(feed, unusable_reason=FROZEN_REASON)
+            still_ns = unchanged_for_ns(feed)
+            if self._frozen_after_ns and still_ns is not None \
+                    and still_ns >= self._frozen_after_ns:
+                span_ns = min(still_ns, EXPECTED_CHANGE_SPAN * self._frozen_after_ns)
+                change = expected_change_px(cam.projector, confirmed, span_ns)
+                if frozen(feed, change, self._frozen_after_ns):
+                    self.frozen_cycles[cam.name] = self.frozen_cycles.get(cam.name, 0) + 1
+                    feed = replace(feed, unusable_reason=FROZEN_REASON)
             out.append(feed)
         return tuple(out)
 

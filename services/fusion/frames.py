@@ -13,8 +13,10 @@ without its depth stays in the ring without depth (a depth verifier does not use
 """
 
 import logging
+import math
 import threading
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import cv2
@@ -24,7 +26,8 @@ from common.clock import mono_ns
 from common.depth_image import DepthDecodeError, decode_depth, to_metres
 from common.imaging import ImageCorruptError, ImageDecodeError, decode_gray
 from common.log import RateLimitedLog
-from common.messages import CompressedFrame, DecodeError, DepthFrame, decode
+from common.messages import CompressedFrame, DecodeError, DepthFrame, RadarTrack, decode
+from services.fusion.roi import ColumnProjector
 
 # Decoded frames kept per camera: a cycle uses the one nearest its stamp, which within the
 # skew bound is one of the last few at 30 fps.
@@ -32,21 +35,31 @@ RING_SIZE = 4
 # Frames waiting for the decoder; when full the oldest is dropped (and counted): a newer
 # frame is always worth more than a backlog.
 QUEUE_SIZE = 2
-# Two pictures are the same when their pixels on a coarse grid (every SAME_STRIDE-th row
-# and column) differ by at most this many grey levels on average: a repeated picture
-# differs by 0 (or JPEG re-encoding noise, well below 1); a live sensor's noise alone
-# is about 1-3 levels, and a moving scene far more.
-SAME_STRIDE = 8
-SAME_MAX_MEAN_DIFF = 0.5
+# Two pictures are the same when their low-pass images (the mean of each COARSE_CELL x
+# COARSE_CELL block) differ nowhere by more than SAME_MAX_CELL_DIFF grey levels, but in
+# fewer than SAME_MIN_CELLS cells. Block means are blind to i.i.d. sensor noise (sigma 2
+# grey levels per pixel is 0.18 in the difference of two 16 x 16 means; JPEG's rounding of
+# the block means about as much), and not to motion: an edge of contrast 20 moved by
+# 4 pixels changes the cells it crosses by 5 levels. A live sensor on a still scene is
+# therefore "the same picture" too: whether a camera is frozen is decided against what
+# the tracks say the picture must do (`frozen`), never on pixel identity.
+COARSE_CELL = 16
+SAME_MAX_CELL_DIFF = 2.0
+SAME_MIN_CELLS = 2
+
+
+def coarse(gray: np.ndarray) -> np.ndarray:
+    """The low-pass image of a grayscale frame: float32 block means (pure)."""
+    h, w = gray.shape
+    return cv2.resize(gray, (max(1, w // COARSE_CELL), max(1, h // COARSE_CELL)),
+                      interpolation=cv2.INTER_AREA).astype(np.float32)
 
 
 def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
-    """Are two grayscale frames (near-)identical? (pure)"""
+    """Do two low-pass images (`coarse`) show the same picture, up to sensor noise? (pure)"""
     if a.shape != b.shape:
         return False
-    ga = a[::SAME_STRIDE, ::SAME_STRIDE].astype(np.int16)
-    gb = b[::SAME_STRIDE, ::SAME_STRIDE].astype(np.int16)
-    return float(np.abs(ga - gb).mean()) <= SAME_MAX_MEAN_DIFF
+    return int(np.count_nonzero(np.abs(a - b) > SAME_MAX_CELL_DIFF)) < SAME_MIN_CELLS
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,8 +83,8 @@ class FrameFeed:
     last_error: str = ""
     last_error_rx_mono_ns: int | None = None
     corrupt: int = 0       # of `undecodable`: bytes not matching the camera's CRC-32
-    # capture stamp of the first of the newest decoded frames whose pictures are all
-    # (near-)identical to it; None when the newest frame differs from the one before
+    # capture stamp of the first of the newest decoded frames whose pictures are all the
+    # same as it up to sensor noise (`same_picture`); None when the newest differs from it
     unchanged_since_ns: int | None = None
     # set by fusion's core: this camera is not to be used this cycle, and why
     unusable_reason: str = ""
@@ -110,19 +123,53 @@ def decode_frame(payload: bytes, rx_mono_ns: int, width: int, height: int) -> De
 
 
 FROZEN_REASON = "camera frozen"
-# The radar sees the scene move relative to the ego when a confirmed track moves at least
-# this fast relative to it: then a live camera's picture must change.
-MOVING_MIN_SPEED_MPS = 1.0
+# A live camera's picture must change where a confirmed track's column moves or grows by
+# at least this many pixels in its image: half a cell of the low-pass image, an edge of
+# contrast 4 grey levels moved that far changes every cell it crosses by more than
+# SAME_MAX_CELL_DIFF. (A car closing at 8 m/s from 20 m: its column's foot moves 10 px in
+# 0.5 s in the example calibration; from 12 m, 16 px.)
+EXPECTED_CHANGE_MIN_PX = 8.0
+# The tracks are predicted back (constant velocity) over at most this many times
+# `frozen_after_s` of one picture: further back the prediction says little.
+EXPECTED_CHANGE_SPAN = 2
 
 
-def frozen(feed: FrameFeed, scene_moving: bool, frozen_after_ns: int) -> bool:
-    """Has this camera repeated one picture for `frozen_after_ns` (capture time) while the
-    scene moved? (pure; `frozen_after_ns` 0: never)"""
-    if not frozen_after_ns or not scene_moving or feed.unchanged_since_ns is None \
-            or not feed.frames:
-        return False
-    newest = max(f.stamp_ns for f in feed.frames)
-    return newest - feed.unchanged_since_ns >= frozen_after_ns
+def frozen(feed: FrameFeed, expected_change_px: float, frozen_after_ns: int) -> bool:
+    """Has this camera shown the same picture (`same_picture`) for `frozen_after_ns` of
+    capture time while the tracks moved its image by `expected_change_px` (see
+    `expected_change`) over that time? (pure; `frozen_after_ns` 0: never)"""
+    window = unchanged_for_ns(feed)
+    return (bool(frozen_after_ns) and window is not None and window >= frozen_after_ns
+            and expected_change_px >= EXPECTED_CHANGE_MIN_PX)
+
+
+def unchanged_for_ns(feed: FrameFeed) -> int | None:
+    """How long (capture time) the newest frame's picture has been the same, or None."""
+    if feed.unchanged_since_ns is None or not feed.frames:
+        return None
+    return max(f.stamp_ns for f in feed.frames) - feed.unchanged_since_ns
+
+
+def expected_change_px(projector: ColumnProjector, tracks: Sequence[RadarTrack],
+                       span_ns: int) -> float:
+    """The most that any track's column (its clipped box in the image) moved or grew, in
+    pixels, over the last `span_ns` of constant-velocity motion relative to the ego
+    (pure). Tracks seen in the image at only one end of the span do not count: a ghost
+    track or a track entering the view proves nothing about the picture."""
+    moving = [t for t in tracks if math.hypot(t.vx_mps, t.vy_mps) * span_ns > 0.0]
+    if not moving or span_ns <= 0:
+        return 0.0
+    dt = span_ns / 1e9
+    now = np.array([(t.x_m, t.y_m) for t in moving], dtype=np.float64)
+    then = now - dt * np.array([(t.vx_mps, t.vy_mps) for t in moving], dtype=np.float64)
+    boxes = projector.boxes(np.concatenate([now, then]))
+    most = 0.0
+    for a, b in zip(boxes[:len(moving)], boxes[len(moving):], strict=True):
+        if a is not None and b is not None:
+            ca, cb = a[1], b[1]
+            most = max(most, abs(ca.x - cb.x), abs(ca.y - cb.y),
+                       abs(ca.x + ca.w - cb.x - cb.w), abs(ca.y + ca.h - cb.y - cb.h))
+    return float(most)
 
 
 def decode_depth_frame(payload: bytes, width: int, height: int) -> tuple[int, np.ndarray]:
@@ -202,6 +249,10 @@ class FrameDecoder:
         self._last_error = ""
         self._last_error_rx: int | None = None
         self._unchanged_since: int | None = None
+        # the first frame of the current run of one picture: its stamp and low-pass image.
+        # Each frame is compared with it, not with the one before, so that a slow change
+        # (a far car growing a pixel a frame) adds up until it shows
+        self._reference: tuple[int, np.ndarray] | None = None
         self.errors_by_reason: dict[str, int] = {}
         self._stop = False
         self._thread = threading.Thread(target=self._run, daemon=True,
@@ -256,12 +307,12 @@ class FrameDecoder:
             self._rl.warning(f"frame:{exc.reason}", "frame_unusable", reason=exc.reason,
                              camera=self.camera, error=str(exc))
             return
+        low = coarse(frame.gray)
         with self._cond:
-            previous = self._ring[-1] if self._ring else None
-            if previous is not None and same_picture(previous.gray, frame.gray):
-                if self._unchanged_since is None:
-                    self._unchanged_since = previous.stamp_ns
+            if self._reference is not None and same_picture(self._reference[1], low):
+                self._unchanged_since = self._reference[0]
             else:
+                self._reference = (frame.stamp_ns, low)
                 self._unchanged_since = None
             for i, (stamp, depth) in enumerate(self._depth_waiting):
                 if stamp == frame.stamp_ns:

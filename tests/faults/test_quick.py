@@ -9,7 +9,7 @@ import json
 import pytest
 
 from tools.faults import harness, report
-from tools.faults.catalogue import catalogue
+from tools.faults.registry import all_faults
 
 pytestmark = pytest.mark.slow
 
@@ -20,7 +20,7 @@ def test_quick_mode_every_fault_answered_within_bound(tmp_path):
     md, js, png = report.write(tmp_path, records, info)
     context = f"\n{md.read_text()}\n{log.getvalue()[-3000:]}"
     assert not info.stopped_early, context
-    assert [r.fault for r in records] == [f.name for f in catalogue()]
+    assert [r.fault for r in records] == [f.name for f in all_faults()]
     for rec in records:
         # the link cut runs everywhere: over a veth pair, or over the loopback relay
         assert not rec.skipped, context

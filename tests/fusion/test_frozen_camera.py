@@ -1,18 +1,29 @@
-"""A frozen camera (the same picture with fresh timestamps) while the radar sees the scene
-move is unavailable, "camera frozen", with a WARNING and a counter; a live camera, or a
-still picture while nothing moves, is used as before."""
+"""A frozen camera (the same picture with fresh timestamps, with or without fresh sensor
+noise) while the tracks say its picture must change is unavailable, "camera frozen", with
+a WARNING and a counter; a live camera, or a still picture while nothing moves, is used
+as before."""
 
 import logging
 
 import numpy as np
+import pytest
 
 from common.clock import wall_ns
 from common.imaging import encode_jpeg, jpeg_crc32
 from common.messages import CompressedFrame, Decision, Header, VerifierStatus, encode
-from services.fusion.frames import FROZEN_REASON, FrameDecoder, same_picture
+from services.fusion.frames import (
+    EXPECTED_CHANGE_MIN_PX,
+    FROZEN_REASON,
+    FrameDecoder,
+    coarse,
+    expected_change_px,
+    same_picture,
+)
+from services.fusion.roi import ColumnProjector
 from services.fusion.shell import FusionShell
-from tests.fusion.helpers import MS, T0, FixedVerifier, cycle, make_core, track
+from tests.fusion.helpers import CAL, MS, T0, FixedVerifier, cycle, make_core, track
 from tests.fusion.test_shell import FakeBus
+from tools.sim.scenes import Obstacle, Scene, render
 
 W, H = 848, 480
 FRAME_NS = 33 * MS
@@ -81,15 +92,77 @@ def test_a_live_camera_is_used():
     assert result.command.decision is Decision.BRAKE
 
 
-def test_a_still_scene_seen_by_a_live_sensor_is_not_the_same_picture():
-    assert same_picture(picture(), picture())
-    assert not same_picture(picture(noise_seed=1), picture(noise_seed=2))
-    assert not same_picture(picture(0), picture(1))
+def projector() -> ColumnProjector:
+    return make_core(FixedVerifier()).projector
 
 
-def test_a_still_picture_while_nothing_moves_is_not_frozen():
+def gaussian(img: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    noise = np.random.default_rng(seed).normal(0.0, sigma, img.shape)
+    return np.clip(img + noise, 0, 255).astype(np.uint8)
+
+
+def test_sensor_noise_is_the_same_picture_and_motion_is_not():
+    assert same_picture(coarse(picture()), coarse(picture()))
+    assert same_picture(coarse(picture(noise_seed=1)), coarse(picture(noise_seed=2)))
+    for sigma in (1.0, 2.0, 4.0):
+        assert same_picture(coarse(gaussian(picture(), sigma, 1)),
+                            coarse(gaussian(picture(), sigma, 2)))
+    assert not same_picture(coarse(picture(0)), coarse(picture(1)))
+
+
+@pytest.mark.parametrize("sigma", [1.0, 2.0, 4.0])
+def test_a_picture_repeated_with_fresh_noise_while_a_car_closes_is_frozen(sigma):
     decoder = FrameDecoder(W, H, logging.getLogger("test"))
-    stamp = feed_frames(decoder, [picture()] * 30)
+    still = picture()
+    stamp = feed_frames(decoder, [gaussian(still, sigma, i) for i in range(30)])
+    result = decide(decoder, make_core(FixedVerifier()), stamp, CLOSING)
+    assert result.targets.unavailable_reason == FROZEN_REASON
+    assert result.command.decision is Decision.WARNING
+
+
+def road_with_car(x_m: float) -> np.ndarray:
+    return render(CAL, Scene(obstacles=(Obstacle(x_m, 0.0),), seed=3))[:, :, 1]
+
+
+def test_a_live_camera_watching_a_car_close_is_never_frozen():
+    # 30 km/h from 18 m to 8 m, 30 frames a second with noise: every cycle uses the camera
+    decoder = FrameDecoder(CAL.width, CAL.height, logging.getLogger("test"))
+    core = make_core(FixedVerifier())
+    speed, t = 8.3, 0.0
+    for i in range(36):
+        t = i * FRAME_NS / 1e9
+        x = 18.0 - speed * t
+        stamp = T0 + i * FRAME_NS
+        decoder.decode_now(payload(gaussian(road_with_car(x), 2.0, i), i, stamp), i)
+        if i % 2:
+            result = decide(decoder, core, stamp, track(x=x, vx=-speed))
+            assert result.targets.verifier_status is VerifierStatus.OK, (i, x)
+    assert core.frozen_cycles == {}
+
+
+def test_a_far_car_closing_slowly_does_not_make_a_still_camera_frozen():
+    # its column moves less than a low-pass cell in the window: a still picture is possible
+    assert expected_change_px(projector(), [track(x=60.0, vx=-1.0)], 1_000 * MS) \
+        < EXPECTED_CHANGE_MIN_PX
+    decoder = FrameDecoder(W, H, logging.getLogger("test"))
+    stamp = feed_frames(decoder, [gaussian(picture(), 2.0, i) for i in range(30)])
+    result = decide(decoder, make_core(FixedVerifier()), stamp, track(x=60.0, vx=-1.0))
+    assert result.targets.verifier_status is VerifierStatus.OK
+
+
+def test_a_near_car_closing_at_30_kmh_moves_its_column_by_more_than_the_bound():
+    for x in (8.0, 12.0, 16.0):
+        assert expected_change_px(projector(), [track(x=x, vx=-8.3)], 500 * MS) \
+            >= EXPECTED_CHANGE_MIN_PX, x
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_a_still_picture_while_nothing_moves_is_not_frozen(noise):
+    # a live camera on a standing ego in a still scene: the same picture up to noise,
+    # used as before
+    decoder = FrameDecoder(W, H, logging.getLogger("test"))
+    stamp = feed_frames(decoder, [gaussian(picture(), 2.0, i) if noise else picture()
+                                  for i in range(60)])
     parked = track(x=10.0, vx=0.0)                       # ego and car both standing
     result = decide(decoder, make_core(FixedVerifier()), stamp, parked)
     assert result.targets.verifier_status is VerifierStatus.OK

@@ -298,7 +298,8 @@ class CameraImpostorFrames(Fault):
 
     def __init__(self, kind: str) -> None:
         self.kind = kind
-        self.name = {"frozen": "frozen camera", "corrupt": "corrupt JPEGs",
+        self.name = {"frozen": "frozen camera", "noisy": "noisy frozen camera",
+                     "corrupt": "corrupt JPEGs",
                      "truncated": "truncated JPEGs",
                      "clock": "camera clock step (+-2 s)"}[kind]
         self.required = "fusion: camera unavailable, brake stays armed"
@@ -316,6 +317,8 @@ class CameraImpostorFrames(Fault):
             return "unusable" in reason
         if self.kind == "clock":
             return timing and _skew_ms(reason) >= 1000.0
+        if self.kind == "noisy":
+            return reason == "camera frozen"
         return not timing and "unusable" not in reason
 
     def inject(self, ctx: Context) -> Outcome:
@@ -331,6 +334,10 @@ class CameraImpostorFrames(Fault):
         # same picture again would be a frozen camera, which fusion reports as such.
         live = [last.jpeg, encode_jpeg(np.clip(decode_bgr(last.jpeg).astype(np.int16) + 12,
                                                0, 255).astype(np.uint8))]
+        # A frozen camera that adds fresh sensor noise to its last picture (sigma 2 grey
+        # levels, each frame with its own valid CRC-32): no two frames are identical
+        still = decode_bgr(last.jpeg).astype(np.float32) if self.kind == "noisy" else None
+        noise = np.random.default_rng(ctx.rng.randrange(2**32))
 
         def frame() -> bytes:
             seq[0] += 1
@@ -342,6 +349,10 @@ class CameraImpostorFrames(Fault):
             elif self.kind == "clock":
                 jpeg = live[seq[0] % 2]
                 crc32 = jpeg_crc32(jpeg) if last.crc32 is not None else None
+            elif still is not None:
+                noisy = still + noise.normal(0.0, 2.0, still.shape).astype(np.float32)
+                jpeg = encode_jpeg(np.clip(noisy, 0, 255).astype(np.uint8), 85)
+                crc32 = jpeg_crc32(jpeg)
             stamp = wall_ns() + (step_ns if self.kind == "clock" else 0)
             header = msgspec.structs.replace(last.header, seq=seq[0], stamp_ns=stamp,
                                              pub_mono_ns=mono_ns())
@@ -351,7 +362,7 @@ class CameraImpostorFrames(Fault):
         def start() -> None:
             os.kill(pid, signal.SIGSTOP)
 
-        bound = ctx.bounds.frozen_ms if self.kind == "frozen" else ctx.bounds.camera_ms
+        bound = ctx.bounds.frozen_ms if self.kind in ("frozen", "noisy") else ctx.bounds.camera_ms
         done = threading.Event()
 
         def play() -> None:

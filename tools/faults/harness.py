@@ -18,9 +18,10 @@ from common.config.loader import load_config
 from common.messages import BrakeState, VerifierStatus
 from common.net import free_port
 from services.brake.shell import TIMER_PERIOD_S
-from tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome, catalogue
+from tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome
 from tools.faults.links import CanGate, NetnsLink, RelayLink
 from tools.faults.observe import Observer
+from tools.faults.registry import all_faults
 from tools.launch.table import Launch
 from tools.sim.session import closed_loop
 
@@ -147,7 +148,7 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
     injection starts, the stack is stopped and what was measured is returned."""
     stop = stop or threading.Event()
     rng = random.Random(seed)
-    faults = [f for f in catalogue() if (only is None or any(o in f.name for o in only))
+    faults = [f for f in all_faults() if (only is None or any(o in f.name for o in only))
               and not any(k in f.name for k in skip or [])]
     records = {f.name: Record(f.name, f.required) for f in faults}
     info = RunInfo(mode, rounds)

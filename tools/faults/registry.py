@@ -1,0 +1,11 @@
+"""Every fault the harness injects, in the order a round injects them."""
+
+from tools.faults.catalogue import CameraImpostorFrames, Fault, catalogue
+from tools.faults.robust import BadConfigStrings, BadReplayStamps
+
+
+def all_faults() -> list[Fault]:
+    """The catalogue's faults, then those of bad input that must end in a named refusal
+    (a picture frozen under fresh noise, NUL bytes in a config, bad replay stamps)."""
+    return [*catalogue(),
+            CameraImpostorFrames("noisy"), BadConfigStrings(), BadReplayStamps()]
