@@ -92,7 +92,7 @@ class BrakeShell:
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
                               mono_ns(), keys)
         for key in keys.values():
-            if key.insecure_example:
+            if key.published:
                 log.warning(kv("insecure_example_key", key_id=key.key_id, path=key.path,
                                note="published with the source: demo and simulator only; "
                                     "make your own with `aeb keygen`"))
