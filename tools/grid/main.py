@@ -32,23 +32,18 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from common.config.loader import ConfigError
+from common.log import add_log_level, setup_logging
 from common.resources import DEPLOY
-from common.service import stop_event_on_signals
-from tools.grid import report
-from tools.grid.lockstep import LoopConfig
-from tools.grid.pool import Case, Outcome, print_progress, run_cases
-from tools.grid.score import (
-    CaseScore,
-    Reach,
-    failed_case,
-    score_case,
-    sensor_floor,
-    shadow_of,
-)
-from tools.sim import families as fam
-from tools.sim.families import FAMILIES, seeds_of
+
+# The grid's machinery (numpy, OpenCV, matplotlib: the demo extra) is imported once the
+# arguments are read: `aeb grid --help` works on any install.
+if TYPE_CHECKING:
+    from tools.grid.lockstep import LoopConfig
+    from tools.grid.pool import Outcome
+    from tools.grid.score import CaseScore
+    from tools.sim.families import Case as FamilyCase
 
 PAPER_CONFIG = DEPLOY / "fusion-paper.toml"
 QUICK_SPEED_KPH = 30.0        # the quick set's speed where a family has it (the paper's)
@@ -79,12 +74,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                          "decided differently")
     ap.add_argument("--no-plots", action="store_true", help="no timeline plot per case")
     ap.add_argument("--list", action="store_true", help="the families and their grids")
+    add_log_level(ap, "WARNING")
     return ap.parse_args(argv)
 
 
 def parse_seeds(text: str) -> list[int]:
     """Seed specs joined by commas, each as tools/sim/families.seeds_of reads it; in
     order, without repeats. Raises ValueError."""
+    from tools.sim.families import seeds_of, split_of
+
     seeds: list[int] = []
     for part in text.split(","):
         if part.strip():
@@ -92,12 +90,14 @@ def parse_seeds(text: str) -> list[int]:
     if not seeds:
         raise ValueError(f"--seeds {text!r}: no seed")
     for s in seeds:
-        fam.split_of(s)
+        split_of(s)
     return seeds
 
 
 def pick_families(text: str) -> list[str]:
     """Family names from names and group names. Raises ValueError."""
+    from tools.sim.families import FAMILIES
+
     if text.strip() == "all":
         return list(FAMILIES)
     groups = {f.group for f in FAMILIES.values()}
@@ -117,18 +117,21 @@ def pick_families(text: str) -> list[str]:
 
 
 def pick_cases(families: list[str], speeds: list[float], seeds: list[int],
-               quick: bool) -> list[fam.Case]:
+               quick: bool) -> list["FamilyCase"]:
     """The grid's cases. Raises ValueError when the choice leaves none."""
-    cases: list[fam.Case] = []
+    from tools.sim.families import FAMILIES
+    from tools.sim.families import Case as FamilyCase
+
+    cases: list[FamilyCase] = []
     for name in families:
         grid = [(v, p) for v, p in FAMILIES[name].grid() if not speeds or v in speeds]
         if not grid:
             continue
         if quick:
             v, p = min(grid, key=lambda vp: abs(vp[0] - QUICK_SPEED_KPH))
-            cases.append(fam.Case(name, v, p, seeds[0]))
+            cases.append(FamilyCase(name, v, p, seeds[0]))
         else:
-            cases += [fam.Case(name, v, p, s) for v, p in grid for s in seeds]
+            cases += [FamilyCase(name, v, p, s) for v, p in grid for s in seeds]
     if not cases:
         raise ValueError("no case: no family has a grid point at these speeds")
     return cases
@@ -159,8 +162,17 @@ def config_names(paths: list[Path]) -> dict[str, Path]:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    setup_logging("grid", args.log_level)
+    from common.config.loader import ConfigError
+    from common.service import stop_event_on_signals
+    from tools.grid import report
+    from tools.grid.lockstep import LoopConfig
+    from tools.grid.pool import Case, print_progress, run_cases
+    from tools.grid.score import sensor_floor
+    from tools.sim.families import FAMILIES, listing
+
     if args.list:
-        print(fam.listing())
+        print(listing())
         return 0
     try:
         families = pick_families(args.families)
@@ -181,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     out: Path = args.out
-    runs: list[tuple[str, fam.Case, Case]] = []
+    runs: list[tuple[str, FamilyCase, Case]] = []
     for name, path in configs.items():
         candidate = args.candidate if name == next(iter(configs)) else None
         for c in cases:
@@ -220,7 +232,10 @@ def main(argv: list[str] | None = None) -> int:
     return 1 if errors or grid.interrupted else 0
 
 
-def _score(config: str, c: fam.Case, o: Outcome, loop: LoopConfig) -> CaseScore:
+def _score(config: str, c: "FamilyCase", o: "Outcome", loop: "LoopConfig") -> "CaseScore":
+    from tools.grid.score import Reach, failed_case, score_case, shadow_of
+    from tools.sim.families import FAMILIES
+
     family = FAMILIES[c.family]
     r = o.result
     if r is None:

@@ -98,8 +98,7 @@ def heatmap(family: str, cases: Sequence[CaseScore], path: Path) -> Path:
                 text[i][j] += f"\n{passed}/{len(cell)}"
     fig_w = 2.2 + 0.7 * len(speeds) + 0.06 * max(len(p) for p in points)
     fig, ax = plt.subplots(figsize=(fig_w, 1.3 + 0.32 * len(points)))
-    cmap = plt.get_cmap("RdYlGn_r").copy()
-    cmap.set_bad("#dddddd")
+    cmap = plt.get_cmap("RdYlGn_r").with_extremes(bad="#dddddd")
     top = MAX_IMPACT_KPH if threat else 1.0
     image = ax.imshow(np.ma.masked_invalid(value), cmap=cmap, vmin=0.0, vmax=top,
                       aspect="auto")
