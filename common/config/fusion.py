@@ -140,6 +140,10 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     verifier: VerifierSettings = msgspec.field(default_factory=VerifierSettings)
     decision: DecisionSettings = msgspec.field(default_factory=DecisionSettings)
     stats_interval_s: Positive = 10.0      # how often counters are logged
+    # At most one radar cycle (one BrakeCommand) per this interval, whatever arrives on
+    # radar/<sensor>/tracks: extra cycles are shed (counted `tracks_shed`), the newest
+    # one in the interval is decided at its end. The radar's cycle is 75 ms; 0: no bound.
+    min_cycle_interval_s: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.05
     # Several cameras, each with its own calibration, instead of `frames.camera` and
     # `calibration` (leave those out). A track is verified if any camera that sees it
     # verifies it (docs/fusion.md). `frames` settings apply to every camera.
