@@ -45,6 +45,7 @@ from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation
 from tools.eval import sim_truth
 from tools.eval.adapters.paper_rois import free_rois
+from tools.eval.frames import content_digest
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
 from tools.messages import SimWorld
@@ -187,6 +188,7 @@ class _Seen:
     light: tuple[str, float]
     cal: Calibration
     world: SimWorld | None
+    digest: str             # the frame's content (frames.content_digest)
 
 
 class _RecordingRois:
@@ -276,7 +278,8 @@ class _RecordingRois:
         if depth is not None:
             self.scorer.prepare(cal)
         world = self.truth.world_at(stamp) if self.truth is not None else None
-        return _Seen(view, view.frame, gray, depth, lighting(gray), cal, world)
+        return _Seen(view, view.frame, gray, depth, lighting(gray), cal, world,
+                     content_digest(gray))
 
     def _depth(self, frame: DecodedFrame) -> np.ndarray | None:
         """The frame's recorded depth (metres at its size), or None (the camera's depth
@@ -339,7 +342,8 @@ class _RecordingRois:
             track_id=track.track_id, obj_class=obj_class, truth=label,
             density=self.scorer.density(obs, scores), lighting=seen.light[0],
             frame_median=seen.light[1], has_depth=seen.depth is not None, scores=scores,
-            frame_canny_us=frame_us)
+            frame_canny_us=frame_us, frame_sha256=seen.digest,
+            scenario=seen.world.scenario if seen.world is not None else "")
 
 
 def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
@@ -369,5 +373,6 @@ def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
                 image_h=pos.image_h, roi=roi, column=column, range_m=pos.range_m,
                 kind="background", frame_ref=pos.frame_ref,
                 truth="NO", density=scorer.density(obs, scores), lighting=light[0],
-                frame_median=light[1], has_depth=depth is not None, scores=scores))
+                frame_median=light[1], has_depth=depth is not None, scores=scores,
+                frame_sha256=pos.frame_sha256, scenario=pos.scenario))
     return out
