@@ -188,7 +188,6 @@ class _Seen:
     light: tuple[str, float]
     cal: Calibration
     world: SimWorld | None
-    digest: str             # the frame's content (frames.content_digest)
 
 
 class _RecordingRois:
@@ -221,6 +220,7 @@ class _RecordingRois:
         self.max_skew_ns = round(s.fusion.frames.max_skew_s * 1e9)
         self.rng = np.random.default_rng(s.seed)
         self.timed_frames: set[tuple[str, int]] = set()
+        self.digests: dict[tuple[str, int], str] = {}
 
     def take(self, m: Record) -> list[RoiRecord]:
         """The recording's next record; a radar cycle gives its ROIs."""
@@ -278,8 +278,17 @@ class _RecordingRois:
         if depth is not None:
             self.scorer.prepare(cal)
         world = self.truth.world_at(stamp) if self.truth is not None else None
-        return _Seen(view, view.frame, gray, depth, lighting(gray), cal, world,
-                     content_digest(gray))
+        return _Seen(view, view.frame, gray, depth, lighting(gray), cal, world)
+
+    def _digest(self, seen: _Seen) -> str:
+        """The frame's content digest, computed once per frame and only for frames that
+        give a ROI (hashing every frame would cost as much as the rest of a cycle)."""
+        key = (seen.view.name, seen.frame.seq)
+        if key not in self.digests:
+            if len(self.digests) > 64:
+                self.digests.clear()
+            self.digests[key] = content_digest(seen.gray)
+        return self.digests[key]
 
     def _depth(self, frame: DecodedFrame) -> np.ndarray | None:
         """The frame's recorded depth (metres at its size), or None (the camera's depth
@@ -342,7 +351,7 @@ class _RecordingRois:
             track_id=track.track_id, obj_class=obj_class, truth=label,
             density=self.scorer.density(obs, scores), lighting=seen.light[0],
             frame_median=seen.light[1], has_depth=seen.depth is not None, scores=scores,
-            frame_canny_us=frame_us, frame_sha256=seen.digest,
+            frame_canny_us=frame_us, frame_sha256=self._digest(seen),
             scenario=seen.world.scenario if seen.world is not None else "")
 
 
