@@ -69,7 +69,7 @@ class RoiSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 
 class VerifierSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """A verifier from the registry (services/fusion/verifiers.py) and its parameters;
+    """A verifier from the registry (services/fusion/verifiers/) and its parameters;
     parameters not given take the verifier's defaults."""
 
     name: str = "edge_density"

@@ -5,7 +5,7 @@ recent sideways motion (for path prediction).
 
 Per confirmed track: kinematics and the radar's threat (decision.py); per camera, the
 frame nearest the cycle within the skew bound (frames.py), the track predicted to that
-frame's time and its column projected to a ROI (roi.py); the verifier (verifiers.py) in
+frame's time and its column projected to a ROI (roi.py); the verifier (verifiers/) in
 the cameras that see it, combined (cameras.py); the decision. The command is the most
 severe decision (ties: the smallest TTC_eff), or a heartbeat.
 
@@ -272,8 +272,9 @@ class FusionCore:
         if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
             reason = f"{reason}; {_reasons(views, j)}"
         decision, reason = decide(decision, reason, verification, self.rule.policy)
+        score_name = check.result.score_name if check.result is not None else ""
         if verification is Verification.REJECTED:
-            reason = f"{reason}; density {density:.4f}"
+            reason = f"{reason}; {score_name} {density:.4f}"
         # Where a track no camera sees is reported: the first camera with a frame.
         view = check.view or next((v for v in views if v.frame is not None), views[0])
         frame = view.frame
@@ -290,7 +291,7 @@ class FusionCore:
             gate_detail=check.result.detail if check.result is not None else {},
             path_predicted=k.window is not None,
             camera=check.view.name if check.view is not None else "",
-            cameras=check.per_camera)
+            cameras=check.per_camera, score_name=score_name)
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:

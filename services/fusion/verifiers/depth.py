@@ -1,4 +1,4 @@
-"""The depth verifier: does a surface stand in the track's column at the radar's range?
+"""The depth verifier (`depth`): does a surface stand in the track's column at the radar's range?
 
 A real obstacle fills part of the column 0.3-2.2 m above the ground at the track's range;
 a radar false target - metal on the road (a plate, a manhole cover), a sign overhead, a
@@ -47,15 +47,15 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.depth_error import D435Noise
-from services.fusion.verifiers import (
+from services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,
     Verifier,
-    _parse,
-    register,
+    parse_params,
 )
 
+SCORE = "depth_share"        # hits / band pixels with a return
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
 # Depth at or below this (metres) is "no return" (0); also the strictness of "nearer".
 _NO_RETURN = 1e-6
@@ -208,9 +208,8 @@ class DepthConsistency:
         return GateResult(score, score >= p.tau,
                           {"returns": float(n_returns), "hits": float(n_hit),
                            "nearer": near / n_returns if n_returns else 0.0,
-                           "expected_m": expected, "tol_m": tol})
+                           "expected_m": expected, "tol_m": tol}, SCORE)
 
 
-@register("depth")
-def _depth(params: Mapping[str, ParamValue]) -> Verifier:
-    return DepthConsistency(_parse(params, DepthParams, "depth"))
+def make(params: Mapping[str, ParamValue]) -> Verifier:
+    return DepthConsistency(parse_params(params, DepthParams, "depth"))
