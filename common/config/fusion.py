@@ -164,6 +164,10 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     # filtered with this time constant; |a| clipped to max_accel_mps2.
     accel_filter_s: Positive = 0.3
     max_accel_mps2: Positive = 10.0
+    # In a bend the radar's lateral velocity of a stationary object lags its change
+    # (w x shrinks as the ego nears it) by about this long: turn_lag_s x |yaw rate x
+    # speed| of a track's lateral speed over ground is not taken as motion across the path.
+    turn_lag_s: NonNegative = 0.8
     # No new activation below this ego speed (a car creeping in a queue).
     min_speed_mps: NonNegative = 1.0
     # A BRAKE that brought the ego to a stop (speed <= standstill_mps) holds it at

@@ -370,11 +370,21 @@ class KinematicRule:
     def lateral_input(self, tracks: list[RadarTrack]) -> list[RadarTrack]:
         """The tracks whose sideways motion LateralMotion judges: across the path, over
         ground (a roadside post in a bend drifts sideways in the radar frame but stands
-        still on the road)."""
+        still on the road), less the allowance for the radar's lag in a bend."""
         if not self.motion_ok:
             return tracks
-        return [msgspec.structs.replace(t, vy_mps=self._ground[t.track_id][1])
-                if t.track_id in self._ground else t for t in tracks]
+        # In a bend a stationary object's lateral velocity in the radar frame (-w x)
+        # changes as the ego nears it, and the radar's filtered velocity lags it by about
+        # `turn_lag_s`: that much of w v is no evidence of motion.
+        allowance = self.k.turn_lag_s * abs(self.yaw_rps * self.ego_mps)
+        out = []
+        for t in tracks:
+            g = self._ground.get(t.track_id)
+            if g is not None:
+                across = math.copysign(max(0.0, abs(g[1]) - allowance), g[1])
+                t = msgspec.structs.replace(t, vy_mps=across)
+            out.append(t)
+        return out
 
     def kinematics(self, track: RadarTrack, moving: bool = False) -> Kinematics:
         if not self.motion_ok:

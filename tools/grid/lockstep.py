@@ -35,7 +35,7 @@ import msgspec
 from common.calibration import Calibration
 from common.command_auth import CommandSigner, load_keyring, load_signing_key
 from common.config.brake import BrakeSettings
-from common.config.fusion import FusionConfig
+from common.config.fusion import FusionConfig, RuleName
 from common.config.loader import load_config
 from common.config.radar import RadarSettings
 from common.messages import (
@@ -98,10 +98,12 @@ class LoopConfig:
 
     @classmethod
     def load(cls, fusion: Path, candidate: Path | None = None) -> "LoopConfig":
-        """From fusion config files. Raises ConfigError."""
-        return cls(load_config(fusion, FusionConfig),
-                   load_config(candidate, FusionConfig) if candidate is not None else None,
-                   name=fusion.stem)
+        """From fusion config files; the radar's settings are the defaults (the paper's
+        prefilter, 25 m), widened to what a kinematic fusion's range gate reaches (as
+        deploy/radar.toml is). Raises ConfigError."""
+        cfg = load_config(fusion, FusionConfig)
+        cand = load_config(candidate, FusionConfig) if candidate is not None else None
+        return cls(cfg, cand, radar=radar_for(cfg, cand), name=fusion.stem)
 
 
 @dataclass
@@ -343,6 +345,19 @@ def _published(command: BrakeCommand, pub_mono_ns: int) -> BrakeCommand:
     """The command as the shell publishes it: stamped when it was decided."""
     return msgspec.structs.replace(
         command, header=msgspec.structs.replace(command.header, pub_mono_ns=pub_mono_ns))
+
+
+def radar_for(*configs: FusionConfig | None) -> RadarSettings:
+    """The radar service's settings for these fusion instances: the defaults, with the
+    prefilter's range out to the farthest kinematic range gate among them."""
+    radar = RadarSettings()
+    reach = max((c.fusion.decision.kinematic.range_max_m for c in configs
+                 if c is not None and c.fusion.decision.rule is RuleName.KINEMATIC),
+                default=0.0)
+    if reach <= radar.prefilter.max_range_m:
+        return radar
+    return msgspec.structs.replace(
+        radar, prefilter=msgspec.structs.replace(radar.prefilter, max_range_m=reach))
 
 
 def _check_camera(cfg: FusionConfig, camera: CameraSettings) -> None:
