@@ -133,13 +133,46 @@ bound, seen by a check), ``checked_stale``
 
 
 class VehicleState:
-    """`vehicle/motion` and `vehicle/driver` as one consumer holds them."""
+    """`vehicle/motion` and `vehicle/driver` as one consumer holds them: fresh for the
+    registry's max age, or for `max_age_s` (a consumer's configured bound; the same
+    bound for the stamp check). Raises ValueError for a bound that is not positive."""
 
-    def __init__(self, stamp_check: bool = True) -> None:
-        self.motion: StateInput[EgoMotion] = StateInput.from_spec(EGO_MOTION, stamp_check)
-        self.driver: StateInput[DriverInputs] = StateInput.from_spec(VEHICLE_DRIVER,
-                                                                      stamp_check)
+    def __init__(self, stamp_check: bool = True, max_age_s: float | None = None) -> None:
+        if max_age_s is None:
+            self.motion: StateInput[EgoMotion] = StateInput.from_spec(EGO_MOTION, stamp_check)
+            self.driver: StateInput[DriverInputs] = StateInput.from_spec(VEHICLE_DRIVER,
+                                                                          stamp_check)
+        else:
+            stamp = max_age_s if stamp_check else None
+            self.motion = StateInput(EGO_MOTION.pattern, max_age_s, stamp)
+            self.driver = StateInput(VEHICLE_DRIVER.pattern, max_age_s, stamp)
 
     def checks(self, now_mono_ns: int) -> dict[str, StateCheck]:
         """Both inputs checked, by key pattern."""
         return {i.name: i.check(now_mono_ns) for i in (self.motion, self.driver)}
+
+    def sample(self, now_mono_ns: int) -> "VehicleSample":
+        """Both inputs as a decision takes them at `now_mono_ns`: each message only while
+        fresh, with its check."""
+        motion, motion_check = self.motion.current(now_mono_ns)
+        driver, driver_check = self.driver.current(now_mono_ns)
+        return VehicleSample(motion, driver, motion_check, driver_check)
+
+
+@dataclass(frozen=True)
+class VehicleSample:
+    """The vehicle's state for one decision: a message is None unless fresh."""
+
+    motion: EgoMotion | None
+    driver: DriverInputs | None
+    motion_check: StateCheck
+    driver_check: StateCheck
+
+    @property
+    def reason(self) -> str:
+        """Empty when both are fresh, else what is stale or missing, in words."""
+        return "; ".join(c.reason for c in (self.motion_check, self.driver_check)
+                         if not c.fresh)
+
+
+NOT_READ = StateCheck(StateFreshness.MISSING, "not read", None)

@@ -13,7 +13,7 @@ import msgspec
 from common.config.base import ServiceConfig
 from common.config.paths import ConfigPath, path_keys
 from common.config.realtime import RealtimeSettings
-from common.keys import RADAR_TRACKS
+from common.keys import EGO_MOTION, RADAR_TRACKS
 from common.resources import EXAMPLE_CALIBRATION
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -108,7 +108,117 @@ class CorridorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     prediction: PathPredictionSettings = msgspec.field(default_factory=PathPredictionSettings)
 
 
+class RuleName(enum.Enum):
+    """Which decision rule (docs/fusion.md, "Decision rule")."""
+
+    PAPER = "paper"            # TTC_eff < 2.5 s in 3-25 m, straight corridor, full BRAKE
+    KINEMATIC = "kinematic"    # predicted path, required deceleration, staged output
+
+
+class PathSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The kinematic rule's predicted path (services/fusion/path.py): an arc of curvature
+    yaw rate / speed from the radar, `half_width_m` + `margin_m` either side of it, up to
+    `length_m` along it. Below `min_yaw_speed_mps` the yaw rate is mostly noise: the
+    curvature comes from the steering wheel through a bicycle model when `wheelbase_m`
+    is given, else the path is straight."""
+
+    half_width_m: NonNegative = 0.9
+    margin_m: NonNegative = 0.3
+    length_m: Positive = 80.0
+    min_yaw_speed_mps: NonNegative = 3.0
+    wheelbase_m: Positive | None = None
+    steering_ratio: Positive = 15.0        # steering wheel angle / road wheel angle
+    # |curvature| is clipped to this (1/m): 1 / 0.05 = a 20 m radius, tighter than any
+    # bend the rule is meant for.
+    max_curvature_per_m: Positive = 0.05
+
+
+class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The kinematic rule's bounds (`rule = "kinematic"`; docs/fusion.md).
+
+    The deceleration a stop requires: the ego at its speed and the target at its own
+    (ego speed + range rate) with its acceleration, both carried on for `latency_s`
+    (radar cycle, fusion, the brake service and the actuator's and brakes' lags), then
+    the ego braking at a constant deceleration so that it ends `stop_margin_m` short of
+    the target. The stages compare it with their bounds; a WARNING also comes from the
+    TTC with relative acceleration."""
+
+    stop_margin_m: NonNegative = 1.0
+    latency_s: Annotated[float, msgspec.Meta(ge=0, le=2)] = 0.45
+    # A stage is reached when the required deceleration is at least its bound or the
+    # TTC below its bound (at low speed the deceleration stays small up close).
+    warning_ttc_s: Positive = 3.0
+    warning_decel_mps2: Positive = 2.0
+    partial_ttc_s: Positive = 2.2
+    partial_decel_mps2: Positive = 3.0
+    full_ttc_s: Positive = 1.6
+    full_decel_mps2: Positive = 4.5
+    partial_level_pct: Annotated[float, msgspec.Meta(gt=0, le=100)] = 50.0
+    full_level_pct: Annotated[float, msgspec.Meta(gt=0, le=100)] = 100.0
+    # The range gate follows the speed: range_base_m + range_time_s x ego speed, at most
+    # range_max_m (min_range_m of [fusion.decision] below it).
+    range_base_m: Positive = 15.0
+    range_time_s: NonNegative = 3.5
+    range_max_m: Positive = 80.0
+    # The target's acceleration from its range rate, differentiated and low-pass
+    # filtered with this time constant; |a| clipped to max_accel_mps2.
+    accel_filter_s: Positive = 0.3
+    max_accel_mps2: Positive = 10.0
+    # In a bend the radar's lateral velocity of a stationary object lags its change
+    # (w x shrinks as the ego nears it) by about this long: turn_lag_s x |yaw rate x
+    # speed| of a track's lateral speed over ground is not taken as motion across the path.
+    turn_lag_s: NonNegative = 0.8
+    # No new activation below this ego speed (a car creeping in a queue).
+    min_speed_mps: NonNegative = 1.0
+    # A BRAKE that brought the ego to a stop (speed <= standstill_mps) holds it at
+    # standstill_level_pct for standstill_hold_s, then releases.
+    standstill_mps: Positive = 0.3
+    standstill_hold_s: NonNegative = 2.0
+    standstill_level_pct: Annotated[float, msgspec.Meta(ge=0, le=100)] = 50.0
+
+    def __post_init__(self) -> None:
+        if not self.warning_decel_mps2 <= self.partial_decel_mps2 <= self.full_decel_mps2:
+            raise ValueError("warning_decel_mps2 <= partial_decel_mps2 <= full_decel_mps2 "
+                             "required")
+        if not self.warning_ttc_s >= self.partial_ttc_s >= self.full_ttc_s:
+            raise ValueError("warning_ttc_s >= partial_ttc_s >= full_ttc_s required")
+        if self.partial_level_pct > self.full_level_pct:
+            raise ValueError("partial_level_pct must not exceed full_level_pct")
+
+
+class OverrideSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The driver overrides the kinematic rule (`vehicle/driver`): a kick-down (the
+    pedal's switch, or the pedal beyond `accelerator_pct`) or a steering manoeuvre
+    (|wheel rate| >= `steering_rate_dps` or |wheel angle| >= `steering_angle_deg`)
+    cancels a brake and suppresses AEB for `suppress_s` after the input ends; the
+    brake pedal pressed releases AEB to the driver (the driver's braking wins). A field
+    the car does not provide (None) cannot override."""
+
+    enabled: bool = True
+    accelerator_pct: Annotated[float, msgspec.Meta(gt=0, le=100)] | None = 95.0
+    steering_rate_dps: Positive | None = 180.0
+    steering_angle_deg: Positive | None = 90.0
+    suppress_s: NonNegative = 2.0
+    brake_pedal: bool = True
+
+
+class VehicleInputSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """`vehicle/motion` and `vehicle/driver` (common/vehicle_state.py): fresh for
+    `max_age_s` after arrival. Only the kinematic rule reads them; stale or missing, it
+    is at most WARNING (docs/fusion.md, "Stale or missing vehicle state")."""
+
+    max_age_s: Positive = EGO_MOTION.max_age_s or 0.1
+    # Refuse samples whose stamp is older than max_age_s on arrival; off for hosts
+    # without synchronised wall clocks.
+    stamp_check: bool = True
+
+
 class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    # "paper" (the default here, so that a config without the field keeps its meaning):
+    # the paper's rule, the fields up to `corridor`; "kinematic" (deploy/fusion.toml): the
+    # predicted path, the required deceleration and staged output (`path`, `kinematic`,
+    # `override`; the camera policy, hold and radar age as for the paper's).
+    rule: RuleName = RuleName.PAPER
     min_range_m: NonNegative = 3.0
     max_range_m: Positive = 25.0
     ttc_offset_s: NonNegative = 1.0        # TTC_eff = TTC - offset
@@ -120,6 +230,9 @@ class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # Radar cycles older than this at processing time never start a brake (~2 cycles).
     radar_max_age_s: Positive = RADAR_TRACKS.max_age_s or 0.16
     corridor: CorridorSettings = msgspec.field(default_factory=CorridorSettings)
+    path: PathSettings = msgspec.field(default_factory=PathSettings)
+    kinematic: KinematicSettings = msgspec.field(default_factory=KinematicSettings)
+    override: OverrideSettings = msgspec.field(default_factory=OverrideSettings)
 
     def __post_init__(self) -> None:
         if self.min_range_m >= self.max_range_m:
@@ -162,6 +275,7 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     verifier: VerifierSettings = msgspec.field(default_factory=VerifierSettings)
     decision: DecisionSettings = msgspec.field(default_factory=DecisionSettings)
     evidence: EvidenceSettings = msgspec.field(default_factory=EvidenceSettings)
+    vehicle_state: VehicleInputSettings = msgspec.field(default_factory=VehicleInputSettings)
     stats_interval_s: Positive = 10.0      # how often counters are logged
     # At most one radar cycle (one BrakeCommand) per this interval, whatever arrives on
     # radar/<sensor>/tracks: extra cycles are shed (counted `tracks_shed`), the newest

@@ -81,6 +81,15 @@ class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
     camera: str = ""
     cameras: tuple[CameraCheck, ...] = ()
     score_name: str = ""
+    # The kinematic rule's figures (None under the paper's rule): the level of the
+    # track's BRAKE stage, the deceleration a stop requires (inf: the gap is gone within
+    # the latency), the target's acceleration over ground along the path, and where it
+    # is on the path (arc length, offset; left positive).
+    brake_level_pct: float | None = None
+    required_decel_mps2: float | None = None
+    accel_mps2: float | None = None
+    path_s_m: float | None = None
+    path_d_m: float | None = None
 
 
 class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
@@ -105,6 +114,14 @@ class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
     frames_corrupt: int = 0        # ... of the undecodable: JPEG bytes failing their CRC-32
     # Cameras without a usable frame this cycle, and why (the others verified as usual).
     cameras_unavailable: dict[str, str] = msgspec.field(default_factory=dict)
+    # The vehicle's state as the kinematic rule used it (None / empty under the paper's
+    # rule): ego speed and yaw rate, the path, why the state was not usable (empty when
+    # fresh: the degraded mode, at most WARNING), the driver's override in force.
+    ego_speed_mps: float | None = None
+    ego_yaw_rate_dps: float | None = None
+    path: str = ""
+    vehicle_state: str = ""
+    override: str = ""
 
 
 class CommandAuth(msgspec.Struct, frozen=True):
@@ -142,5 +159,8 @@ class BrakeCommand(msgspec.Struct, frozen=True, kw_only=True):
     reason: str
     radar_seq: int
     radar_last_frame_mono_ns: int
+    # The driver's override in force (kinematic rule): ``kick-down``, ``steering`` (AEB
+    # suppressed), ``brake pedal`` (AEB released to the driver); empty when none.
+    override: str = ""
     # Last, so that the MAC is the payload's last bytes; None: unsigned (never followed)
     auth: CommandAuth | None = None

@@ -20,7 +20,9 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
-from common.config.fusion import FusionSettings, GateScope
+import msgspec
+
+from common.config.fusion import FusionSettings, GateScope, RuleName
 from common.messages import (
     BrakeCommand,
     Decision,
@@ -32,10 +34,14 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
+from common.messages.vehicle import DriverInputs, EgoMotion
+from common.vehicle_state import VehicleSample, VehicleState
 from services.fusion.cameras import Camera, CameraView, camera_views, check_track
 from services.fusion.decision import (
     BrakeHold,
+    CommandStage,
     DecisionRule,
+    KinematicRule,
     Kinematics,
     LateralMotion,
     decide,
@@ -112,7 +118,15 @@ class FusionCore:
                 prepare(cam.projector.cal)
         self.source = f"fusion/{settings.instance}"
         self.hold = BrakeHold(round(settings.decision.hold_s * 1e9))
-        self.rule = DecisionRule(settings.decision)
+        kinematic = settings.decision.rule is RuleName.KINEMATIC
+        self.rule: DecisionRule | KinematicRule = (
+            KinematicRule(settings.decision) if kinematic else DecisionRule(settings.decision))
+        self.stage = CommandStage(settings.decision, self.hold,
+                                  self.rule if isinstance(self.rule, KinematicRule) else None)
+        # `vehicle/motion` and `vehicle/driver` (`on_vehicle`); only the kinematic rule
+        # reads them.
+        vs = settings.vehicle_state
+        self.vehicle = VehicleState(vs.stamp_check, vs.max_age_s)
         p = settings.decision.corridor.prediction
         # Per-track memory of sideways motion, for path prediction (None when it is off).
         self.lateral = (LateralMotion(p.min_lateral_speed_mps, p.confirm_cycles)
@@ -128,19 +142,31 @@ class FusionCore:
         self.frozen_cycles: dict[str, int] = {}   # cycles a camera was judged frozen
         self._radar_max_age_ns = round(settings.decision.radar_max_age_s * 1e9)
 
+    def on_vehicle(self, msg: EgoMotion | DriverInputs, now_wall_ns: int,
+                   now_mono_ns: int) -> bool:
+        """A `vehicle/motion` or `vehicle/driver` sample arrived (common/vehicle_state.py:
+        late and out-of-order samples are counted and not taken); True when taken."""
+        if isinstance(msg, EgoMotion):
+            return self.vehicle.motion.observe(msg, now_mono_ns, now_wall_ns)
+        return self.vehicle.driver.observe(msg, now_mono_ns, now_wall_ns)
+
     def process(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
-                now_wall_ns: int, now_mono_ns: int) -> CycleResult:
+                now_wall_ns: int, now_mono_ns: int,
+                vehicle: VehicleSample | None = None) -> CycleResult:
         """One radar cycle, decided and reported (`decide`, then `report`).
         Raises ValueError when the number of feeds is not the number of cameras."""
-        decided = self.decide(tracks, feeds, now_wall_ns, now_mono_ns)
+        decided = self.decide(tracks, feeds, now_wall_ns, now_mono_ns, vehicle)
         return CycleResult(self.report(decided), decided.command)
 
     def decide(self, tracks: RadarTracks, feeds: FrameFeed | Sequence[FrameFeed],
-               now_wall_ns: int, now_mono_ns: int) -> DecidedCycle:
+               now_wall_ns: int, now_mono_ns: int,
+               vehicle: VehicleSample | None = None) -> DecidedCycle:
         """The cycle's BrakeCommand (`.command`), checking only the tracks it depends on.
         `feeds`: each camera's frames, in camera order (one FrameFeed for a single
         camera). `now_wall_ns` judges the radar's age; `now_mono_ns` stamps the messages'
-        pub_mono_ns (the shell refreshes it at publish).
+        pub_mono_ns (the shell refreshes it at publish) and judges the vehicle state's.
+        `vehicle`: the vehicle's state for this cycle (None: `self.vehicle`, as
+        `on_vehicle` filled it, at `now_mono_ns`); only the kinematic rule reads it.
         Raises ValueError when the number of feeds is not the number of cameras."""
         feeds = (feeds,) if isinstance(feeds, FrameFeed) else tuple(feeds)
         if len(feeds) != len(self.cameras):
@@ -151,7 +177,13 @@ class FusionCore:
             if t.confirmed:
                 (confirmed if finite_track(t) else invalid).append(t)
         self.invalid_tracks += len(invalid)
-        self._moving = self.lateral.update(confirmed) if self.lateral is not None else set()
+        if isinstance(self.rule, KinematicRule):
+            sample = vehicle if vehicle is not None else self.vehicle.sample(now_mono_ns)
+            self.rule.begin(sample, confirmed, tracks.header.stamp_ns)
+            lateral_input = self.rule.lateral_input(confirmed)
+        else:
+            lateral_input = confirmed
+        self._moving = self.lateral.update(lateral_input) if self.lateral is not None else set()
         if self.evidence is not None:
             self.evidence.forget_older(tracks.header.stamp_ns)
         age_ns = now_wall_ns - tracks.header.stamp_ns
@@ -167,7 +199,8 @@ class FusionCore:
         feeds = self._usable(feeds, confirmed)
         kins = [self._kinematics(t) for t in confirmed]
         threats = [self.rule.threat(k) for k in kins]
-        ranks = [_rank(threat, k.ttc_eff_s) for (threat, _), k in zip(threats, kins, strict=True)]
+        ranks = [_rank(threat, k.ttc_eff_s, k.level_pct)
+                 for (threat, _), k in zip(threats, kins, strict=True)]
         order = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
                        key=ranks.__getitem__, reverse=True)
         views = camera_views(self.cameras, feeds, [confirmed[i] for i in order],
@@ -220,7 +253,7 @@ class FusionCore:
         feeds = cycle.feeds
         header = Header(seq=cycle.command.header.seq, source=self.source, stamp_ns=stamp_ns,
                         pub_mono_ns=cycle.now_mono_ns)
-        return VerifiedTargets(
+        return self._with_vehicle(VerifiedTargets(
             header=header, instance=self.s.instance, radar_sensor=cycle.tracks.sensor,
             radar_seq=cycle.tracks.header.seq, verifier=self.verifier.name,
             verifier_params=self.verifier_params, verifier_status=cycle.status,
@@ -232,7 +265,19 @@ class FusionCore:
             frames_undecodable=sum(f.undecodable for f in feeds),
             frames_dropped=sum(f.dropped for f in feeds),
             frames_corrupt=sum(f.corrupt for f in feeds),
-            cameras_unavailable=cycle.cameras_unavailable)
+            cameras_unavailable=cycle.cameras_unavailable, override=cycle.command.override))
+
+    def _with_vehicle(self, targets: VerifiedTargets) -> VerifiedTargets:
+        """With the vehicle's state as the kinematic rule used it this cycle (unchanged
+        under the paper's rule)."""
+        rule = self.rule
+        if not isinstance(rule, KinematicRule):
+            return targets
+        motion = rule.vehicle.motion if rule.vehicle is not None else None
+        return msgspec.structs.replace(
+            targets, ego_speed_mps=motion.speed_mps if motion is not None else None,
+            ego_yaw_rate_dps=motion.yaw_rate_dps if motion is not None else None,
+            path=rule.path.describe(), vehicle_state=rule.degraded)
 
     def _usable(self, feeds: tuple[FrameFeed, ...],
                 confirmed: list[RadarTrack]) -> tuple[FrameFeed, ...]:
@@ -312,7 +357,7 @@ class FusionCore:
             gate_detail=detail,
             path_predicted=k.window is not None,
             camera=check.view.name if check.view is not None else "",
-            cameras=check.per_camera, score_name=score_name)
+            cameras=check.per_camera, score_name=score_name, **_kinematic_fields(k))
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:
@@ -346,7 +391,6 @@ class FusionCore:
         """The command from the most severe of `targets` (ties: smallest TTC_eff, then the
         first), and the hold. `confirmed`: every confirmed track (counted in the reason; a
         held track's current range and TTC)."""
-        ds = self.s.decision
         worst = max(targets, key=_rank_of, default=None)
         decision = worst.decision if worst is not None else Decision.NONE
         n_targets = max(len(targets), len(confirmed))
@@ -365,26 +409,39 @@ class FusionCore:
         track_id = worst.track_id if worst is not None and decision is not Decision.NONE else -1
         range_m = worst.range_m if track_id >= 0 and worst is not None else None
         ttc_s = worst.ttc_s if track_id >= 0 and worst is not None else None
-        held = self.hold.update(decision, track_id, now_wall_ns)
-        if held:
-            track_id = self.hold.track_id
+        level = worst.brake_level_pct if worst is not None else None
+        staged = self.stage.update(decision, level, track_id, now_wall_ns)
+        held = staged.held
+        if staged.note:
+            reason = f"{staged.note}; this cycle: {decision.value}, {reason}"
+        elif held:
             left_ms = self.hold.remaining_ns(now_wall_ns) / 1e6
             reason = f"BRAKE held {left_ms:.0f} ms more; this cycle: {decision.value}, {reason}"
-            decision = Decision.BRAKE
+        if held and decision is not Decision.BRAKE:
+            track_id = self.hold.track_id
             # The held track as the radar sees it now, if it is still there.
             now = next((t for t in confirmed if t.track_id == track_id), None)
             range_m = now.range_m if now is not None else None
             ttc_s = self._kinematics(now).ttc_s if now is not None else None
+        decision = staged.decision
         seq = self._seq
         self._seq += 1
         return BrakeCommand(
             header=Header(seq=seq, source=self.source, stamp_ns=tracks.header.stamp_ns,
                           pub_mono_ns=now_mono_ns),
             instance=self.s.instance, decision=decision,
-            brake_level_pct=ds.brake_level_pct if decision is Decision.BRAKE else 0.0,
+            brake_level_pct=staged.level_pct if decision is Decision.BRAKE else 0.0,
             verifier_status=status, held=held, track_id=track_id, range_m=range_m,
             ttc_s=ttc_s, reason=reason, radar_seq=tracks.header.seq,
-            radar_last_frame_mono_ns=tracks.last_frame_mono_ns)
+            radar_last_frame_mono_ns=tracks.last_frame_mono_ns, override=staged.override)
+
+
+def _kinematic_fields(k: Kinematics) -> dict[str, float | None]:
+    """A target's kinematic-rule figures (none under the paper's rule)."""
+    if k.path_point is None:
+        return {}
+    return dict(brake_level_pct=k.level_pct, required_decel_mps2=k.required_decel_mps2,
+                accel_mps2=k.accel_mps2, path_s_m=k.path_point.s_m, path_d_m=k.path_point.d_m)
 
 
 def _reasons(views: list[CameraView], track: int | None = None) -> str:
@@ -414,10 +471,13 @@ def _invalid_target(t: RadarTrack) -> VerifiedTarget:
         frame_age_ms=None)
 
 
-def _rank(decision: Decision, ttc_eff_s: float | None) -> tuple[int, float]:
-    """Orders decisions by severity, then urgency: the higher, the more severe."""
-    return severity(decision), -(ttc_eff_s if ttc_eff_s is not None else math.inf)
+def _rank(decision: Decision, ttc_eff_s: float | None,
+          level_pct: float | None = None) -> tuple[int, float, float]:
+    """Orders decisions by severity (a BRAKE by its level), then urgency: the higher, the
+    more severe."""
+    level = level_pct or 0.0 if decision is Decision.BRAKE else 0.0
+    return severity(decision), level, -(ttc_eff_s if ttc_eff_s is not None else math.inf)
 
 
-def _rank_of(target: VerifiedTarget) -> tuple[int, float]:
-    return _rank(target.decision, target.ttc_eff_s)
+def _rank_of(target: VerifiedTarget) -> tuple[int, float, float]:
+    return _rank(target.decision, target.ttc_eff_s, target.brake_level_pct)

@@ -1,5 +1,10 @@
 """The AEB decision for one track, and the brake hold (pure, no I/O, no clocks).
 
+Two rules (`[fusion.decision] rule`): the paper's (`DecisionRule`, below) and the
+kinematic one (`KinematicRule`: the predicted path, the TTC with the target's
+acceleration, the deceleration a stop requires, staged output, driver override;
+docs/fusion.md, "Decision rule").
+
 Paper: TTC = r / |v_r| (closing only), TTC_eff = TTC - 1.0 s;
 BRAKE iff verified and 3 <= r <= 25 m and TTC_eff < 2.5 s. WARNING uses the same rule
 with a larger TTC_eff bound (4.0 s). Added: an in-path corridor on the lateral offset
@@ -9,11 +14,15 @@ a policy for tracks the camera cannot check; and a minimum hold.
 """
 
 import math
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+
+import msgspec
 
 from common.config.fusion import DecisionSettings, UnverifiablePolicy
 from common.messages import Decision, RadarTrack, Verification
+from common.vehicle_state import VehicleSample
+from services.fusion.path import PathPoint, PredictedPath, predicted_path, straight_path
 
 
 def severity(d: Decision) -> int:
@@ -45,6 +54,11 @@ class Kinematics:
     in_path: bool             # always True when the corridor check is off
     # Set when in_path came from the predicted sideways motion (then ttc_s = arrival).
     window: PathWindow | None = None
+    # The kinematic rule's figures (None under the paper's rule):
+    level_pct: float | None = None           # the brake level of its BRAKE stage
+    required_decel_mps2: float | None = None
+    accel_mps2: float | None = None          # the target's along the path (over ground)
+    path_point: PathPoint | None = None
 
 
 def corridor_window(lateral_m: float, lateral_speed_mps: float,
@@ -197,3 +211,398 @@ class BrakeHold:
 
     def remaining_ns(self, now_ns: int) -> int:
         return 0 if self.until_ns is None else max(0, self.until_ns - now_ns)
+
+    def clear(self) -> None:
+        """End a hold now (the driver took over, the ego stood still long enough)."""
+        self.until_ns = None
+
+
+# -- the kinematic rule (rule = "kinematic") ------------------------------------------------
+
+
+def time_to_collision(gap_m: float, ego_mps: float, lead_mps: float,
+                      lead_decel_mps2: float) -> float | None:
+    """When the ego at constant speed reaches a target `gap_m` ahead that moves at
+    `lead_mps` along the path and brakes at `lead_decel_mps2` (>= 0) to a stop; None
+    when never. A gap of 0 or less is now (0)."""
+    if gap_m <= 0.0:
+        return 0.0
+    closing = ego_mps - lead_mps
+    a = lead_decel_mps2 if lead_mps > 0.0 else 0.0
+    if a <= 0.0:
+        return gap_m / closing if closing > 0.0 else None
+    t = (-closing + math.sqrt(max(closing * closing + 2.0 * a * gap_m, 0.0))) / a
+    stop_t = lead_mps / a
+    if t <= stop_t:
+        return t
+    # The target stops first, lead^2 / 2a further on.
+    if ego_mps <= 0.0:
+        return None
+    return (gap_m + lead_mps * lead_mps / (2.0 * a)) / ego_mps
+
+
+def required_decel(gap_m: float, ego_mps: float, lead_mps: float, lead_decel_mps2: float,
+                   latency_s: float) -> float:
+    """The constant deceleration the ego needs, starting after `latency_s` at its speed,
+    so that it never closes the `gap_m` to a target at `lead_mps` braking at
+    `lead_decel_mps2` (>= 0) to a stop. 0 when no braking is needed, inf when the gap is
+    gone before the brake acts."""
+    a = lead_decel_mps2 if lead_mps > 0.0 else 0.0
+    t = latency_s
+    if a > 0.0:
+        tl = min(t, lead_mps / a)
+        lead_travel = lead_mps * tl - 0.5 * a * tl * tl
+        lead_after = lead_mps - a * tl
+    else:
+        lead_travel = lead_mps * t
+        lead_after = lead_mps
+    gap = gap_m + lead_travel - ego_mps * t
+    if gap <= 0.0:
+        return math.inf if ego_mps > 0.0 else 0.0
+    closing = ego_mps - lead_after
+    if a > 0.0 and lead_after > 0.0:
+        # Either the ego matches the target's speed while the target still moves ...
+        if closing > 0.0 and 2.0 * gap / closing <= lead_after / a:
+            return a + closing * closing / (2.0 * gap)
+        # ... or it stops behind where the target stops.
+        return max(ego_mps, 0.0) ** 2 / (2.0 * (gap + lead_after * lead_after / (2.0 * a)))
+    return closing * closing / (2.0 * gap) if closing > 0.0 else 0.0
+
+
+class LeadAcceleration:
+    """Each track's acceleration over ground along the path: the derivative of its speed
+    (ego speed + range rate), low-pass filtered with time constant `tau_s`, clipped to
+    +-`limit`. A track's first cycle, or one after a gap longer than `max_gap_s`, has
+    none yet (0: constant speed). Tracks absent from a cycle are forgotten."""
+
+    def __init__(self, tau_s: float, limit_mps2: float, max_gap_s: float = 0.5) -> None:
+        self.tau_s = tau_s
+        self.limit = limit_mps2
+        self.max_gap_ns = round(max_gap_s * 1e9)
+        self._state: dict[int, tuple[int, float, float]] = {}   # id -> (t_ns, v, a)
+
+    def update(self, speeds: dict[int, float], t_ns: int) -> dict[int, float]:
+        """This cycle's speeds over ground by track id; the filtered accelerations."""
+        out: dict[int, float] = {}
+        state: dict[int, tuple[int, float, float]] = {}
+        for tid, v in speeds.items():
+            prev = self._state.get(tid)
+            a = 0.0
+            if prev is not None and 0 < t_ns - prev[0] <= self.max_gap_ns:
+                dt = (t_ns - prev[0]) / 1e9
+                raw = max(-self.limit, min(self.limit, (v - prev[1]) / dt))
+                alpha = 1.0 - math.exp(-dt / self.tau_s)
+                a = prev[2] + alpha * (raw - prev[2])
+            state[tid] = (t_ns, v, a)
+            out[tid] = a
+        self._state = state
+        return out
+
+
+# Stages of the kinematic rule, by severity: the brake level comes with the stage.
+STAGE_WARNING = "warning"
+STAGE_PARTIAL = "partial"
+STAGE_FULL = "full"
+
+
+class KinematicRule:
+    """The kinematic rule, from the settings. Per cycle `begin` takes the vehicle's
+    state and the confirmed tracks (the path, each track's acceleration); then
+    `kinematics` and `threat` per track, as DecisionRule's.
+
+    Stale or missing `vehicle/motion` (`degraded`): the paper's rule on the straight
+    corridor (DecisionRule, the same settings), at most WARNING. Stale or missing
+    `vehicle/driver` with fresh motion: this rule, at most WARNING (no override could be
+    seen). The reason starts ``vehicle state ...: at most WARNING``."""
+
+    def __init__(self, s: DecisionSettings) -> None:
+        self.s = s
+        self.k = s.kinematic
+        self.paper = DecisionRule(s)
+        self.policy = s.unverifiable_policy
+        self.min_range = s.min_range_m
+        p = s.corridor.prediction
+        self.predict = p.enabled
+        self.horizon = p.horizon_s
+        self.arrival_margin = p.arrival_margin_s
+        self.centre = s.corridor.center_y_m
+        self.accel = LeadAcceleration(self.k.accel_filter_s, self.k.max_accel_mps2)
+        self.vehicle: VehicleSample | None = None
+        self.degraded = "vehicle state not read"     # empty while motion and driver are fresh
+        self.motion_ok = False
+        self.ego_mps = 0.0
+        self.yaw_rps = 0.0
+        self.path: PredictedPath = straight_path(
+            s.corridor.half_width_m + s.corridor.margin_m, s.kinematic.range_max_m,
+            self.centre, "no vehicle state")
+        self.max_range = s.max_range_m
+        self._accels: dict[int, float] = {}
+        self._ground: dict[int, tuple[float, float]] = {}   # id -> (along, across) over ground
+
+    def begin(self, vehicle: VehicleSample, tracks: Sequence[RadarTrack],
+              stamp_ns: int) -> None:
+        """This cycle's vehicle state and confirmed (finite) tracks, at the radar cycle's
+        stamp."""
+        self.vehicle = vehicle
+        motion = vehicle.motion
+        self.motion_ok = motion is not None
+        self.degraded = vehicle.reason
+        self._ground = {}
+        self._accels = {}
+        if motion is None:
+            self.path = straight_path(self.s.corridor.half_width_m + self.s.corridor.margin_m,
+                                      self.s.max_range_m, self.centre, "no vehicle state")
+            self.accel.update({}, stamp_ns)
+            return
+        k = self.k
+        self.ego_mps = v = motion.speed_mps
+        self.yaw_rps = w = math.radians(motion.yaw_rate_dps)
+        steer = vehicle.driver.steering_wheel_angle_deg if vehicle.driver is not None else None
+        self.path = predicted_path(v, motion.yaw_rate_dps, steer, self.s.path, self.centre)
+        self.max_range = min(k.range_max_m, k.range_base_m + k.range_time_s * max(v, 0.0),
+                             self.s.path.length_m)
+        for t in tracks:
+            # Over ground: the radar's velocities are relative to the turning vehicle frame.
+            gx, gy = t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m
+            self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
+        self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
+
+    def lateral_input(self, tracks: list[RadarTrack]) -> list[RadarTrack]:
+        """The tracks whose sideways motion LateralMotion judges: across the path, over
+        ground (a roadside post in a bend drifts sideways in the radar frame but stands
+        still on the road), less the allowance for the radar's lag in a bend."""
+        if not self.motion_ok:
+            return tracks
+        # In a bend a stationary object's lateral velocity in the radar frame (-w x)
+        # changes as the ego nears it, and the radar's filtered velocity lags it by about
+        # `turn_lag_s`: that much of w v is no evidence of motion.
+        allowance = self.k.turn_lag_s * abs(self.yaw_rps * self.ego_mps)
+        out = []
+        for t in tracks:
+            g = self._ground.get(t.track_id)
+            if g is not None:
+                across = math.copysign(max(0.0, abs(g[1]) - allowance), g[1])
+                t = msgspec.structs.replace(t, vy_mps=across)
+            out.append(t)
+        return out
+
+    def kinematics(self, track: RadarTrack, moving: bool = False) -> Kinematics:
+        if not self.motion_ok:
+            return self.paper.kinematics(track, moving)
+        k = self.k
+        p = self.path.point(track.x_m, track.y_m)
+        along, across = self._ground.get(track.track_id, (0.0, 0.0))
+        a = self._accels.get(track.track_id, 0.0)
+        v = self.ego_mps
+        r = track.range_m
+        in_range = self.min_range <= r <= self.max_range
+        window: PathWindow | None = None
+        in_path = self.path.contains(p)
+        lead, decel = along, max(0.0, -a)
+        if moving and self.predict and v - along > 0.0 and p.s_m >= 0.0:
+            arrival = p.s_m / (v - along)
+            m = self.arrival_margin
+            if arrival - m <= self.horizon:
+                enter, leave = corridor_window(p.d_m, across, self.path.half_width_m)
+                in_path = (enter <= arrival + m and leave >= max(0.0, arrival - m)
+                           and p.s_m <= self.path.length_m)
+                window = PathWindow(enter, leave, arrival)
+                lead, decel = 0.0, 0.0      # it crosses: the ego must stop before its line
+        gap = p.s_m - k.stop_margin_m
+        ttc = time_to_collision(p.s_m, v, lead, decel)
+        if window is not None:
+            ttc = window.arrival_s
+        need = required_decel(gap, v, lead, decel, k.latency_s) if v > 0.0 else 0.0
+        kin = Kinematics(r, track.range_rate_mps, p.d_m, ttc, ttc, in_range, in_path, window,
+                         None, need, a, p)
+        return replace(kin, level_pct=self.level(kin))
+
+    def threat(self, kin: Kinematics) -> tuple[Decision, str]:
+        if not self.motion_ok:
+            decision, reason = self.paper.threat(kin)
+            return self._capped(decision, f"{reason} (paper's rule, straight corridor)")
+        decision, reason = self._threat(kin)
+        if decision is Decision.NONE or not self.degraded:
+            return decision, reason
+        return self._capped(decision, reason)
+
+    def _capped(self, decision: Decision, reason: str) -> tuple[Decision, str]:
+        if decision is Decision.BRAKE:
+            decision = Decision.WARNING
+        if decision is Decision.NONE:
+            return decision, reason
+        return decision, f"vehicle state {self.degraded}: at most WARNING; {reason}"
+
+    def stage(self, kin: Kinematics) -> str | None:
+        """The stage a track's figures reach (None: none)."""
+        k = self.k
+        need = kin.required_decel_mps2 or 0.0
+        ttc = kin.ttc_s if kin.ttc_s is not None else math.inf
+        if need >= k.full_decel_mps2 or ttc < k.full_ttc_s:
+            return STAGE_FULL
+        if need >= k.partial_decel_mps2 or ttc < k.partial_ttc_s:
+            return STAGE_PARTIAL
+        if need >= k.warning_decel_mps2 or ttc < k.warning_ttc_s:
+            return STAGE_WARNING
+        return None
+
+    def _threat(self, kin: Kinematics) -> tuple[Decision, str]:
+        k = self.k
+        if not kin.in_range:
+            return Decision.NONE, (f"range {kin.range_m:.2f} m outside "
+                                   f"[{self.min_range:g}, {self.max_range:.1f}] m")
+        if self.ego_mps < k.min_speed_mps:
+            return Decision.NONE, (f"ego speed {self.ego_mps:.2f} m/s below "
+                                   f"{k.min_speed_mps:g} m/s")
+        p = kin.path_point
+        w = kin.window
+        if not kin.in_path:
+            why = "" if w is None else f"; {_window_text(w)}"
+            where = "" if p is None else f"s {p.s_m:.1f} m, offset {p.d_m:+.2f} m, "
+            return Decision.NONE, (f"out of path ({where}limit {self.path.half_width_m:g} m,"
+                                   f" {self.path.describe()}{why})")
+        if kin.ttc_s is None and not kin.required_decel_mps2:
+            return Decision.NONE, f"not closing (range rate {kin.range_rate_mps:+.2f} m/s)"
+        stage = self.stage(kin)
+        figures = (f"needs {_decel(kin.required_decel_mps2)}, TTC "
+                   f"{_t(kin.ttc_s if kin.ttc_s is not None else math.inf)} s, target accel "
+                   f"{kin.accel_mps2 or 0.0:+.1f} m/s^2, {self.path.describe()}")
+        if w is not None:
+            figures = f"in path by prediction ({_window_text(w)}), {figures}"
+        if stage is None:
+            return Decision.NONE, f"no stage reached: {figures}"
+        if stage == STAGE_WARNING:
+            return Decision.WARNING, f"warning: {figures}"
+        return Decision.BRAKE, f"{stage} brake: {figures}"
+
+    def level(self, kin: Kinematics) -> float | None:
+        """The brake level of a track's stage (None below the partial stage)."""
+        if not self.motion_ok:
+            return None
+        stage = self.stage(kin)
+        return (self.k.full_level_pct if stage == STAGE_FULL else
+                self.k.partial_level_pct if stage == STAGE_PARTIAL else None)
+
+
+def _decel(d: float | None) -> str:
+    if d is None:
+        return "-"
+    return f"{d:.2f} m/s^2" if math.isfinite(d) else "inf m/s^2 (gap gone within the latency)"
+
+
+OVERRIDE_KICKDOWN = "kick-down"
+OVERRIDE_STEERING = "steering"
+OVERRIDE_BRAKE_PEDAL = "brake pedal"
+
+
+@dataclass(frozen=True, slots=True)
+class StagedCommand:
+    """The command after the hold, the standstill hold and the driver's override.
+    `note`: what they did, for the reason (empty: nothing); `override`: the driver's
+    override in force (empty: none)."""
+
+    decision: Decision
+    level_pct: float
+    held: bool
+    note: str = ""
+    override: str = ""
+
+
+class CommandStage:
+    """From the most severe target decision of a cycle to the command.
+
+    The paper's rule (`rule` None): the brake hold, at `brake_level_pct`. The kinematic
+    rule: the driver's override first (a kick-down or a steering manoeuvre suppresses
+    AEB while it lasts and `suppress_s` after, the brake pedal releases AEB to the
+    driver while pressed: at most WARNING, any hold ended); then a brake that brought the
+    ego to a stop holds it at `standstill_level_pct` for `standstill_hold_s` and releases
+    (no new activation until it moves again); then the hold. Within one brake the level
+    never drops (partial to full, not back: no chatter between stages)."""
+
+    def __init__(self, s: DecisionSettings, hold: BrakeHold,
+                 rule: KinematicRule | None) -> None:
+        self.s = s
+        self.hold = hold
+        self.rule = rule
+        self._level = 0.0                         # the brake's level so far
+        self._standstill_until: int | None = None
+        self._released = False                    # the standstill hold ended, ego still
+        self._suppress_until: int | None = None
+        self._suppress_why = ""
+
+    def update(self, decision: Decision, level_pct: float | None, track_id: int,
+               now_ns: int) -> StagedCommand:
+        rule = self.rule
+        if rule is None:
+            held = self.hold.update(decision, track_id, now_ns)
+            brake = decision is Decision.BRAKE or held
+            return StagedCommand(Decision.BRAKE if held else decision,
+                                 self.s.brake_level_pct if brake else 0.0, held)
+        override = self._override(now_ns)
+        if override:
+            braking = self._level > 0.0 or self.hold.until_ns is not None
+            self._end_brake()
+            capped = Decision.WARNING if decision is Decision.BRAKE else decision
+            what = ("AEB released to the driver" if override == OVERRIDE_BRAKE_PEDAL
+                    else "AEB suppressed")
+            cancelled = ", brake cancelled" if braking else ""
+            return StagedCommand(capped, 0.0, False,
+                                 f"driver override ({override}): {what}{cancelled}", override)
+        k = self.s.kinematic
+        stopped = rule.motion_ok and rule.ego_mps <= k.standstill_mps
+        if not stopped:
+            self._released = False
+        if self._standstill_until is not None:
+            if now_ns < self._standstill_until:
+                left = (self._standstill_until - now_ns) / 1e6
+                return StagedCommand(Decision.BRAKE, k.standstill_level_pct, True,
+                                     f"standstill hold {left:.0f} ms more")
+            self._end_brake()
+            self._released = True
+        if self._released:
+            capped = Decision.WARNING if decision is Decision.BRAKE else decision
+            return StagedCommand(capped, 0.0, False,
+                                 "standstill hold over: released" if capped is not decision
+                                 else "")
+        held = self.hold.update(decision, track_id, now_ns)
+        if decision is not Decision.BRAKE and not held:
+            self._level = 0.0
+            return StagedCommand(decision, 0.0, False)
+        self._level = max(self._level, level_pct or 0.0, k.partial_level_pct)
+        if stopped:
+            self._standstill_until = now_ns + round(k.standstill_hold_s * 1e9)
+            return StagedCommand(Decision.BRAKE, k.standstill_level_pct, True,
+                                 "ego stopped: standstill hold")
+        return StagedCommand(Decision.BRAKE, self._level, held)
+
+    def _end_brake(self) -> None:
+        self.hold.clear()
+        self._level = 0.0
+        self._standstill_until = None
+
+    def _override(self, now_ns: int) -> str:
+        """The driver's override in force now ("" none)."""
+        o = self.s.override
+        rule = self.rule
+        vehicle = rule.vehicle if rule is not None else None
+        d = vehicle.driver if vehicle is not None else None
+        if not o.enabled or d is None:
+            return ""
+        why = ""
+        if d.kickdown or (o.accelerator_pct is not None and d.accelerator_pedal_pct is not None
+                          and d.accelerator_pedal_pct >= o.accelerator_pct):
+            why = OVERRIDE_KICKDOWN
+        elif ((o.steering_rate_dps is not None and d.steering_wheel_rate_dps is not None
+               and abs(d.steering_wheel_rate_dps) >= o.steering_rate_dps)
+              or (o.steering_angle_deg is not None and d.steering_wheel_angle_deg is not None
+                  and abs(d.steering_wheel_angle_deg) >= o.steering_angle_deg)):
+            why = OVERRIDE_STEERING
+        if why:
+            self._suppress_until = now_ns + round(o.suppress_s * 1e9)
+            self._suppress_why = why
+        if o.brake_pedal and d.brake_pedal_pressed:
+            return OVERRIDE_BRAKE_PEDAL
+        if self._suppress_until is not None and now_ns <= self._suppress_until:
+            return self._suppress_why
+        self._suppress_until = None
+        return ""

@@ -19,21 +19,25 @@ from common.bus import Bus
 from common.calibration import Calibration
 from common.clock import mono_ns, wall_ns
 from common.command_auth import CommandSigner
-from common.config.fusion import FusionSettings
+from common.config.fusion import FusionSettings, RuleName
 from common.counters import ReasonCounter
 from common.keys import (
     CAMERA_DEPTH,
     CAMERA_INFO,
     CAMERA_JPEG,
+    EGO_MOTION,
     FUSION_BRAKE_CMD,
     FUSION_TARGETS,
     RADAR_TRACKS,
+    VEHICLE_DRIVER,
 )
 from common.log import RateLimitedLog, kv
 from common.messages import (
     CameraInfo,
     Decision,
     DecodeError,
+    DriverInputs,
+    EgoMotion,
     RadarTracks,
     VerifierStatus,
     decode,
@@ -109,6 +113,9 @@ class FusionShell:
         self.counters = ReasonCounter()
         self._rl = RateLimitedLog(log)
         self._lock = threading.Lock()
+        # The core's vehicle state: written by the vehicle subscriptions, sampled once per
+        # radar cycle (a lock of its own: a 50 Hz sample never waits for a radar cycle).
+        self._vehicle_lock = threading.Lock()
         self._last_radar_seq: int | None = None
         self._proc_us: deque[float] = deque(maxlen=512)
         self._subs: list[zenoh.Subscriber[None]] = []
@@ -139,6 +146,9 @@ class FusionShell:
         self._gate_thread.start()
         self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
                                                  sensor=self.s.radar_sensor))
+        if self.s.decision.rule is RuleName.KINEMATIC:
+            self._subs.append(self.bus.subscribe(EGO_MOTION, self.on_vehicle))
+            self._subs.append(self.bus.subscribe(VEHICLE_DRIVER, self.on_vehicle))
         for name in self.camera_names:
             if name in self.calibrations:
                 self._subs.append(self.bus.subscribe(CAMERA_INFO, self.on_camera_info,
@@ -167,6 +177,11 @@ class FusionShell:
             self._rl.warning(f"calibration:{info.camera}", "camera_calibration_differs",
                              camera=info.camera, ours=ours.origin,
                              differences="; ".join(diff))
+
+    def on_vehicle(self, msg: EgoMotion | DriverInputs, key: str) -> None:
+        """`vehicle/motion` or `vehicle/driver` (any thread) into the core's state."""
+        with self._vehicle_lock:
+            self.core.on_vehicle(msg, wall_ns(), mono_ns())
 
     def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
         """Zenoh's callback: a cycle is handled here at once unless one was handled less
@@ -225,8 +240,11 @@ class FusionShell:
             self._check_order(tracks)
             feeds = [d.snapshot() for d in self.decoders]
             decided: DecidedCycle | None = None
+            with self._vehicle_lock:
+                now_mono = mono_ns()
+                vehicle = self.core.vehicle.sample(now_mono)
             try:
-                decided = self.core.decide(tracks, feeds, wall_ns(), mono_ns())
+                decided = self.core.decide(tracks, feeds, wall_ns(), now_mono, vehicle)
                 command = decided.command
             except Exception as exc:  # one command per radar cycle, even when a bug bites
                 self._count_failure(tracks, exc)
@@ -288,6 +306,15 @@ class FusionShell:
                                         "move: camera unavailable")
         if cmd.decision is not Decision.NONE:
             self.counters.add(cmd.decision.value.lower() + ("_held" if cmd.held else ""))
+        if result.targets.vehicle_state:
+            # The degraded mode (docs/fusion.md): at most WARNING until the state is fresh.
+            self.counters.add("vehicle_state_stale")
+            self._rl.warning("vehicle:stale", "vehicle_state_stale",
+                             detail=result.targets.vehicle_state,
+                             policy="kinematic rule at most WARNING")
+        if cmd.override:
+            self.counters.add("driver_override")
+            self.counters.add("override_" + cmd.override.replace(" ", "_").replace("-", ""))
         if cmd.verifier_status is not VerifierStatus.OK:
             self.counters.add(cmd.verifier_status.value)
             self._rl.warning(f"status:{cmd.verifier_status.value}", "verifier_not_ok",
@@ -305,6 +332,12 @@ class FusionShell:
                    depth_received=sum(f.depth_received for f in feeds),
                    depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
                    invalid_tracks=self.core.invalid_tracks, tracks_shed=self._gate.shed)
+        if self.s.decision.rule is RuleName.KINEMATIC:
+            with self._vehicle_lock:
+                for name, state in (("motion", self.core.vehicle.motion),
+                                    ("driver", self.core.vehicle.driver)):
+                    for why, n in state.counts.snapshot().items():
+                        out[f"vehicle_{name}_{why}"] = n
         if len(feeds) > 1:
             for name, f in zip(self.camera_names, feeds, strict=True):
                 out[f"frames_{name}"] = f"{f.received}/{f.undecodable}/{f.dropped}"

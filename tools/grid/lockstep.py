@@ -15,7 +15,9 @@ RadarTracks, encoded and decoded as on the wire, into `FusionCore.process` with 
 camera's frames as fusion's decoder would hold them (camera.py: 30 fps, each rendered
 only when fusion reads it), the signed BrakeCommand into `BrakeCore.on_command`, its
 lines to the simulated actuator and the acknowledgements back (brake.py), the brake's
-timer at its due times. A candidate fusion (`LoopConfig.candidate`) gets the same
+timer at its due times; `vehicle/motion` and `vehicle/driver` every 20 ms (the ego's
+speed and yaw rate, the scenario's driver; `LoopSettings.vehicle_motion`) into every
+fusion core's vehicle state after a hop. A candidate fusion (`LoopConfig.candidate`) gets the same
 tracks and frames in shadow mode: its commands never reach the brake.
 
 Before the scenario starts the loop runs on an empty road until the brake is armed and
@@ -33,12 +35,14 @@ import msgspec
 from common.calibration import Calibration
 from common.command_auth import CommandSigner, load_keyring, load_signing_key
 from common.config.brake import BrakeSettings
-from common.config.fusion import FusionConfig
+from common.config.fusion import FusionConfig, RuleName
 from common.config.loader import load_config
 from common.config.radar import RadarSettings
 from common.messages import (
     BrakeCommand,
     Decision,
+    DriverInputs,
+    EgoMotion,
     Header,
     RadarTracks,
     VerifiedTargets,
@@ -63,6 +67,7 @@ from tools.sim.scenario_run import (
     RadarSchedule,
     ScenarioRun,
     radar_view,
+    vehicle_messages,
     world_message,
 )
 from tools.sim.verdict import Sample, Verdict
@@ -93,10 +98,12 @@ class LoopConfig:
 
     @classmethod
     def load(cls, fusion: Path, candidate: Path | None = None) -> "LoopConfig":
-        """From fusion config files. Raises ConfigError."""
-        return cls(load_config(fusion, FusionConfig),
-                   load_config(candidate, FusionConfig) if candidate is not None else None,
-                   name=fusion.stem)
+        """From fusion config files; the radar's settings are the defaults (the paper's
+        prefilter, 25 m), widened to what a kinematic fusion's range gate reaches (as
+        deploy/radar.toml is). Raises ConfigError."""
+        cfg = load_config(fusion, FusionConfig)
+        cand = load_config(candidate, FusionConfig) if candidate is not None else None
+        return cls(cfg, cand, radar=radar_for(cfg, cand), name=fusion.stem)
 
 
 @dataclass
@@ -211,6 +218,8 @@ class Lockstep:
             ev.at(0, self._tick)
             ev.at(round(self.rng.uniform(0, self.camera.period_ns)), self._capture)
             ev.at(HOUSEKEEPING_NS, self._housekeeping)
+            if self.config.loop.vehicle_motion:
+                ev.at(0, self._vehicle)
             if not ev.run_until(self._settled, round(SETTLE_LIMIT_S * 1e9)):
                 raise LockstepError(
                     f"{self.scenario.name}: the stack did not settle within "
@@ -274,6 +283,22 @@ class Lockstep:
             self.events.at(at + self.delays.zenoh_hop_ns, partial(self._fusion, payload))
         self.events.at(t_ns + HOUSEKEEPING_NS, self._housekeeping)
 
+    def _vehicle(self, t_ns: int) -> None:
+        """The vehicle gateway's tick: both messages, as of the last world step, to every
+        fusion core one hop later."""
+        ev = self.events
+        header = Header(seq=0, source="sim", stamp_ns=ev.wall_ns(t_ns),
+                        pub_mono_ns=ev.mono_ns(t_ns))
+        messages = vehicle_messages(self.run, header)
+        ev.at(t_ns + self.delays.zenoh_hop_ns, partial(self._vehicle_arrives, messages))
+        ev.at(t_ns + round(self.config.loop.world_period_s * 1e9), self._vehicle)
+
+    def _vehicle_arrives(self, messages: tuple[EgoMotion, DriverInputs], t_ns: int) -> None:
+        wall, mono = self.events.wall_ns(t_ns), self.events.mono_ns(t_ns)
+        for fusion in self._instances():
+            for msg in messages:
+                fusion.core.on_vehicle(msg, wall, mono)
+
     def _world(self, t_ns: int) -> SimWorld:
         header = Header(seq=0, source="sim", stamp_ns=self.events.wall_ns(t_ns),
                         pub_mono_ns=self.events.mono_ns(t_ns))
@@ -320,6 +345,19 @@ def _published(command: BrakeCommand, pub_mono_ns: int) -> BrakeCommand:
     """The command as the shell publishes it: stamped when it was decided."""
     return msgspec.structs.replace(
         command, header=msgspec.structs.replace(command.header, pub_mono_ns=pub_mono_ns))
+
+
+def radar_for(*configs: FusionConfig | None) -> RadarSettings:
+    """The radar service's settings for these fusion instances: the defaults, with the
+    prefilter's range out to the farthest kinematic range gate among them."""
+    radar = RadarSettings()
+    reach = max((c.fusion.decision.kinematic.range_max_m for c in configs
+                 if c is not None and c.fusion.decision.rule is RuleName.KINEMATIC),
+                default=0.0)
+    if reach <= radar.prefilter.max_range_m:
+        return radar
+    return msgspec.structs.replace(
+        radar, prefilter=msgspec.structs.replace(radar.prefilter, max_range_m=reach))
 
 
 def _check_camera(cfg: FusionConfig, camera: CameraSettings) -> None:

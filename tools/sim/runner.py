@@ -19,11 +19,12 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import can
+import msgspec
 
 from common.bus import Bus
 from common.clock import mono_ns, wall_ns
-from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD
-from common.messages import BrakeCommand, BrakeStatus, EgoMotion, Header
+from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD, VEHICLE_DRIVER
+from common.messages import BrakeCommand, BrakeStatus, Header
 from tools.keys import SIM_WORLD
 from tools.sim.radar_feed import RadarFeed
 from tools.sim.scenario import Scenario
@@ -32,6 +33,7 @@ from tools.sim.scenario_run import (
     RadarSchedule,
     ScenarioRun,
     radar_view,
+    vehicle_messages,
     world_message,
 )
 from tools.sim.verdict import Sample, Verdict
@@ -107,6 +109,8 @@ class Simulator:
         self.on_sample: Callable[[Sample], None] | None = None
         self._world_pub = bus.publisher(SIM_WORLD)
         self._motion_pub = bus.publisher(EGO_MOTION) if self.settings.vehicle_motion else None
+        self._driver_pub = (bus.publisher(VEHICLE_DRIVER) if self.settings.vehicle_motion
+                            else None)
         self._subs = [bus.subscribe(FUSION_BRAKE_CMD, self._on_command, instance=instance),
                       bus.subscribe(BRAKE_STATUS, self._on_status)]
 
@@ -203,12 +207,13 @@ class Simulator:
         seq = self.bus.next_seq("sim/world")
         stamp, mono = wall_ns(), mono_ns()
         world = world_message(run, Header(seq, "sim", stamp, mono), self._runs)
-        speed, yaw_rate = world.ego_speed_mps, world.ego_yaw_rate_dps
         self._world_pub.put(world)
-        if self._motion_pub is not None:
-            self._motion_pub.put(EgoMotion(header=Header(self.bus.next_seq("vehicle/motion"),
-                                                         "sim", stamp, mono),
-                                           speed_mps=speed, yaw_rate_dps=yaw_rate))
+        if self._motion_pub is not None and self._driver_pub is not None:
+            motion, driver = vehicle_messages(run, Header(0, "sim", stamp, mono))
+            self._motion_pub.put(msgspec.structs.replace(motion, header=Header(
+                self.bus.next_seq("vehicle/motion"), "sim", stamp, mono)))
+            self._driver_pub.put(msgspec.structs.replace(driver, header=Header(
+                self.bus.next_seq("vehicle/driver"), "sim", stamp, mono)))
 
     def _record(self, run: _Run, position: float) -> None:
         sample = run.record(self.decision, self.brake_state, self.actuator.commanded_pct(),

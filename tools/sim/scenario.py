@@ -96,6 +96,29 @@ class EgoSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     brake_lag_s: NonNeg = 0.15
 
 
+class DriverSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """`[driver]`: what the simulated driver does, each from a time into the run (None:
+    never). Without it the driver holds the throttle part-way (`accelerator_pct`), keeps
+    the lane with the wheel (its angle follows the road through a bicycle model) and
+    never brakes.
+
+    - `kickdown_at_s`: the accelerator floored (kick-down switch) from then on; the ego
+      keeps its speed (the simulated car does not accelerate).
+    - `steer_at_s`: a steering manoeuvre: the wheel turned at `steer_rate_dps` for
+      `steer_duration_s`, then held; the ego still keeps its lane (the manoeuvre is an
+      input to the stack, not a lane change).
+    - `brake_at_s`: the brake pedal pressed from then on, decelerating the ego at
+      `brake_decel_mps2` (or the actuator's, whichever is larger)."""
+
+    accelerator_pct: Annotated[float, msgspec.Meta(ge=0, le=100)] = 20.0
+    kickdown_at_s: NonNeg | None = None
+    steer_at_s: NonNeg | None = None
+    steer_rate_dps: Annotated[float, msgspec.Meta(ge=-1000, le=1000)] = 300.0
+    steer_duration_s: Positive = 0.4
+    brake_at_s: NonNeg | None = None
+    brake_decel_mps2: Annotated[float, msgspec.Meta(gt=0, le=12)] = 4.0
+
+
 class CameraLook(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """How the rendered scene looks: `brightness` scales the light (1 day, 0.3 dusk),
     `noise` is the sensor noise standard deviation in grey levels."""
@@ -156,6 +179,7 @@ class Scenario(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     road: RoadSpec = msgspec.field(default_factory=RoadSpec)
     radar: RadarLook = msgspec.field(default_factory=RadarLook)
     camera: CameraLook = msgspec.field(default_factory=CameraLook)
+    driver: DriverSpec = msgspec.field(default_factory=DriverSpec)
 
     def radar_look(self) -> RadarLook:
         """The radar's look in this scenario's weather: rain adds clutter and noise."""

@@ -12,13 +12,17 @@ import math
 import random
 from dataclasses import dataclass, field
 
-from common.messages import Header
+from common.messages import DriverInputs, EgoMotion, Gear, Header
 from tools.messages import SimObject, SimWorld
 from tools.sim.scenario import Scenario, ScenarioKind
 from tools.sim.verdict import Sample, Verdict, judge
 from tools.sim.world import Body, World
 
 STOPPED_MPS = 0.01
+# The simulated car's steering (the world keeps the lane; the wheel angle is what a
+# driver would turn for the road's curvature): a bicycle model.
+SIM_WHEELBASE_M = 2.7
+SIM_STEERING_RATIO = 15.0
 
 
 @dataclass(frozen=True)
@@ -137,3 +141,33 @@ def world_message(run: ScenarioRun | None, header: Header, runs: int) -> SimWorl
         ego_y_m=pose.y_m, ego_heading_deg=math.degrees(pose.heading_rad),
         ego_yaw_rate_dps=yaw_rate, ego_s_m=w.ego.s_m, ego_d_m=w.ego.d_m,
         road=run.scenario.road, lighting=run.scenario.lighting)
+
+
+def vehicle_messages(run: ScenarioRun | None, header: Header) -> tuple[EgoMotion, DriverInputs]:
+    """`vehicle/motion` and `vehicle/driver` now, as the gateway would publish them: the
+    ego's speed and yaw rate, the driver's inputs from the scenario's `[driver]` (the
+    ego at rest, nothing pressed, between runs)."""
+    if run is None or run.ended:
+        motion = EgoMotion(header=header, speed_mps=0.0, yaw_rate_dps=0.0)
+        return motion, DriverInputs(
+            header=header, steering_wheel_angle_deg=0.0, steering_wheel_rate_dps=0.0,
+            accelerator_pedal_pct=0.0, kickdown=False, brake_pedal_pressed=False,
+            brake_pressure_bar=0.0, gear=Gear.DRIVE)
+    w = run.world
+    d = run.scenario.driver
+    t = w.t_s
+    k = w.road.curvature_at(w.ego.s_m)
+    angle = math.degrees(math.atan(SIM_WHEELBASE_M * k)) * SIM_STEERING_RATIO
+    rate = 0.0
+    if d.steer_at_s is not None and t >= d.steer_at_s:
+        turning = t - d.steer_at_s
+        angle += d.steer_rate_dps * min(turning, d.steer_duration_s)
+        rate = d.steer_rate_dps if turning < d.steer_duration_s else 0.0
+    kickdown = d.kickdown_at_s is not None and t >= d.kickdown_at_s
+    braking = d.brake_at_s is not None and t >= d.brake_at_s
+    motion = EgoMotion(header=header, speed_mps=w.ego.speed_mps, yaw_rate_dps=w.yaw_rate_dps())
+    return motion, DriverInputs(
+        header=header, steering_wheel_angle_deg=angle, steering_wheel_rate_dps=rate,
+        accelerator_pedal_pct=100.0 if kickdown else 0.0 if braking else d.accelerator_pct,
+        kickdown=kickdown, brake_pedal_pressed=braking,
+        brake_pressure_bar=30.0 if braking else 0.0, gear=Gear.DRIVE)

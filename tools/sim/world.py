@@ -181,6 +181,9 @@ class World:
             return
         spec = self.scenario.ego
         target = spec.max_decel_mps2 * min(max(brake_position_pct, 0.0), 100.0) / 100.0
+        driver = self.scenario.driver
+        if driver.brake_at_s is not None and self.t_s >= driver.brake_at_s:
+            target = max(target, driver.brake_decel_mps2)
         ego = self.ego
         if spec.brake_lag_s > 0:
             ego.decel_mps2 += (target - ego.decel_mps2) * (1 - math.exp(-dt_s / spec.brake_lag_s))
