@@ -53,7 +53,7 @@ MIN_WAIT_NS = 100_000
 TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
 STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
 _TIMER_PERIOD_NS = round(TIMER_PERIOD_S * 1e9)
-QUEUE_CAPACITY = 32         # queued command samples at most; the oldest dropped beyond
+QUEUE_CAPACITY = 256        # queued command samples at most; the oldest dropped beyond
 MAX_UNKNOWN_IDS_LOGGED = 64   # a flood of made-up key ids is counted, not logged each
 
 
