@@ -213,3 +213,101 @@ class TrackFlood(Fault):
             detail += f"; FAILSAFE ({len(failsafe)} statuses, {failsafe[0].msg.reason}; {grew})"
         return Outcome(ok and response <= FLOOD_RECOVER_BOUND_MS, response, detail,
                        lost=1 if failsafe else 0, bound_ms=FLOOD_RECOVER_BOUND_MS)
+
+
+SIDE_VEHICLE = "faults-brake"        # keys of its own: the stack never sees this brake
+SIDE_PERIOD_S = 0.02
+RESTART_BOUND_MS = 15_000.0          # python starting the brake again on a loaded machine
+
+
+class BrakeRestartMidStop(Fault):
+    """A brake of its own beside the stack (its own simulated actuator on a pty, its own
+    key, a vehicle name of its own) braking at 100 % on a command stream the harness
+    publishes: SIGKILL, then the same brake started again while the stream still says
+    BRAKE. The new process asks the actuator what it holds before it commands anything:
+    its lines never go below 100 %."""
+
+    name = "brake restart mid-stop"
+    required = "the restarted brake's lines never release the stop (never below the level)"
+
+    def available(self, ctx: Context) -> str:
+        return "" if run_dir(ctx).is_dir() else f"no {run_dir(ctx)}"
+
+    def inject(self, ctx: Context) -> Outcome:
+        from common.bus import Bus
+        from common.command_auth import CommandSigner, new_key, write_key
+        from common.config import ZenohMode, ZenohSettings
+        from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+        from tools.faults.intruder import forged_command
+        from tools.sim.actuator import SimActuator
+
+        folder = run_dir(ctx) / "side-brake"
+        folder.mkdir(exist_ok=True)
+        key = new_key("primary")
+        key_path = folder / "primary.key"
+        write_key(key_path, key, overwrite=True)
+        link = folder / "actuator"
+        config = folder / "brake.toml"
+        config.write_text(f'vehicle = "{SIDE_VEHICLE}"\n[zenoh]\nconnect = ["{ctx.loop.endpoint}"]'
+                          f'\n[brake]\ncommand_keys = ["{key_path}"]\n'
+                          f'[brake.serial]\nport = "{link}"\n')
+        sim, pair = SimActuator.on_pty(link, seed=ctx.rng.randrange(1 << 16))
+        braking = threading.Event()
+        stop = threading.Event()
+        argv = [sys.executable, "-m", "services.brake", "-c", str(config)]
+        procs: list[subprocess.Popen[bytes]] = []
+        settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(ctx.loop.endpoint,))
+        try:
+            with sim, Bus.open(settings, SIDE_VEHICLE, "fusion/primary") as bus:
+                bus.subscribe(BRAKE_STATUS, lambda s, k: braking.set()
+                              if s.state is BrakeState.BRAKING else braking.clear())
+                pub = bus.publisher(FUSION_BRAKE_CMD, instance="primary")
+                signer = CommandSigner(key)
+
+                def stream() -> None:
+                    seq = 0
+                    while not stop.wait(SIDE_PERIOD_S):
+                        pub.put_bytes(signer.sign(forged_command(seq, "primary")))
+                        seq += 1
+
+                thread = threading.Thread(target=stream, daemon=True)
+                thread.start()
+                procs.append(subprocess.Popen(argv, cwd=folder, stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL))
+                if not _wait(braking, 60.0):
+                    return Outcome(False, None, "the side brake never braked")
+                procs[0].kill()
+                procs[0].wait(30)
+                braking.clear()
+                t_restart = mono_ns()
+                procs.append(subprocess.Popen(argv, cwd=folder, stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL))
+                again = _wait(braking, 60.0)
+                stop.set()
+                thread.join(5)
+                lines = sim.commands_since(t_restart)
+        finally:
+            stop.set()
+            for proc in procs:
+                if proc.poll() is None:
+                    proc.terminate()
+                    try:
+                        proc.wait(15)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+            pair.remove()
+        if not lines:
+            return Outcome(False, None, "no line from the restarted brake")
+        first_ms = (lines[0].t_ns - t_restart) / MS
+        levels = [r.cmd.level_pct for r in lines]
+        detail = (f"restarted: first line {first_ms:.0f} ms after the restart at "
+                  f"{levels[0]} %, lowest {min(levels)} % in {len(levels)} lines, "
+                  f"{sim.queries} queries")
+        released = min(levels) < 100
+        return Outcome(not released and again and first_ms <= RESTART_BOUND_MS, first_ms,
+                       detail + ("" if again else "; not BRAKING again"),
+                       lost=int(released), bound_ms=RESTART_BOUND_MS)
+
+
+def _wait(event: threading.Event, timeout_s: float) -> bool:
+    return event.wait(timeout_s)
