@@ -131,7 +131,10 @@ def test_secure_profile_an_intruder_with_the_candidates_or_the_primarys_certific
         finally:
             fusion.stop()
     assert sum(sent_candidate.values()) > 200
-    assert quiet.rejected == before.rejected, "the candidate's commands reached the brake"
+    # (a real command delayed beyond max_age_ms on a loaded host is too_old: not theirs)
+    assert {k: v for k, v in quiet.rejected.items() if k != "too_old"} == \
+        {k: v for k, v in before.rejected.items() if k != "too_old"}, \
+        "the candidate's commands reached the brake"
     grew = {k: after.rejected.get(k, 0) - before.rejected.get(k, 0) for k in after.rejected}
     # blind: the key id is guessed too (unknown_key); never a valid MAC
     assert grew.get("unauthenticated", 0) + grew.get("unknown_key", 0) == total, grew
