@@ -1,7 +1,12 @@
 """The brake service's I/O shell: feeds the pure core from three threads under one lock.
 
-- Zenoh's callback thread: every BrakeCommand sample -> core -> serial write, right there
-  (the command path: no queue, no hand-off to another thread);
+- the command thread (`brake-commands`): every BrakeCommand sample -> core -> serial
+  write, right there (the command path). Zenoh puts the samples into a ring of
+  QUEUE_CAPACITY without running any Python (no GIL taken per sample on its receive
+  thread), the oldest dropped when it is full: a flood of commands costs the brake only
+  what it handles, and the newest command waits at most QUEUE_CAPACITY handlings, never
+  the backlog of the flood (`command_queue_full` counts the times the thread found the
+  ring full, i.e. dropped older samples);
 - the timer thread (`brake-timer`, one real-time priority above the command path): wakes
   at the core's next due time (deadline expiry, hold end, heartbeat, acknowledgement
   timeout) and at least every TIMER_PERIOD_S, so that silence is detected without any
@@ -48,6 +53,7 @@ MIN_WAIT_NS = 100_000
 TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
 STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
 _TIMER_PERIOD_NS = round(TIMER_PERIOD_S * 1e9)
+QUEUE_CAPACITY = 256        # queued command samples at most; the oldest dropped beyond
 MAX_UNKNOWN_IDS_LOGGED = 64   # a flood of made-up key ids is counted, not logged each
 
 
@@ -104,7 +110,7 @@ class BrakeShell:
         self._last_frame: Command | None = None   # the last line written
         self._stopping = False
         self._status_pub: TypedPublisher[BrakeStatus] | None = None
-        self._subscriber: zenoh.Subscriber[None] | None = None
+        self._subscriber: zenoh.Subscriber[zenoh.Handler[zenoh.Sample]] | None = None
         self._token: zenoh.LivelinessToken | None = None
         self._status_seq = 0
         self._published_version = -1
@@ -114,6 +120,7 @@ class BrakeShell:
         self.cmd_to_serial_us: float | None = None
         self.radar_to_serial_us: float | None = None
         self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
+        self._drainer: threading.Thread | None = None
         self._rt = ThreadRealtime(s.realtime, log, "brake command callback")
 
     # ---- life cycle ---------------------------------------------------------------
@@ -130,7 +137,12 @@ class BrakeShell:
         with self._lock:
             self._status_pub = publisher
             self._cond.notify()
-        self._subscriber = bus.subscribe_raw(FUSION_BRAKE_CMD, self.on_command)
+        self._subscriber = bus.session.declare_subscriber(
+            FUSION_BRAKE_CMD.wildcard(self.cfg.vehicle),
+            zenoh.handlers.RingChannel(QUEUE_CAPACITY))
+        self._drainer = threading.Thread(target=self._drain_loop, args=(self._subscriber,),
+                                         name="brake-commands", daemon=True)
+        self._drainer.start()
         apply_process(self.cfg.brake.realtime, self._log)
         self._token = bus.declare_health(SERVICE, INSTANCE)
         systemd.status(f"serving: following fusion {self.cfg.brake.instance}")
@@ -147,13 +159,37 @@ class BrakeShell:
         if self._token is not None:
             self._token.undeclare()
         if self._subscriber is not None:
-            self._subscriber.undeclare()
+            self._subscriber.undeclare()      # ends the command thread's wait
+        if self._drainer is not None:
+            self._drainer.join(timeout=5.0)
 
     # ---- events (each under the lock) -----------------------------------------------
 
-    def on_command(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
-        """Zenoh's thread: validate, decide and write to the serial line at once."""
+    def _drain_loop(self, sub: zenoh.Subscriber[zenoh.Handler[zenoh.Sample]]) -> None:
+        """The command thread: each sample of the ring, in arrival order, handled at once;
+        ends when the subscriber is undeclared."""
         self._rt.ensure()
+        handler = sub.handler
+        while True:
+            try:
+                batch = [handler.recv()]       # waits without the GIL
+                while len(batch) < QUEUE_CAPACITY and (more := handler.try_recv()) is not None:
+                    batch.append(more)
+            except zenoh.ZError:
+                return                         # undeclared: the service is stopping
+            if len(batch) >= QUEUE_CAPACITY:
+                self.errors["command_queue_full"] += 1
+            for sample in batch:
+                if sample.kind != zenoh.SampleKind.PUT:
+                    continue
+                try:
+                    self.on_command(sample.payload.to_bytes(), str(sample.key_expr), mono_ns())
+                except Exception as exc:  # the command path must outlive a bug
+                    self.errors["command_failed"] += 1
+                    self._rl.error("command", "command_failed", error=repr(exc))
+
+    def on_command(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        """The command thread: validate, decide and write to the serial line at once."""
         with self._lock:
             before = (self.core.state, self.core.command_state)
             out = self.core.on_command(payload, key, rx_mono_ns, wall_ns())

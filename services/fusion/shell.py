@@ -1,8 +1,8 @@
 """The fusion I/O shell: each camera's frames (and, for a verifier that needs depth, its
 depth) to its decoder, radar cycles through the core, messages out. Exactly one
 BrakeCommand per radar cycle handled, published before its VerifiedTargets; from the bus,
-at most one cycle per `min_cycle_interval_s` (`RadarGate`): a flood of tracks sheds cycles
-instead of signing a command for each."""
+at most one cycle per `min_cycle_interval_s` (`RadarGate`), the newest: a flood of tracks
+sheds cycles instead of signing a command for each."""
 
 import logging
 import threading
@@ -49,47 +49,57 @@ from services.fusion.core import CycleResult, DecidedCycle, FusionCore
 from services.fusion.frames import FROZEN_REASON, FrameDecoder
 from services.fusion.verifiers import wants_depth
 
+RADAR_RING = 4     # radar samples Zenoh keeps for the radar thread; the oldest dropped
+
 
 class RadarGate:
-    """At most one radar cycle per `interval_ns`, the newest winning: `offer` says whether
-    a cycle may be handled now; one that comes too soon waits (replacing, and shedding,
-    any that waits already) and `due` hands it out once its time has come. Not
-    thread-safe: the shell's gate lock."""
+    """At most one radar cycle per `interval_ns`: `wait_ns` says how long until the next
+    may be handled, `take` marks one handled. Not thread-safe: the radar thread only."""
 
     def __init__(self, interval_ns: int) -> None:
         self.interval_ns = interval_ns
-        self.shed = 0
         self._last_ns: int | None = None
-        self._pending: tuple[RadarTracks, int] | None = None
-
-    def offer(self, tracks: RadarTracks, rx_mono_ns: int, now_ns: int) -> bool:
-        """True: handle `tracks` now (its slot is taken). False: it waits (or was shed)."""
-        if self._pending is None and (self._last_ns is None
-                                      or now_ns - self._last_ns >= self.interval_ns):
-            self._last_ns = now_ns
-            return True
-        if self._pending is not None:
-            self.shed += 1
-        self._pending = (tracks, rx_mono_ns)
-        return False
-
-    def due(self, now_ns: int) -> tuple[RadarTracks, int] | None:
-        """The waiting cycle once its slot has come (the slot then taken), else None."""
-        if self._pending is None or self.wait_ns(now_ns) > 0:
-            return None
-        pending, self._pending = self._pending, None
-        self._last_ns = now_ns
-        return pending
 
     def wait_ns(self, now_ns: int) -> int:
-        """How long until the waiting cycle is due (0: now, or nothing waits)."""
-        if self._pending is None or self._last_ns is None:
+        if self._last_ns is None:
             return 0
         return max(0, self._last_ns + self.interval_ns - now_ns)
 
-    @property
-    def waiting(self) -> bool:
-        return self._pending is not None
+    def take(self, now_ns: int) -> None:
+        self._last_ns = now_ns
+
+
+class LocalRing:
+    """What Zenoh's RingChannel handler offers (`recv`, `try_recv`), filled by a
+    callback: for a bus without a Zenoh session (test doubles)."""
+
+    def __init__(self, capacity: int) -> None:
+        self._items: deque[tuple[bytes, str, int]] = deque(maxlen=capacity)
+        self._cond = threading.Condition()
+        self._closed = False
+
+    def put(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        with self._cond:
+            self._items.append((payload, key, rx_mono_ns))
+            self._cond.notify()
+
+    def recv(self) -> tuple[bytes, str, int]:
+        """The oldest item, waiting for one. Raises EOFError once closed."""
+        with self._cond:
+            while not self._items and not self._closed:
+                self._cond.wait()
+            if not self._items:
+                raise EOFError("closed")
+            return self._items.popleft()
+
+    def try_recv(self) -> tuple[bytes, str, int] | None:
+        with self._cond:
+            return self._items.popleft() if self._items else None
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
 
 
 class FusionShell:
@@ -126,10 +136,10 @@ class FusionShell:
         self._tgt_pub = bus.publisher(FUSION_TARGETS, instance=settings.instance)
         self._rt = ThreadRealtime(settings.realtime, log, "fusion radar callback")
         self._gate = RadarGate(round(settings.min_cycle_interval_s * 1e9))
-        self._gate_cond = threading.Condition()
-        self._gate_stop = False
-        self._gate_thread = threading.Thread(target=self._deferred_loop,
-                                             name="fusion-radar-deferred", daemon=True)
+        self.tracks_shed = 0
+        self._radar_sub: Any = None
+        self._local_ring: LocalRing | None = None
+        self._radar_thread: threading.Thread | None = None
 
     @property
     def decoder(self) -> FrameDecoder:
@@ -143,9 +153,7 @@ class FusionShell:
             if wants_depth(self.core.verifier):
                 self._subs.append(self.bus.subscribe_raw(CAMERA_DEPTH, decoder.submit_depth,
                                                          camera=name))
-        self._gate_thread.start()
-        self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
-                                                 sensor=self.s.radar_sensor))
+        self._start_radar()
         if self.s.decision.rule is RuleName.KINEMATIC:
             self._subs.append(self.bus.subscribe(EGO_MOTION, self.on_vehicle))
             self._subs.append(self.bus.subscribe(VEHICLE_DRIVER, self.on_vehicle))
@@ -158,11 +166,13 @@ class FusionShell:
         for sub in self._subs:
             sub.undeclare()
         self._subs.clear()
-        with self._gate_cond:
-            self._gate_stop = True
-            self._gate_cond.notify()
-        if self._gate_thread.is_alive():
-            self._gate_thread.join(timeout=5.0)
+        if self._radar_sub is not None:
+            self._radar_sub.undeclare()       # ends the radar thread's wait
+            self._radar_sub = None
+        if self._local_ring is not None:
+            self._local_ring.close()
+        if self._radar_thread is not None:
+            self._radar_thread.join(timeout=5.0)
         for decoder in self.decoders:
             decoder.stop()
 
@@ -183,40 +193,68 @@ class FusionShell:
         with self._vehicle_lock:
             self.core.on_vehicle(msg, wall_ns(), mono_ns())
 
-    def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
-        """Zenoh's callback: a cycle is handled here at once unless one was handled less
-        than `min_cycle_interval_s` ago; then it waits for the deferred thread, and a
-        newer one replaces it (`tracks_shed`)."""
-        self._rt.ensure()
-        tracks = self._decoded(payload, key)
-        if tracks is None:
-            return
-        with self._gate_cond:
-            now_here = self._gate.offer(tracks, rx_mono_ns, mono_ns())
-            if not now_here:
-                self._gate_cond.notify()
-        if now_here:
-            self.handle(tracks, rx_mono_ns)
+    def _start_radar(self) -> None:
+        """Radar cycles reach the radar thread through a ring that Zenoh fills without
+        running any Python, the oldest dropped: a flood of tracks costs fusion only the
+        cycles it decides (a bus double without a session: a ring of our own)."""
+        session = getattr(self.bus, "session", None)
+        handler: Any
+        if isinstance(session, zenoh.Session):
+            self._radar_sub = session.declare_subscriber(
+                RADAR_TRACKS.wildcard(self.bus.vehicle, sensor=self.s.radar_sensor),
+                zenoh.handlers.RingChannel(RADAR_RING))
+            handler = self._radar_sub.handler
         else:
-            self._rl.warning("radar:shed", "radar_cycles_shed", shed=self._gate.shed,
-                             min_cycle_interval_s=self.s.min_cycle_interval_s,
-                             detail="tracks faster than one cycle per interval: the newest "
-                                    "in each interval is decided")
+            ring = self._local_ring = LocalRing(RADAR_RING)
+            self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, ring.put,
+                                                     sensor=self.s.radar_sensor))
+            handler = ring
+        self._radar_thread = threading.Thread(target=self._radar_loop, args=(handler,),
+                                              name="fusion-radar", daemon=True)
+        self._radar_thread.start()
 
-    def _deferred_loop(self) -> None:
-        """Handles the cycle that waited for its slot (the newest of a flood)."""
+    def _radar_loop(self, handler: Any) -> None:
+        """One radar cycle at a time: the newest waiting, at most one per
+        `min_cycle_interval_s`; the older ones waiting are shed (`tracks_shed`)."""
         self._rt.ensure()
         while True:
-            with self._gate_cond:
-                while not self._gate_stop:
-                    ready = self._gate.due(mono_ns())
-                    if ready is not None:
-                        break
-                    wait = self._gate.wait_ns(mono_ns()) if self._gate.waiting else None
-                    self._gate_cond.wait(None if wait is None else max(wait, 100_000) / 1e9)
-                else:
-                    return
-            self.handle(*ready)
+            try:
+                item = handler.recv()
+                wait = self._gate.wait_ns(mono_ns())
+                if wait > 0:
+                    time.sleep(wait / 1e9)
+                while (newer := handler.try_recv()) is not None:
+                    item = newer
+                    self._shed()
+            except (zenoh.ZError, EOFError):
+                return                       # undeclared: fusion is stopping
+            if not isinstance(item, tuple) and item.kind != zenoh.SampleKind.PUT:
+                continue
+            self._gate.take(mono_ns())
+            payload, key, rx = self._unpack(item)
+            tracks = self._decoded(payload, key)
+            if tracks is not None:
+                try:
+                    self.handle(tracks, rx)
+                except Exception as exc:  # the radar thread must outlive a bug
+                    self.counters.add("processing_error")
+                    self._rl.error("radar", "radar_cycle_failed", error=repr(exc))
+
+    def _shed(self) -> None:
+        """Count a cycle left out for a newer one (those the ring itself dropped are not
+        seen: `tracks_shed` is a lower bound under a flood)."""
+        self.tracks_shed += 1
+        self._rl.warning("radar:shed", "radar_cycles_shed", shed=self.tracks_shed,
+                         min_cycle_interval_s=self.s.min_cycle_interval_s,
+                         detail="tracks faster than one cycle per interval: the newest is "
+                                "decided, the others shed")
+
+    @staticmethod
+    def _unpack(item: Any) -> tuple[bytes, str, int]:
+        """(payload, key, receipt) of a ring item (a Zenoh sample: received now)."""
+        if isinstance(item, tuple):
+            return item
+        return item.payload.to_bytes(), str(item.key_expr), mono_ns()
 
     def _decoded(self, payload: bytes, key: str) -> RadarTracks | None:
         try:
@@ -331,7 +369,7 @@ class FusionShell:
                    frames_corrupt=sum(f.corrupt for f in feeds),
                    depth_received=sum(f.depth_received for f in feeds),
                    depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
-                   invalid_tracks=self.core.invalid_tracks, tracks_shed=self._gate.shed)
+                   invalid_tracks=self.core.invalid_tracks, tracks_shed=self.tracks_shed)
         if self.s.decision.rule is RuleName.KINEMATIC:
             with self._vehicle_lock:
                 for name, state in (("motion", self.core.vehicle.motion),

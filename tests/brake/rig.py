@@ -127,20 +127,24 @@ class BrakeRig:
 
 
 @contextmanager
-def brake_rig(log_dir: Path, secure: bool = False, **brake: Any) -> Iterator[BrakeRig]:
+def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
+              **brake: Any) -> Iterator[BrakeRig]:
     """Everything started and the brake service's liveliness token seen. `brake` holds
-    [brake] fields; nested tables as `serial={...}`, `actuator={...}`. `secure`: the
-    secure profile (TLS router with access control; this process observes as the
-    monitor, which may read everything and write nothing)."""
-    nested = {k: brake.pop(k) for k in ("serial", "actuator") if k in brake}
+    [brake] fields; nested tables as `serial={...}`, `actuator={...}`, `realtime={...}`.
+    `secure`: the secure profile (TLS router with access control; this process observes as the
+    monitor, which may read everything and write nothing). `watch_commands` false: this
+    process does not subscribe to the commands (a flood test: a slow subscriber of a
+    BLOCK key slows the router's delivery to every subscriber)."""
+    nested = {k: brake.pop(k) for k in ("serial", "actuator", "realtime") if k in brake}
     link = log_dir / "actuator"
     brake.setdefault("command_keys", [str(write_test_key(log_dir))])
     tables: dict[str, dict[str, Any]] = {
         "brake": brake,
         "brake.serial": {"port": str(link), **nested.get("serial", {})},
     }
-    if "actuator" in nested:
-        tables["brake.actuator"] = nested["actuator"]
+    for table in ("actuator", "realtime"):
+        if table in nested:
+            tables[f"brake.{table}"] = nested[table]
     config = log_dir / "brake.toml"
     with ExitStack() as stack:
         profile = stack.enter_context(secure_router(log_dir)) if secure else None
@@ -160,7 +164,8 @@ def brake_rig(log_dir: Path, secure: bool = False, **brake: Any) -> Iterator[Bra
             config_file=str(profile.client("monitor")) if profile else ""), "ego", "test"))
         status, commands = Log(), Log()
         bus.subscribe(BRAKE_STATUS, status)
-        bus.subscribe(FUSION_BRAKE_CMD, commands, instance="primary")
+        if watch_commands:
+            bus.subscribe(FUSION_BRAKE_CMD, commands, instance="primary")
         watch = HealthWatch(bus)
         try:
             watch.wait_alive("brake", "main", START_TIMEOUT_S)

@@ -12,6 +12,7 @@ import pytest
 
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeState, encode
+from services.brake.commands import RECENT
 from services.brake.protocol import HostMode
 from tests.brake.helpers import command, write_test_key
 from tests.brake.rig import BrakeRig, Stream, brake_rig
@@ -65,11 +66,14 @@ def test_brake_command_puts_brake_bytes_on_the_line(rig):
 
 def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
     """Wrong instance (a real candidate process and a forged payload), old
-    sequence, duplicate, too old, malformed, out-of-contract; the line stays at 0."""
+    sequence, duplicate, too old, malformed, out-of-contract; the line stays at 0. (A new
+    command at a sequence number already used is a second sender: tests/security.)"""
     start = len(rig.status)
     before = None
     with Stream(rig.bus) as stream:
         rig.wait_live(start, since_ns=stream.started_ns)
+        # old_sequence: further behind than the accepted commands the brake remembers
+        rig.wait_status(lambda s: s.last_cmd_seq > RECENT + 10, len(rig.status), 60)
         _, before = rig.wait_status(lambda s: True, len(rig.status))
         t0 = time.monotonic_ns()
         candidate = rig.publisher(level=100.0, instance="candidate", name="candidate")
@@ -78,8 +82,8 @@ def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
         def forged(next_seq: int) -> None:
             last = next_seq - 1
             put = stream.put
-            put(command(last, 100.0))                                    # duplicate
-            put(command(last - 3, 100.0))                                # old sequence
+            put(stream.sent[-1])                          # duplicate (the same bytes)
+            put(command(last - RECENT - 5, 100.0))        # old sequence
             put(command(next_seq, 100.0,
                         pub_mono_ns=time.monotonic_ns() - 1_000_000_000))  # too old
             put(command(next_seq, 100.0, instance="candidate"))         # wrong instance

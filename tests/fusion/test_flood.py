@@ -4,40 +4,83 @@ of each interval, and sheds the rest (`tracks_shed`) instead of signing a comman
 every message. The gate on a fake clock, then the fusion service as its own process."""
 
 import itertools
+import logging
 import re
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from common.clock import wall_ns
 from common.keys import FUSION_BRAKE_CMD, RADAR_TRACKS
-from services.fusion.shell import RadarGate
-from tests.fusion.helpers import CALIBRATION, cycle, track
-from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module
+from common.messages import encode
+from services.fusion.frames import FrameDecoder
+from services.fusion.shell import FusionShell, RadarGate
+from tests.fusion.helpers import CALIBRATION, FixedVerifier, cycle, make_core, track
+from tests.support import (
+    Collector,
+    HealthWatch,
+    ServiceProcess,
+    open_bus,
+    python_module,
+    wait_for,
+)
 
 MS = 1_000_000
 
 
-def test_the_gate_lets_one_cycle_per_interval_through_the_newest_winning():
-    gate = RadarGate(50 * MS)
-    assert gate.offer(cycle(seq=0), 0, 0)                 # the first at once
-    for i in range(1, 6):                                 # five more within 10 ms
-        assert not gate.offer(cycle(seq=i), i * MS, i * 2 * MS)
-    assert gate.shed == 4 and gate.due(49 * MS) is None
-    assert gate.wait_ns(20 * MS) == 30 * MS
-    ready = gate.due(50 * MS)
-    assert ready is not None and ready[0].header.seq == 5
-    assert gate.due(60 * MS) is None and not gate.waiting
-    assert not gate.offer(cycle(seq=6), 0, 70 * MS)       # slot taken at 50 ms
-    assert gate.offer(cycle(seq=7), 0, 200 * MS) is False  # one waits: it goes first
-    assert gate.shed == 5
+class RingBus:
+    """Just what FusionShell needs without Zenoh: publishers and subscriptions."""
+
+    vehicle = "ego"
+
+    def __init__(self) -> None:
+        self.subs: dict[str, Any] = {}
+        self.log: list[tuple[str, Any]] = []
+
+    def publisher(self, spec: Any, **params: str) -> Any:
+        log = self.log
+        return type("Pub", (), {"put": lambda _, msg: log.append((spec.name, msg))})()
+
+    def subscribe_raw(self, spec: Any, callback: Any, **params: str) -> Any:
+        self.subs[spec.name] = callback
+        return type("Sub", (), {"undeclare": lambda self: None})()
+
+    subscribe = subscribe_raw
+
+    def commands(self) -> list[Any]:
+        return [m for name, m in list(self.log) if name == "fusion_brake_cmd"]
 
 
-def test_a_radar_at_its_own_rate_is_never_held_back():
+def test_the_gate_spaces_cycles_by_the_interval():
     gate = RadarGate(50 * MS)
-    assert all(gate.offer(cycle(seq=i), 0, i * 75 * MS) for i in range(100))
-    assert gate.shed == 0
+    assert gate.wait_ns(0) == 0
+    gate.take(10 * MS)
+    assert gate.wait_ns(20 * MS) == 40 * MS and gate.wait_ns(60 * MS) == 0
+    gate.take(75 * MS)                                     # a radar at its own rate
+    assert gate.wait_ns(150 * MS) == 0
+
+
+def test_the_radar_thread_decides_the_newest_and_sheds_the_rest():
+    """Through the shell's ring (a bus double): 50 cycles at once give a few commands,
+    the last of them on the newest cycle."""
+    bus = RingBus()
+    core = make_core(FixedVerifier(), min_cycle_interval_s=0.05)
+    shell = FusionShell(bus, core.s, core,  # type: ignore[arg-type]
+                        FrameDecoder(848, 480, logging.getLogger("t")), logging.getLogger("t"))
+    shell.start()
+    try:
+        put = bus.subs["radar_tracks"]
+        for i in range(50):
+            put(encode(cycle(track(), seq=i, stamp_ns=wall_ns())), "k", i)
+        wait_for(lambda: any(c.radar_seq == 49 for c in bus.commands()), 30,
+                 what="the newest cycle decided")
+    finally:
+        shell.stop()
+    decided = [c.radar_seq for c in bus.commands()]
+    assert len(decided) < 50 and decided[-1] == 49
+    assert shell.tracks_shed + len(decided) <= 50 and shell.tracks_shed > 0
 
 
 @pytest.mark.slow
@@ -79,4 +122,5 @@ def test_a_track_flood_gets_one_command_per_cycle_interval(router, tmp_path: Pat
     assert min(b - a for a, b in itertools.pairwise(stamps)) >= 30 * MS
     seqs = [m.header.seq for m in commands.messages]
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))       # contiguous commands
-    assert shed and shed[-1] >= seq - 1 - len(during) - 5, (shed[-1:], seq, len(during))
+    # counted: those the radar thread left for a newer one (Zenoh's ring drops more)
+    assert shed and shed[-1] > 0

@@ -17,6 +17,16 @@ Attacks, in this order (each is counted in what it prints as one JSON line at th
   them) for `--flood-s`. An unbounded flood is a denial of service that no check in the
   brake can stop on the default profile (docs/security.md).
 
+With `--key FILE` (a stolen or published command key of the instance), two more attacks,
+not in the default list:
+
+- `keyed-ahead`: for `--keyed-s`, after every real command seen, a BRAKE 100 % command
+  at its sequence number + 2 signed with the key in the real fusion's own session (read
+  from the bus): what the published example key allowed before the brake refused it on
+  a real actuator;
+- `keyed-flood`: commands signed with the key in a session of its own at `--flood-hz`
+  for `--flood-s` (a second sender of the key, or a flood on the brake's own key).
+
 `--blind`: for an intruder that may not subscribe to the brake's key (the secure
 profile's access control): no recording, no replay; the sequence numbers ahead are
 guessed (from 1,000,000).
@@ -35,12 +45,13 @@ from collections.abc import Callable
 
 from common.bus import Bus, BusError
 from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandKey, CommandSigner
+from common.command_auth import CommandKey, CommandSigner, KeyFileError, load_key
 from common.config.base import ZenohMode, ZenohSettings
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeCommand, Decision, DecodeError, Header, VerifierStatus, decode
 
 ATTACKS = ("ahead", "jump", "forged", "replay", "flood")
+KEYED_ATTACKS = ("keyed-ahead", "keyed-flood")
 
 
 def forged_command(seq: int, instance: str, level: float = 100.0) -> BrakeCommand:
@@ -61,6 +72,8 @@ class Recorder:
         self.payloads: list[bytes] = []
         self.last_seq = -1
         self.key_id = ""
+        self.session: int | None = None     # the real fusion's CommandAuth.session
+        self.changed = threading.Condition()
         self.recording = True
         self._lock = threading.Lock()
         self.seen = threading.Event()
@@ -75,17 +88,25 @@ class Recorder:
         with self._lock:
             if cmd.auth is not None and not self.key_id:
                 self.key_id = cmd.auth.key_id
+            if cmd.auth is not None:
+                self.session = cmd.auth.session
             self.last_seq = max(self.last_seq, cmd.header.seq)
             if self.recording:
                 self.payloads.append(payload)
+        with self.changed:
+            self.changed.notify_all()
         self.seen.set()
 
 
 def run(bus: Bus, instance: str, attacks: tuple[str, ...], record_s: float,
         replay_delay_s: float, flood_s: float, flood_hz: float = 1000.0, blind: bool = False,
-        progress: Callable[[str], None] = lambda s: None) -> dict[str, int]:
+        progress: Callable[[str], None] = lambda s: None, key: CommandKey | None = None,
+        keyed_s: float = 1.0) -> dict[str, int]:
     """Publish the attacks; returns how many commands each one published. Raises
-    TimeoutError when (not `blind`) no command of the instance is seen in 30 s."""
+    TimeoutError when (not `blind`) no command of the instance is seen in 30 s,
+    ValueError for a keyed attack without `key`."""
+    if key is None and set(attacks) & set(KEYED_ATTACKS):
+        raise ValueError(f"{', '.join(KEYED_ATTACKS)} need a key (--key)")
     pub = bus.publisher(FUSION_BRAKE_CMD, instance=instance)
     rec = Recorder()
     sub = None if blind else bus.subscribe_raw(FUSION_BRAKE_CMD, rec, instance=instance)
@@ -134,6 +155,31 @@ def run(bus: Bus, instance: str, attacks: tuple[str, ...], record_s: float,
                     continue
                 seq = rec.last_seq + 1 + sent["flood"] % 50
                 put(forged_command(seq, instance), "flood", sent["flood"] % 2 == 1)
+        if "keyed-ahead" in attacks and key is not None:
+            progress("keyed-ahead")
+            stolen = CommandSigner(key, session=rec.session)
+            end = time.monotonic() + keyed_s
+            last = -1
+            while time.monotonic() < end:
+                with rec.changed:
+                    rec.changed.wait_for(lambda last=last: rec.last_seq != last,  # type: ignore[misc]
+                                         timeout=0.1)
+                if rec.last_seq == last:
+                    continue
+                last = rec.last_seq
+                pub.put_bytes(stolen.sign(forged_command(last + 2, instance)))
+                sent["keyed-ahead"] += 1
+        if "keyed-flood" in attacks and key is not None:
+            progress("keyed-flood")
+            own = CommandSigner(key)
+            start = time.monotonic()
+            end = start + flood_s
+            while (now := time.monotonic()) < end:
+                if flood_hz > 0 and sent["keyed-flood"] >= (now - start) * flood_hz:
+                    time.sleep(min(0.0005, end - now))
+                    continue
+                pub.put_bytes(own.sign(forged_command(sent["keyed-flood"], instance)))
+                sent["keyed-flood"] += 1
     finally:
         if sub is not None:
             sub.undeclare()
@@ -153,14 +199,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--replay-delay-s", type=float, default=0.5)
     parser.add_argument("--flood-s", type=float, default=1.0)
     parser.add_argument("--flood-hz", type=float, default=1000.0, help="0: unbounded")
+    parser.add_argument("--key", help="a command key file of the instance (keyed attacks)")
+    parser.add_argument("--keyed-s", type=float, default=1.0,
+                        help="how long keyed-ahead follows the real stream")
     parser.add_argument("--blind", action="store_true",
                         help="do not subscribe (no replay, guessed sequence numbers)")
     args = parser.parse_args(argv)
     attacks = tuple(a for a in args.attacks.split(",") if a)
-    unknown = set(attacks) - set(ATTACKS)
+    unknown = set(attacks) - set(ATTACKS) - set(KEYED_ATTACKS)
     if unknown:
-        print(f"error: unknown attacks {sorted(unknown)}; known: {','.join(ATTACKS)}",
-              file=sys.stderr)
+        print(f"error: unknown attacks {sorted(unknown)}; known: "
+              f"{','.join(ATTACKS + KEYED_ATTACKS)}", file=sys.stderr)
+        return 2
+    try:
+        key = load_key(args.key) if args.key else None
+    except KeyFileError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if key is None and set(attacks) & set(KEYED_ATTACKS):
+        print("error: keyed attacks need --key", file=sys.stderr)
         return 2
     settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=tuple(args.connect),
                              config_file=args.zenoh_config)
@@ -168,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         with Bus.open(settings, args.vehicle, "intruder") as bus:
             sent = run(bus, args.instance, attacks, args.record_s, args.replay_delay_s,
                        args.flood_s, args.flood_hz, args.blind,
-                       lambda s: print(f"intruder: {s}", flush=True))
+                       lambda s: print(f"intruder: {s}", flush=True), key, args.keyed_s)
     except (BusError, TimeoutError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

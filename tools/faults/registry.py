@@ -2,10 +2,14 @@
 
 from tools.faults.catalogue import CameraImpostorFrames, Fault, catalogue
 from tools.faults.robust import BadConfigStrings, BadReplayStamps
+from tools.faults.security import BrakeRestartMidStop, PublishedKey, TrackFlood
 
 
 def all_faults() -> list[Fault]:
     """The catalogue's faults, then those of bad input that must end in a named refusal
-    (a picture frozen under fresh noise, NUL bytes in a config, bad replay stamps)."""
+    (a picture frozen under fresh noise, NUL bytes in a config, bad replay stamps), then
+    a key holder, a flood and a restart (the published key, a radar track flood, a
+    brake restarted mid-stop)."""
     return [*catalogue(),
-            CameraImpostorFrames("noisy"), BadConfigStrings(), BadReplayStamps()]
+            CameraImpostorFrames("noisy"), BadConfigStrings(), BadReplayStamps(),
+            PublishedKey(), TrackFlood(), BrakeRestartMidStop()]
