@@ -18,7 +18,8 @@ of a cycle whose threats the camera all rejects. For each count (0 = the heartbe
 fixed cost; 1, 8, 64, 128): mean, p50, p95 and max; baselines from the same run: the
 paper's naive gate (colour crop, cvtColor, Canny, count) summed over the same ROIs, and
 one full-frame gate (how fast this machine is right now). Target: < 3 ms for 64 tracks
-(default gate scope).
+(default gate scope). The verifier is the one deploy/fusion.toml ships (`--verifier`
+for another); its cost per ROI is printed beside the paper's gate's on the same ROIs.
 
 Cameras: fusion with 1, 2 or 4 cameras (a SIMULATED rig: front, left, right, narrow)
 behind a Zenoh router, a separate process publishing each camera's 848x480 JPEG at
@@ -53,7 +54,7 @@ from common.calibration import Calibration, CalibrationFile
 from common.clock import mono_ns, wall_ns
 from common.config.base import ZenohMode, ZenohSettings
 from common.config.fusion import FusionConfig, FusionSettings
-from common.config.loader import parse_config
+from common.config.loader import load_config, parse_config
 from common.depth_image import encode_depth, to_units
 from common.imaging import decode_gray, encode_jpeg
 from common.keys import CAMERA_JPEG, RADAR_TRACKS
@@ -68,7 +69,7 @@ from common.messages import (
     encode,
 )
 from common.net import free_endpoint, wait_listening
-from common.resources import EXAMPLE_CALIBRATION
+from common.resources import DEPLOY, EXAMPLE_CALIBRATION
 from services.fusion.core import FusionCore
 from services.fusion.frames import FrameDecoder
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
@@ -97,6 +98,14 @@ CAMERA_TRACKS = 8
 SCENARIOS = {"threats": ("threats", "candidates"), "traffic": ("traffic", "candidates"),
              "gate all": ("threats", "all")}
 OBSTACLES = tuple(Obstacle(x, y) for x, y in ((6, 0.5), (12, -0.6), (20, 0.2)))
+
+
+def shipped_verifier() -> str:
+    """The verifier deploy/fusion.toml ships, as NAME:K=V,... (its parameters as the
+    config gives them, paths resolved)."""
+    v = load_config(DEPLOY / "fusion.toml", FusionConfig).fusion.verifier
+    params = ",".join(f"{k}={val}" for k, val in v.params.items())
+    return f"{v.name}:{params}" if params else v.name
 
 
 def tracks_payload(n: int, seq: int, rng: np.random.Generator, kind: str) -> bytes:
@@ -270,6 +279,39 @@ def measure_tracks(reps: int, verifier_spec: str = PAPER_GATE) -> dict[str, Any]
     return results
 
 
+def per_roi_us(verifier_spec: str, reps: int) -> dict[str, Any]:
+    """Each verifier's cost per ROI on the same observations: 64 threat tracks' columns
+    over 3.5-25 m in the rendered frame, with the depth image `measure_tracks` gives
+    (a return at 12 m on every pixel) to a verifier that uses depth; mean over `reps`
+    passes, us per ROI. `verifier_spec` beside the paper's gate."""
+    cal = Calibration.load(CALIBRATION)
+    gray = decode_gray(encode_jpeg(render(cal, Scene(obstacles=OBSTACLES, seed=3)), 80))
+    depth = np.full((cal.height, cal.width), 12.0, np.float32)
+    rng = np.random.default_rng(11)
+    xy = np.column_stack([rng.uniform(3.5, 25.0, 64), rng.uniform(-0.8, 0.8, 64)])
+    projector = ColumnProjector(cal, ColumnGeometry())
+    boxes = [b for b in projector.boxes(xy) if b is not None]
+    out: dict[str, Any] = {"rois": len(boxes)}
+    for spec_text in dict.fromkeys((verifier_spec, PAPER_GATE)):
+        spec = parse_spec(spec_text)
+        v = create(spec.name, spec.params)
+        prepare = getattr(v, "prepare", None)
+        if callable(prepare):
+            prepare(cal)
+        d = depth if wants_depth(v) else None
+        obs = [Observation(gray, roi, col, float(np.hypot(*p)), d, cal, (p[0], p[1]))
+               for (roi, col), p in zip(boxes, xy, strict=False)]
+        samples = []
+        for _ in range(reps):
+            t = time.perf_counter_ns()
+            for o in obs:
+                v.verify(o)
+            samples.append((time.perf_counter_ns() - t) / 1e3 / len(obs))
+        out[spec_text] = {"mean_us": float(np.mean(samples)),
+                          "p50_us": float(np.median(samples))}
+    return out
+
+
 def print_table(results: dict[str, Any]) -> None:
     print("\nTracks received -> BrakeCommand published, in-process (us)")
     print("(gated: gate runs per cycle, of which `first` before the command was published; "
@@ -281,6 +323,10 @@ def print_table(results: dict[str, Any]) -> None:
               f"{r['gated_first_mean']:>6.1f} "
               f"{r['mean_us']:9.1f} {r['p50_us']:9.1f} {r['p95_us']:9.1f} {r['max_us']:9.1f} "
               f"{r['targets_published_mean_us']:9.1f} {r['naive_gate_sum_mean_us']:15.1f}")
+    roi = results.get("per_roi")
+    if roi:
+        print(f"\nPer ROI, the same {roi['rois']} threat ROIs (us, mean of passes): " + ", ".join(
+            f"{k} {v['mean_us']:.1f}" for k, v in roi.items() if isinstance(v, dict)))
     print(f"\nThis machine now: one full-frame gate (Canny + count, 1 thread) takes "
           f"{results['full_frame_canny_us']:.0f} us (median)")
     for scenario in SCENARIOS:
@@ -513,6 +559,14 @@ def print_cameras(cams: dict[str, Any]) -> None:
 def figures(tracks: dict[str, Any], cams: dict[str, Any]) -> list[Figure]:
     """The suite's "scale" figures: each beside its same-run baseline."""
     out = []
+    roi = tracks.get("per_roi")
+    if roi and tracks.get("verifier") in roi and PAPER_GATE in roi:
+        v = tracks["verifier"]
+        out.append(Figure(
+            "scale", "fusion verifier per ROI (the shipped one)", roi[v]["mean_us"], "us",
+            baseline="the paper's gate (edge_density), same ROIs",
+            baseline_value=roi[PAPER_GATE]["mean_us"], extra={"verifier": v,
+                                                              "rois": roi["rois"]}))
     for scenario, (_, scope) in SCENARIOS.items():
         for n in COUNTS[1:]:
             r = tracks[f"{scenario} {n}"]
@@ -577,12 +631,15 @@ def plot_cameras(cams: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def run(quick: bool, out_dir: Path, verifier_spec: str = PAPER_GATE,
+def run(quick: bool, out_dir: Path, verifier_spec: str = "",
         cameras: bool = True) -> list[Figure]:
-    """Both scales; prints the tables, writes JSON and PNGs under `out_dir`, returns the
-    suite's figures."""
+    """Both scales with `verifier_spec` (default: the verifier deploy/fusion.toml ships);
+    prints the tables, writes JSON and PNGs under `out_dir`, returns the suite's
+    figures."""
+    verifier_spec = verifier_spec or shipped_verifier()
     tracks = measure_tracks(20 if quick else 300, verifier_spec)
     tracks["verifier"] = verifier_spec
+    tracks["per_roi"] = per_roi_us(verifier_spec, 5 if quick else 50)
     print(f"verifier: {verifier_spec}")
     print_table(tracks)
     if not cameras:
@@ -609,8 +666,9 @@ def main(argv: list[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--out", default="out/bench", help="directory for JSON and PNG")
-    parser.add_argument("--verifier", default=PAPER_GATE, metavar="NAME[:K=V,...]",
-                        help="the verifier of the tracks scale (default: the paper's gate)")
+    parser.add_argument("--verifier", default="", metavar="NAME[:K=V,...]",
+                        help="the verifier of the tracks scale (default: the one "
+                             "deploy/fusion.toml ships; edge_density: the paper's gate)")
     parser.add_argument("--tracks-only", action="store_true",
                         help="the tracks scale only (not the cameras')")
     # The camera process of the cameras scale (started by the benchmark itself).

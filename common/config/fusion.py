@@ -248,8 +248,10 @@ class EvidenceSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     vetoed while the sum is at or below `veto_at`, else confirmed. A track with a history
     at the ceiling (or the floor) needs several frames against it to change its verdict,
     so one bad frame neither brakes nor vetoes; a new track starts at 0, where its first
-    frame is all the evidence there is. Verifiers without an llr (the edge-density gate)
-    decide per frame as before."""
+    frame is all the evidence there is. Such a verifier also checks every closing track
+    in range, not only the threats (after the command), so that a track that becomes a
+    threat only after it has left the image is judged on what the camera saw of it.
+    Verifiers without an llr (the edge-density gate) decide per frame as before."""
 
     enabled: bool = True
     floor: Annotated[float, msgspec.Meta(ge=-100, le=0)] = -4.0
@@ -257,6 +259,12 @@ class EvidenceSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     veto_at: Annotated[float, msgspec.Meta(ge=-100, lt=0)] = -1.0
     # A track not checked for this long starts again from 0 (s).
     forget_s: Annotated[float, msgspec.Meta(gt=0, le=60)] = 1.0
+    # A track no frame shows (close ahead, beside the bumper) is judged on its sum so
+    # far; a track the radar has just started there takes the sum of the track checked
+    # last within handover_m of it in the last handover_s (the radar often re-acquires a
+    # crossing cyclist under a new id as it comes close).
+    handover_m: Annotated[float, msgspec.Meta(ge=0, le=20)] = 3.0
+    handover_s: Annotated[float, msgspec.Meta(ge=0, le=5)] = 1.0
 
     def __post_init__(self) -> None:
         if self.veto_at < self.floor:

@@ -135,6 +135,8 @@ class FusionCore:
         # Per-track evidence of verifiers that report a per-frame llr (None when off).
         self.evidence = (TrackEvidence(settings.evidence) if settings.evidence.enabled
                          else None)
+        self._gathers = self.evidence is not None and bool(
+            getattr(verifier, "gives_llr", False))
         self._seq = 0
         self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
@@ -248,8 +250,13 @@ class FusionCore:
                                  self.verifier.needs_depth)
             gate_all = self.s.gate_scope is GateScope.ALL
             for j, i in enumerate(others):
-                targets[i] = self._target(cycle.confirmed[i], cycle.kins[i], cycle.threats[i],
-                                          views, j, stamp_ns, gate=gate_all)
+                # A verifier whose evidence adds up checks every closing track in range
+                # too: a track that becomes a threat only once it has left the image (a
+                # cyclist crossing close ahead) has the evidence of when it was seen.
+                k = cycle.kins[i]
+                gather = self._gathers and k.in_range and k.ttc_s is not None
+                targets[i] = self._target(cycle.confirmed[i], k, cycle.threats[i],
+                                          views, j, stamp_ns, gate=gate_all or gather)
         feeds = cycle.feeds
         header = Header(seq=cycle.command.header.seq, source=self.source, stamp_ns=stamp_ns,
                         pub_mono_ns=cycle.now_mono_ns)
@@ -322,13 +329,22 @@ class FusionCore:
         result = check.result
         detail = result.detail if result is not None else {}
         if result is not None and self.evidence is not None and LLR_KEY in detail:
-            total = self.evidence.add(t.track_id, detail[LLR_KEY], radar_stamp_ns)
+            total = self.evidence.add(t.track_id, detail[LLR_KEY], radar_stamp_ns,
+                                      (t.x_m, t.y_m))
             detail = {**detail, EVIDENCE_KEY: total}
             verification = (Verification.REJECTED if self.evidence.vetoed(total)
                             else Verification.UNAVAILABLE if result.unverifiable
                             else Verification.VERIFIED)
         elif result is not None and result.unverifiable:
             verification = Verification.UNAVAILABLE
+        elif (result is None and gate and self._gathers and self.evidence is not None
+              and verification in (Verification.NOT_VISIBLE, Verification.UNAVAILABLE)):
+            # No frame shows the track now: the evidence gathered so far decides.
+            carried = self.evidence.carried(t.track_id, (t.x_m, t.y_m), radar_stamp_ns)
+            if carried is not None and carried != 0.0:
+                detail = {EVIDENCE_KEY: carried, "evidence_carried": 1.0}
+                verification = (Verification.REJECTED if self.evidence.vetoed(carried)
+                                else Verification.VERIFIED if carried > 0 else verification)
         density = result.score if result is not None else None
         if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
             why = (_reasons(views, j) if result is None or not result.unverifiable

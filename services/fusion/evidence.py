@@ -8,6 +8,8 @@ neither one frame of road texture brake for a ghost nor one frame whose depth mi
 thin bicycle veto it.
 """
 
+import math
+
 from common.config.fusion import EvidenceSettings
 
 LLR_KEY = "llr"                 # a verifier's per-frame value, in its GateResult.detail
@@ -21,17 +23,41 @@ class TrackEvidence:
     def __init__(self, s: EvidenceSettings) -> None:
         self.s = s
         self._forget_ns = round(s.forget_s * 1e9)
-        self._sums: dict[int, tuple[float, int]] = {}     # id -> (sum, last stamp ns)
+        self._handover_ns = round(s.handover_s * 1e9)
+        # id -> (sum, last stamp ns, x, y at that frame)
+        self._sums: dict[int, tuple[float, int, float, float]] = {}
 
-    def add(self, track_id: int, llr: float, stamp_ns: int) -> float:
+    def add(self, track_id: int, llr: float, stamp_ns: int, xy: tuple[float, float] = (
+            math.nan, math.nan)) -> float:
         """The track's sum after this frame's `llr` (a non-finite llr counts as 0)."""
-        total, last = self._sums.get(track_id, (0.0, stamp_ns))
+        total, last, _, _ = self._sums.get(track_id, (0.0, stamp_ns, 0.0, 0.0))
         if stamp_ns - last > self._forget_ns:
             total = 0.0
-        if llr == llr and abs(llr) != float("inf"):
+        if math.isfinite(llr):
             total = min(max(total + llr, self.s.floor), self.s.ceiling)
-        self._sums[track_id] = (total, stamp_ns)
+        self._sums[track_id] = (total, stamp_ns, xy[0], xy[1])
         return total
+
+    def carried(self, track_id: int, xy: tuple[float, float], stamp_ns: int
+                ) -> float | None:
+        """The evidence that stands for a track no frame shows now: its own sum, or, for a
+        track the radar has just (re)started there, the sum of the track checked last
+        within `handover_m` of it in the last `handover_s`, which it then keeps; None when
+        there is none."""
+        own = self._sums.get(track_id)
+        if own is not None and stamp_ns - own[1] <= self._forget_ns:
+            return own[0]
+        best: tuple[int, float] | None = None
+        for total, last, x, y in self._sums.values():
+            near = (stamp_ns - last <= self._handover_ns
+                    and math.hypot(x - xy[0], y - xy[1]) <= self.s.handover_m)
+            if near and (best is None or last > best[0]):
+                best = (last, total)
+        if best is None:
+            return None
+        # The new track keeps it (as old as it is) for the cycles it stays out of view.
+        self._sums[track_id] = (best[1], best[0], *xy)
+        return best[1]
 
     def vetoed(self, total: float) -> bool:
         return total <= self.s.veto_at
@@ -39,7 +65,8 @@ class TrackEvidence:
     def forget_older(self, stamp_ns: int) -> None:
         """Drop the tracks last checked more than `forget_s` before `stamp_ns`."""
         if self._sums:
-            old = [k for k, (_, t) in self._sums.items() if stamp_ns - t > self._forget_ns]
+            old = [k for k, (_, t, _, _) in self._sums.items()
+                   if stamp_ns - t > self._forget_ns]
             for k in old:
                 del self._sums[k]
 

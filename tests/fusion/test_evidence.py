@@ -91,3 +91,31 @@ def test_evidence_settings_are_validated():
         settings(evidence={"floor": -1.0, "veto_at": -2.0})
     with pytest.raises(ConfigError):
         settings(evidence={"veto_at": 0.5})
+
+
+def test_a_track_out_of_view_keeps_its_evidence_and_a_new_id_near_it_takes_it_over():
+    from services.fusion.evidence import TrackEvidence
+    ev = TrackEvidence(settings().evidence)
+    for i in range(3):
+        ev.add(4, 1.5, T0 + i * CYCLE_NS, (5.0, -4.0))
+    now = T0 + 10 * CYCLE_NS                      # 0.5 s after the last frame
+    assert ev.carried(4, (4.6, -3.8), now) == 4.0
+    # The radar restarts the cyclist as track 21 nearby: it takes track 4's sum ...
+    assert ev.carried(21, (3.0, -3.2), now) == 4.0
+    # ... but not a track far away, nor one long after.
+    assert ev.carried(22, (12.0, 1.0), now) is None
+    assert ev.carried(23, (3.0, -3.2), T0 + 40 * CYCLE_NS) is None
+
+
+
+def test_closing_tracks_that_are_not_threats_yet_are_checked_for_their_evidence():
+    v = Scripted(1.5, 1.5, 1.5)
+    v.gives_llr = True                             # type: ignore[attr-defined]
+    core = make_core(v)
+    # 24 m ahead closing at 3 m/s: TTC 8 s, no threat; its evidence is gathered anyway.
+    t = run(core, track(1, x=24.0, vx=-3.0)).targets.targets[0]
+    assert t.decision is Decision.NONE and t.gate_detail["evidence_llr"] == 1.5
+    # Without `gives_llr` a non-threat is not gated (the default gate scope).
+    plain = make_core(Scripted(1.5))
+    t = run(plain, track(1, x=24.0, vx=-3.0)).targets.targets[0]
+    assert t.verification is Verification.NOT_CHECKED

@@ -63,7 +63,7 @@ def test_a_threat_is_braked_for_through_every_core_and_the_actuator(scenes):
     last = r.cycles[-2].brake
     assert last is not None and not last.rejected          # every command signed and valid
     assert last.counters["commands"] >= len(r.cycles) - 1   # (and the settling's before)
-    assert braked[0].targets.verifier == "combined" and r.fusion_failures == 0
+    assert braked[0].targets.verifier == "recall_first" and r.fusion_failures == 0
     states = {s.brake_state for s in r.samples}
     assert states == {"ARMED", "BRAKING"} and r.settle_s < 1.0
 
@@ -91,8 +91,12 @@ def test_a_candidate_in_shadow_mode_is_recorded_per_cycle_and_never_brakes(scene
 
 
 def test_only_the_frames_fusion_reads_are_rendered(scenes):
-    beside = run("no_threat_parked_cars_30kph", scenes)       # no threat: nothing to check
-    assert beside.profile.frames_captured > 150 and beside.profile.frames_rendered == 0
+    # No threat: only the closing tracks the default check gathers evidence on are checked.
+    beside = run("no_threat_parked_cars_30kph", scenes)
+    seen = {t.frame_seq for c in beside.cycles for t in c.targets.targets
+            if t.density is not None}
+    assert beside.profile.frames_captured > 150
+    assert beside.profile.frames_rendered == len(seen) < beside.profile.frames_captured / 2
     r = run("cardboard_box_30kph", scenes)
     checked = {t.frame_seq for c in r.cycles for t in c.targets.targets if t.density is not None}
     assert 0 < r.profile.frames_rendered == len(checked) < r.profile.frames_captured / 4

@@ -30,6 +30,9 @@ from tools.recording.writer import RecordingWriter
 DATA = REPO / "tests" / "data" / "recording"
 SIM = DATA / "pedestrian_standing_20kph.mcap"
 DECLARED = DATA / "pedestrian_standing_20kph.rerun-fusion.json"
+# The recording was made with the combined verifier: re-run with its config.
+RECORDED_CONFIG = REPO / "deploy" / "fusion-combined.toml"
+AS_RECORDED = ("-c", str(RECORDED_CONFIG), "--instance", "primary")
 
 
 def rerun(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
@@ -39,7 +42,8 @@ def rerun(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
 
 def test_fusion_rerun_on_the_simulator_recording_shows_only_the_declared_differences(tmp_path):
     out = tmp_path / "found.json"
-    proc = rerun("fusion", str(SIM), "--compare", "--expect", str(DECLARED), "--quiet",
+    proc = rerun("fusion", str(SIM), *AS_RECORDED, "--compare", "--expect", str(DECLARED),
+                 "--quiet",
                  "--write-expected", str(out))
     declared = [Difference.from_json(d) for d in json.loads(DECLARED.read_text())["differences"]]
     found = [Difference.from_json(d) for d in json.loads(out.read_text())["differences"]]
@@ -70,13 +74,14 @@ TAU = 1.55
 
 def test_another_threshold_gives_the_expected_differences(tmp_path):
     result = tmp_path / "result.json"
-    proc = rerun("fusion", str(SIM), "--compare", "--quiet", "--json", str(result),
+    proc = rerun("fusion", str(SIM), *AS_RECORDED, "--compare", "--quiet", "--json",
+                 str(result),
                  "--set", f"fusion.verifier.params.tau={TAU}")
     assert proc.returncode == 1          # differences, none declared
     assert f"tau={TAU}" in proc.stdout
     # Every track verified live with a score below TAU is now rejected; nothing else
     # changes its verification, and cycles that braked on one of them no longer brake.
-    run = FusionRerun(load_config(REPO / "deploy" / "fusion.toml", FusionConfig))
+    run = FusionRerun(load_config(RECORDED_CONFIG, FusionConfig), "primary")
     lower = [(c.tracks.header.seq, t.track_id) for c in run.run(Recording.open(SIM))
              if c.recorded is not None for t in c.recorded.targets
              if t.verification is Verification.VERIFIED and (t.density or 0) < TAU]
@@ -204,7 +209,7 @@ def test_a_frame_whose_depth_live_fusion_had_not_yet_is_rerun_without_it(tmp_pat
     stamp = _first_frame_checked_with_depth()
     no_depth, live = tmp_path / "no_depth.mcap", tmp_path / "live.mcap"
     _rewrite(Recording.open(SIM), no_depth, _without_depth_of(stamp))
-    proc = rerun("fusion", str(no_depth), "-o", str(tmp_path / "outputs.mcap"),
+    proc = rerun("fusion", str(no_depth), *AS_RECORDED, "-o", str(tmp_path / "outputs.mcap"),
                  "--out-instance", "primary", "--no-views", "--quiet")
     assert proc.returncode == 0, proc.stderr
     outputs = list(Recording.open(tmp_path / "outputs.mcap").records())
@@ -213,7 +218,7 @@ def test_a_frame_whose_depth_live_fusion_had_not_yet_is_rerun_without_it(tmp_pat
     assert any(r.topic == "aeb/ego/camera/front/depth" and message_head(r.data).stamp_ns
                == stamp for r in Recording.open(live).records())
 
-    proc = rerun("fusion", str(live), "--compare", "--quiet", "--json",
+    proc = rerun("fusion", str(live), *AS_RECORDED, "--compare", "--quiet", "--json",
                  str(tmp_path / "result.json"))
     assert proc.returncode == 0 and "no difference" in proc.stdout, proc.stdout
     timing = json.loads((tmp_path / "result.json").read_text())["timing"]
@@ -224,9 +229,20 @@ def test_depth_the_live_instance_had_but_the_recording_lacks_is_said(tmp_path):
     stamp = _first_frame_checked_with_depth()
     lacking = tmp_path / "lacking.mcap"
     _rewrite(Recording.open(SIM), lacking, _without_depth_of(stamp))
-    proc = rerun("fusion", str(lacking), "--compare", "--quiet")
+    proc = rerun("fusion", str(lacking), *AS_RECORDED, "--compare", "--quiet")
     assert "1 frame(s) had their depth in the live instance, but the recording does not " \
            "hold it" in proc.stdout, proc.stdout
+
+
+def test_evidence_shows_the_default_checks_llr_per_cycle():
+    # The shipped recall_first on the recording's standing pedestrian: depth confirms
+    # it, and its sum climbs to the ceiling.
+    proc = rerun("fusion", str(SIM), "--evidence", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("t=")]
+    assert lines and all(" llr " in line and " sum " in line for line in lines)
+    assert any("depth_confirms" in line and "sum +4.00" in line for line in lines), lines
+    assert any("BRAKE" in line for line in lines)
 
 
 def test_comparing_nothing_fails_naming_the_recorded_instance():

@@ -119,6 +119,7 @@ class RecallFirst:
     name = "recall_first"
     needs_depth = False         # without depth it confirms (or says unverifiable)
     uses_depth = True
+    gives_llr = True            # fusion sums it per track (and gathers it ahead of threats)
 
     def __init__(self, p: RecallFirstParams, look: Verifier | None) -> None:
         self.p = p
