@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from services.fusion.appearance import HogLinearModel, hog_linear_features
 from services.fusion.roi import Roi
 from services.fusion.verifiers import Observation
+from services.fusion.verifiers.appearance import HogLinearModel, hog_linear_features
 from tools.eval import labels as labelfile
 from tools.eval.frames import FrameLoadError, load_gray, record_digest
 from tools.eval.records import FrameRef, RoiRecord, read_records
