@@ -15,6 +15,7 @@ from tools.grid.score import (
     case_points,
     failed_case,
     family_scores,
+    miss_reason,
     score_case,
     sensor_floor,
     shadow_diff,
@@ -191,3 +192,21 @@ def test_an_empty_timeline_is_an_error():
     with pytest.raises(ValueError, match="no samples"):
         score_case([], v, REACH, name="x", family="CCRs", group="g", config="c",
                    speed_kph=10.0, params={}, seed=0)
+
+
+def test_why_a_collision_was_not_avoided():
+    late = score(approach(40.0, 20.0, 0.5), speed=40.0,
+                 collision=Collision(1.0, 0, ObjectKind.CAR, 20 * KPH, 20 * KPH))
+    assert late.why.startswith("braked late (TTC ")
+    rejected = "camera rejected (TTC_eff 1.20 s < 2.5 s); density 0.4"
+    reasons = [(0.1 * i, ["TTC_eff 5.00 s >= 4 s"] if i < 30 else [rejected, "range 30 m"])
+               for i in range(50)]
+    assert miss_reason(reasons, 5.0, None, False) == (
+        "the camera check rejected it (20 of 20 cycles in the last 2 s)")
+    assert miss_reason([(0.1 * i, []) for i in range(50)], 5.0, None, False).startswith(
+        "no confirmed track (20 of 20")
+    warned = [(4.0, ["verified, TTC_eff 3.07 s < 4 s"])]
+    assert miss_reason(warned, 5.0, None, False).startswith("verified, TTC not under")
+    assert miss_reason([], 5.0, None, False) == "no radar cycle before the impact"
+    avoided = score(approach(30.0, 40.0, 3.0))
+    assert avoided.why == ""

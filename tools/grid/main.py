@@ -233,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _score(config: str, c: "FamilyCase", o: "Outcome", loop: "LoopConfig") -> "CaseScore":
-    from tools.grid.score import Reach, failed_case, score_case, shadow_of
+    from tools.grid.score import Reach, failed_case, reasons_of, score_case, shadow_of
     from tools.sim.families import FAMILIES
 
     family = FAMILIES[c.family]
@@ -244,7 +244,8 @@ def _score(config: str, c: "FamilyCase", o: "Outcome", loop: "LoopConfig") -> "C
                            seed=c.seed, error=o.error)
     return score_case(r.samples, r.verdict, Reach.of(loop), name=c.name, family=c.family,
                       group=family.group, config=config, speed_kph=c.speed_kph,
-                      params=dict(c.params), seed=c.seed, shadow=shadow_of(r.cycles))
+                      params=dict(c.params), seed=c.seed, shadow=shadow_of(r.cycles),
+                      reasons=reasons_of(r.cycles))
 
 
 if __name__ == "__main__":

@@ -209,7 +209,7 @@ def case_table(cases: Sequence[CaseScore]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for c in cases:
         lines.append("| " + " | ".join([
-            c.name, c.config, c.error or c.outcome,
+            c.name, c.config, c.error or (f"{c.outcome}: {c.why}" if c.why else c.outcome),
             f"{_num(c.first_warning_t_s, 2)} ({_num(c.first_warning_ttc_s, 2)})",
             f"{_num(c.first_brake_t_s, 2)} ({_num(c.first_brake_ttc_s, 2)})",
             _num(c.in_reach_t_s, 2), f"{_ms(c.reaction_brake_s)} / {_ms(c.reaction_half_s)}",

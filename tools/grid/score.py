@@ -152,6 +152,7 @@ class CaseScore:
     reaction_brake_s: float | None       # in reach -> first BRAKE (negative: before)
     reaction_half_s: float | None        # in reach -> actuator at 50 %
     lag_brake_s: float | None            # due -> first BRAKE
+    why: str = ""                        # a collision: why it was not avoided (miss_reason)
     shadow: Shadow | None = None
     error: str = ""
 
@@ -176,9 +177,10 @@ def case_points(kind: ScenarioKind, speed_kph: float, verdict: Verdict) -> float
 
 def score_case(samples: Sequence[Sample], verdict: Verdict, reach: Reach, *, name: str,
                family: str, group: str, config: str, speed_kph: float,
-               params: dict[str, Any], seed: int, shadow: Shadow | None = None) -> CaseScore:
-    """One case's score from its timeline and verdict. Raises ValueError for an empty
-    timeline."""
+               params: dict[str, Any], seed: int, shadow: Shadow | None = None,
+               reasons: Sequence[tuple[float, Sequence[str]]] = ()) -> CaseScore:
+    """One case's score from its timeline and verdict (`reasons`: fusion's per cycle, for
+    why a collision was not avoided). Raises ValueError for an empty timeline."""
     if not samples:
         raise ValueError(f"{name}: no samples to score")
     warning = _first(samples, lambda s: s.decision == "WARNING")
@@ -207,7 +209,51 @@ def score_case(samples: Sequence[Sample], verdict: Verdict, reach: Reach, *, nam
         in_reach_t_s=in_reach.t_s if in_reach else None,
         due_t_s=due.t_s if due else None,
         reaction_brake_s=since(in_reach, brake), reaction_half_s=since(in_reach, half),
-        lag_brake_s=since(due, brake), shadow=shadow)
+        lag_brake_s=since(due, brake),
+        why=(miss_reason(reasons, samples[-1].t_s, brake.ttc_s if brake else None,
+                         brake is not None) if verdict.collision else ""),
+        shadow=shadow)
+
+
+MISS_WINDOW_S = 2.0
+# What fusion said of its targets, most telling first (services/fusion/decision.py's words)
+_MISS_CATEGORIES = (
+    ("camera rejected", "the camera check rejected it"),
+    ("camera not visible", "not visible to the camera"),
+    ("camera unavailable", "camera check unavailable"),
+    ("out of corridor", "outside the corridor"),
+    ("verified, ", "verified, TTC not under the BRAKE bound"),
+    ("TTC_eff", "TTC above the bounds"),
+    ("not closing", "not closing"),
+    ("range", "outside the decision's range"),
+)
+
+
+def miss_reason(reasons: Sequence[tuple[float, Sequence[str]]], impact_t_s: float,
+                brake_ttc_s: float | None, braked: bool, window_s: float = MISS_WINDOW_S
+                ) -> str:
+    """Why a collision was not avoided: braked too late (the TTC at the first BRAKE), or
+    what fusion said of its targets in most of the cycles of the last `window_s` before
+    the impact (each cycle by its most telling reason), or no track at all."""
+    if braked:
+        return ("braked late" if brake_ttc_s is None
+                else f"braked late (TTC {brake_ttc_s:.2f} s at the first BRAKE)")
+    window = [texts for t, texts in reasons if impact_t_s - window_s <= t <= impact_t_s]
+    if not window:
+        return "no radar cycle before the impact"
+    counts: dict[str, int] = {}
+    for texts in window:
+        label = "no confirmed track"
+        for key, what in _MISS_CATEGORIES:
+            if any(key in text for text in texts):
+                label = what
+                break
+        else:
+            if texts:
+                label = "other: " + texts[0][:40]
+        counts[label] = counts.get(label, 0) + 1
+    label, n = max(counts.items(), key=lambda kv: kv[1])
+    return f"{label} ({n} of {len(window)} cycles in the last {window_s:g} s)"
 
 
 def failed_case(*, name: str, family: str, group: str, kind: ScenarioKind, config: str,
@@ -220,6 +266,11 @@ def failed_case(*, name: str, family: str, group: str, kind: ScenarioKind, confi
                      first_brake_t_s=None, first_brake_ttc_s=None, half_t_s=None,
                      in_reach_t_s=None, due_t_s=None, reaction_brake_s=None,
                      reaction_half_s=None, lag_brake_s=None, error=error)
+
+
+def reasons_of(cycles: Sequence["FusionCycle"]) -> list[tuple[float, list[str]]]:
+    """Each cycle's run time and its targets' decision reasons."""
+    return [(c.t_s, [t.reason for t in c.targets.targets]) for c in cycles]
 
 
 def shadow_of(cycles: Sequence["FusionCycle"]) -> Shadow | None:

@@ -65,6 +65,7 @@ BUILTIN: dict[str, tuple[str, str]] = {
     "hog_people": ("appearance", "make_hog_people"),
     "hog_linear": ("appearance", "make_hog_linear"),
     "combined": ("combined", "make"),
+    "recall_first": ("recall_first", "make"),
 }
 
 # Factories by name: those added with `register`, and the built-ins once loaded.
