@@ -170,8 +170,8 @@ def out_of_fold(x: np.ndarray, y: np.ndarray, groups: list[str], l2: float, fold
     out = np.full(len(y), np.nan)
     for k in range(folds):
         test = fold == k
-        if test.all() or not test.any():
-            continue
+        if test.all() or not test.any() or len(set(y[~test].tolist())) < 2:
+            continue            # nothing to validate on, or a class missing to fit
         coef, bias = fit_logistic(x[~test], y[~test], l2)
         out[test] = 1.0 / (1.0 + np.exp(-(x[test] @ coef + bias)))
     return out
