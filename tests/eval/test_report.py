@@ -3,6 +3,7 @@ it is (and its clear-view part), real structures apart, the sweep over each veri
 own score range, warnings on sets too small for their intervals, per stratum, per class,
 and what is left out and why."""
 
+import msgspec
 import pytest
 
 from tools.eval import tables
@@ -102,6 +103,13 @@ def test_the_sweep_runs_over_each_verifiers_own_score_range():
     ev = evaluate(dens, {r.id: r.truth for r in dens}, "edge_density:tau=0.08", {"tau": 0.08},
                   ReportSettings(n_boot=50))
     assert tuple(row["tau"] for row in ev["sweep"]) == PAPER_SWEEP
+    # A verifier of any name whose score says it is an edge density: the paper's too.
+    named = [msgspec.structs.replace(r, scores={"my_gate": Score(
+        r.scores["edge_density:tau=0.08"].score, True, 1.0, "edge_density")}) for r in dens]
+    ev = evaluate(named, {r.id: r.truth for r in named}, "my_gate", {},
+                  ReportSettings(n_boot=50))
+    assert tuple(row["tau"] for row in ev["sweep"]) == PAPER_SWEEP
+    assert ev["score_name"] == "edge_density"
     ev = evaluate(records, labels, "combined", {"tau": 0.5},
                   ReportSettings(n_boot=50, taus=(0.2, 0.95)))
     assert [row["tau"] for row in ev["sweep"]] == [0.2, 0.95]

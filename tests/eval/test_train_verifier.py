@@ -168,3 +168,18 @@ def test_tau_keeps_the_asked_share_of_the_positives():
     tau = tau_for_recall(scores, y, 0.9)
     assert np.mean(scores >= tau) >= 0.9 and np.mean(scores > tau) < 0.9
     assert tau_for_recall(scores, y, 1.0) == pytest.approx(0.0)
+
+
+def test_a_frame_that_cannot_be_read_is_not_called_held_out(tmp_path, capsys):
+    rois = roi_set(tmp_path, frames=12)
+    weights = tmp_path / "w.json"
+    assert main([str(rois), "--out", str(weights), "--folds", "2", "--fold", "1",
+                 "--cv-folds", "2", "--l2", "10"]) == 0
+    capsys.readouterr()
+    records = read_records(rois)
+    (tmp_path / "synthetic" / "000001.png").unlink()
+    kept = eval_run.held_out(records, str(weights))
+    # Without its picture a frame cannot be shown to be unseen: left out, said so.
+    assert "synthetic:000001" not in {r.frame_key for r in kept}
+    err = capsys.readouterr().err
+    assert "synthetic:000001 left out of the held-out set" in err and "1 frames unreadable" in err

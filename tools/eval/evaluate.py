@@ -166,7 +166,7 @@ def held_out(records: list[RoiRecord], weights: str) -> list[RoiRecord]:
     elsewhere are still training frames. A record whose frame cannot be read cannot be
     shown to be held out: left out, counted on stderr. Raises VerifierConfigError for a
     weights file that cannot be read, ValueError for one that names no frame content."""
-    from services.fusion.appearance import HogLinearModel
+    from services.fusion.verifiers.appearance import HogLinearModel
     from tools.eval.training import trained_digests
 
     trained = trained_digests(HogLinearModel.load(weights), weights)

@@ -43,11 +43,13 @@ class FrameRef(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 class Score(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """One verifier on one ROI: `score` None when not applicable (it needs depth the data
-    does not have); `us` the time verify() took."""
+    does not have); `us` the time verify() took; `score_name` what the score is
+    (e.g. "edge_density"; "" in sets written before verifiers said)."""
 
     score: float | None
     verified: bool | None
     us: float = 0.0
+    score_name: str = ""        # what the score is, as the verifier says (GateResult)
 
 
 class RoiRecord(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

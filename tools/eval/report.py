@@ -33,7 +33,10 @@ PAPER_TAU = 0.025
 # Range bands of the strata: near (the paper's 8 m example), middle, far.
 RANGE_BANDS = ((3.0, 8.0), (8.0, 15.0), (15.0, 25.0))
 CLEAR_VIEW = ", clear view"
-# Verifiers whose score is an edge density: the paper's thresholds are theirs.
+# Scores that are an edge density (the verifier's GateResult.score_name) and, for sets
+# written before verifiers named their score, the verifiers that score one: the paper's
+# thresholds are theirs.
+DENSITY_SCORE = "edge_density"
 DENSITY_VERIFIERS = frozenset({"edge_density", "adaptive_edge_density"})
 # Other verifiers' sweep: their YES scores at these quantiles (score >= threshold keeps
 # about 99 %, 95 %, ... 10 % of the obstacles), and their own tau.
@@ -120,14 +123,17 @@ def negative_member(r: RoiRecord) -> str:
 
 
 def sweep_taus(verifier: str, scores: np.ndarray, truth: np.ndarray, tau: float | None,
-               given: tuple[float, ...] | None) -> tuple[tuple[float, ...], str]:
+               given: tuple[float, ...] | None, score_name: str = ""
+               ) -> tuple[tuple[float, ...], str]:
     """(thresholds, what they are) of a verifier's Table IV: `given` for every verifier;
-    else the paper's for an edge density; else its YES scores at SWEEP_QUANTILES (all
+    else the paper's for an edge density (`score_name`, what the verifier says its score
+    is; by the verifier's name where it said nothing); else its YES scores at SWEEP_QUANTILES (all
     its scores without a YES) and its own tau, so that every row means something on its
     own scale."""
     if given:
         return tuple(given), "given (--taus)"
-    if verifier.partition(":")[0] in DENSITY_VERIFIERS:
+    if score_name == DENSITY_SCORE or (not score_name and verifier.partition(":")[0]
+                                       in DENSITY_VERIFIERS):
         return PAPER_SWEEP, "the paper's thresholds (edge density)"
     base = scores[truth] if truth.any() else scores
     if len(base) == 0:
@@ -289,7 +295,9 @@ def evaluate(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str
         y_tau, j = metrics.youden(sel.scores, sel.truth)
         out["youden"] = {"tau": y_tau, "j": j,
                          **metrics.at_threshold(sel.scores, sel.truth, y_tau).as_dict()}
-    taus, basis = sweep_taus(verifier, sel.scores, sel.truth, tau, s.taus)
+    names = {r.scores[verifier].score_name for r in every.records}
+    out["score_name"] = names.pop() if len(names) == 1 else ""
+    taus, basis = sweep_taus(verifier, sel.scores, sel.truth, tau, s.taus, out["score_name"])
     out["sweep_basis"] = basis
     out["sweep"] = [{"tau": t, **c.as_dict()}
                     for t, c in metrics.sweep(sel.scores, sel.truth, taus)]

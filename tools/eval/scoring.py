@@ -109,7 +109,8 @@ class Scorer:
             t0 = time.perf_counter_ns()
             result = v.verify(obs)
             us = (time.perf_counter_ns() - t0) / 1000.0
-            out[label] = Score(float(result.score), bool(result.verified), us)
+            out[label] = Score(float(result.score), bool(result.verified), us,
+                               result.score_name)
         return out
 
     def density(self, obs: Observation, scores: dict[str, Score]) -> float:

@@ -49,7 +49,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--fold", type=int, default=0, help="the fold held out (not trained on)")
     p.add_argument("--seeds", default="", metavar="SPEC",
                    help="only the generated cases of these seeds, all in the train split: "
-                        "train, train:N, A-B or a comma list (default: every ROI)")
+                        "train, train:N, A-B or a comma list (default: every ROI; "
+                        "the demo's own scenarios never)")
     p.add_argument("--recall", type=float, default=0.99,
                    help="tau keeps this share of the positives on held-out folds")
     p.add_argument("--cv-folds", type=int, default=4,

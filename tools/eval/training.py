@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from services.fusion.appearance import HogLinearModel, hog_linear_features
 from services.fusion.roi import Roi
 from services.fusion.verifiers import Observation
+from services.fusion.verifiers.appearance import HogLinearModel, hog_linear_features
 from tools.eval import labels as labelfile
 from tools.eval.frames import FrameLoadError, load_gray, record_digest
 from tools.eval.records import FrameRef, RoiRecord, read_records
@@ -170,8 +170,8 @@ def out_of_fold(x: np.ndarray, y: np.ndarray, groups: list[str], l2: float, fold
     out = np.full(len(y), np.nan)
     for k in range(folds):
         test = fold == k
-        if test.all() or not test.any():
-            continue
+        if test.all() or not test.any() or len(set(y[~test].tolist())) < 2:
+            continue            # nothing to validate on, or a class missing to fit
         coef, bias = fit_logistic(x[~test], y[~test], l2)
         out[test] = 1.0 / (1.0 + np.exp(-(x[test] @ coef + bias)))
     return out
