@@ -32,10 +32,9 @@ from benchmarks.bench_gate import CALIBRATION, scenes, stats, timed
 from benchmarks.figures import Figure, section_main
 from common.calibration import Calibration
 from common.imaging import decode_gray
-from services.fusion import hog
-from services.fusion.appearance import HogLinearModel
 from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.verifiers import Observation, Verifier, create
+from services.fusion.verifiers import Observation, Verifier, create, hog
+from services.fusion.verifiers.appearance import HogLinearModel
 
 BASELINE = "edge_density"
 _BLOCK = 10

@@ -20,12 +20,19 @@ Key file (TOML, mode 0600, made by `aeb keygen`):
     instance = "primary"
     secret = "<64 hex digits>"
     insecure_example = false     # true: published with the source, for the demo/simulator
+
+A published example key (the flag, or one of the secrets shipped in deploy/keys/, however
+its file is labelled) is known to everyone: the brake refuses it on a real actuator
+unless `brake.allow_example_key` says otherwise (services/brake/main.py). Any other key
+file must be readable by its owner only: a file with group or other permission bits is
+refused (`KeyFileError` naming the file and its mode).
 """
 
 import hashlib
 import hmac
 import os
 import secrets
+import stat
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -38,6 +45,15 @@ from common.messages import BrakeCommand, CommandAuth, encode
 MAC_LEN = 32
 SECRET_LEN = 32   # BLAKE2b takes keys of up to 64 bytes
 _ZERO_MAC = bytes(MAC_LEN)
+# SHA-256 of the secrets published in deploy/keys/ (primary, candidate, paper): a copy of
+# one of them is an example key even when its file no longer says so
+PUBLISHED_SECRETS = frozenset({
+    "fd180419baea56f298d331c24624e04646adb1b9f2b47341590523bfafec48b7",
+    "4bb9beca03c29288760ce83c44c7de25b4453364025ef699811551df6f9a6a6f",
+    "af4ce6d7f0419ad6784084225111691df353d9c34d36ee127a8ea89bbc825066",
+})
+# a key file's permission bits that are refused: any access by group or others
+SECRET_MODE_MASK = 0o077
 
 
 class KeyFileError(ValueError):
@@ -51,6 +67,12 @@ class CommandKey:
     secret: bytes
     insecure_example: bool = False
     path: str = ""
+
+    @property
+    def published(self) -> bool:
+        """An example key: labelled so, or one of the secrets shipped with the source."""
+        return (self.insecure_example
+                or hashlib.sha256(self.secret).hexdigest() in PUBLISHED_SECRETS)
 
     def __repr__(self) -> str:   # never print a secret
         return (f"CommandKey(key_id={self.key_id!r}, instance={self.instance!r}, "
@@ -86,15 +108,18 @@ def write_key(path: Path, key: CommandKey, overwrite: bool = False) -> None:
     `overwrite`, OSError when the file cannot be written."""
     flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
     fd = os.open(path, flags, 0o600)
+    # before the secret is in it: an existing file being overwritten keeps its old mode
+    os.fchmod(fd, 0o600)
     with os.fdopen(fd, "w") as f:
         f.write(key_file_text(key))
-    os.chmod(path, 0o600)
 
 
 def load_key(path: str | Path) -> CommandKey:
-    """Read a key file. Raises KeyFileError naming the file and what is wrong."""
+    """Read a key file. Raises KeyFileError naming the file and what is wrong (among it:
+    a key that is not an example key in a file with group or other permission bits)."""
     p = Path(path)
     try:
+        mode = p.stat().st_mode
         raw = tomllib.loads(p.read_text())
         f = msgspec.convert(raw, _KeyFile)
     except OSError as exc:
@@ -109,7 +134,13 @@ def load_key(path: str | Path) -> CommandKey:
         raise KeyFileError(f"{p}: secret has {len(secret)} bytes, 16 to 64 needed")
     if not f.key_id or not f.instance:
         raise KeyFileError(f"{p}: key_id and instance must not be empty")
-    return CommandKey(f.key_id, f.instance, secret, f.insecure_example, str(p))
+    key = CommandKey(f.key_id, f.instance, secret, f.insecure_example, str(p))
+    # an example key is public whatever its mode (and git checks it out 0644)
+    if mode & SECRET_MODE_MASK and not key.published:
+        raise KeyFileError(f"{p}: mode {stat.S_IMODE(mode):04o} lets group or others access "
+                           f"a secret command key; make it readable by its owner only: "
+                           f"chmod 600 {p}")
+    return key
 
 
 def load_signing_key(path: str | Path, instance: str) -> CommandKey:

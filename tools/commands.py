@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "router": ("common.router", "a Zenoh router"),
     "up": ("tools.launch.main", "start the router and services of a process table"),
     "demo": ("tools.demo", "closed-loop demo on simulated scenarios"),
+    "grid": ("tools.grid.main", "Euro NCAP-style test grid, scored, with heat maps"),
     "faults": ("tools.faults.main", "inject faults into the stack, check responses; fuzz"),
     "monitor": ("tools.monitor.main", "live view of tracks, targets, brake state, health"),
     "ab-report": ("tools.ab.main", "where a primary and a candidate fusion disagreed"),
@@ -47,7 +48,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 COMMAND_EXTRA = {"radar": "radar", "camera": "camera", "fusion": "fusion", "can-export": "dbc",
                  "vehicle": "vehicle",
                  "calib-check": "fusion", "monitor": "monitor", "demo": "demo", "bench": "demo",
-                 "faults": "demo",
+                 "faults": "demo", "grid": "demo",
                  "record": "record", "info": "record", "replay": "record", "rerun": "record",
                  "evidence": "record", "foxglove": "record", "ab-report": "record",
                  "eval": "eval", "label": "eval", "train-verifier": "eval"}

@@ -75,6 +75,10 @@ class BrakeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # Key files (common/command_auth.py) of `instance`, by key id: only commands with a
     # valid MAC of one of them are followed. Two during a key rotation. Required.
     command_keys: tuple[ConfigPath, ...] = ()
+    # A published example key (deploy/keys/) is refused when the serial port is a real
+    # actuator (not the simulator's pty): anyone can sign commands with it. true accepts
+    # it all the same, with a WARNING at every start (a bench, never a road).
+    allow_example_key: bool = False
     # An authenticated sequence number may run ahead of the last accepted one by at most
     # 16 + this rate times the time since it (seq_jump otherwise): a jump cannot lock out
     # the stream that follows it.

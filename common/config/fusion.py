@@ -69,7 +69,7 @@ class RoiSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 
 class VerifierSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """A verifier from the registry (services/fusion/verifiers.py) and its parameters;
+    """A verifier from the registry (services/fusion/verifiers/) and its parameters;
     parameters not given take the verifier's defaults."""
 
     name: str = "edge_density"
@@ -241,6 +241,28 @@ class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError("warning_ttc_eff_s must be at least brake_ttc_eff_s")
 
 
+class EvidenceSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Evidence over time, per track: a verifier that reports a per-frame log-likelihood
+    ratio of "an obstacle stands there" (`llr` in its detail: `recall_first`) has it
+    summed per track id, clipped to [floor, ceiling] after each frame; the track is
+    vetoed while the sum is at or below `veto_at`, else confirmed. A track with a history
+    at the ceiling (or the floor) needs several frames against it to change its verdict,
+    so one bad frame neither brakes nor vetoes; a new track starts at 0, where its first
+    frame is all the evidence there is. Verifiers without an llr (the edge-density gate)
+    decide per frame as before."""
+
+    enabled: bool = True
+    floor: Annotated[float, msgspec.Meta(ge=-100, le=0)] = -4.0
+    ceiling: Annotated[float, msgspec.Meta(ge=0, le=100)] = 4.0
+    veto_at: Annotated[float, msgspec.Meta(ge=-100, lt=0)] = -1.0
+    # A track not checked for this long starts again from 0 (s).
+    forget_s: Annotated[float, msgspec.Meta(gt=0, le=60)] = 1.0
+
+    def __post_init__(self) -> None:
+        if self.veto_at < self.floor:
+            raise ValueError("veto_at must not be below floor (nothing could be vetoed)")
+
+
 class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # Every key this instance publishes is under fusion/<instance>/.
     instance: str = "primary"
@@ -253,7 +275,12 @@ class FusionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     verifier: VerifierSettings = msgspec.field(default_factory=VerifierSettings)
     decision: DecisionSettings = msgspec.field(default_factory=DecisionSettings)
     vehicle_state: VehicleInputSettings = msgspec.field(default_factory=VehicleInputSettings)
+    evidence: EvidenceSettings = msgspec.field(default_factory=EvidenceSettings)
     stats_interval_s: Positive = 10.0      # how often counters are logged
+    # At most one radar cycle (one BrakeCommand) per this interval, whatever arrives on
+    # radar/<sensor>/tracks: extra cycles are shed (counted `tracks_shed`), the newest
+    # one in the interval is decided at its end. The radar's cycle is 75 ms; 0: no bound.
+    min_cycle_interval_s: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.05
     # Several cameras, each with its own calibration, instead of `frames.camera` and
     # `calibration` (leave those out). A track is verified if any camera that sees it
     # verifies it (docs/fusion.md). `frames` settings apply to every camera.

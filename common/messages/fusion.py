@@ -47,6 +47,10 @@ class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
     radar cycle's own values (what the decision used). `roi_xywh` is in pixels of the
     frame, empty when not visible or not projected. `gate_detail` holds what a verifier
     derived for this ROI (e.g. adapted thresholds), empty for fixed-parameter verifiers.
+    `density` is the verifier's score (named so on the wire since the paper's gate, whose
+    score is the edge density); `score_name` says what it is for this verifier
+    ("edge_density", "depth_share", "probability", ...; empty in recordings made before
+    it existed, where it was the verifier's score as well).
     `path_predicted`: `in_path` was decided from the track's sideways motion (is it in
     the corridor when the ego arrives?), and `ttc_s` is the time the ego's front reaches
     it (x / closing speed along x), not r / |range rate|.
@@ -76,6 +80,7 @@ class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
     path_predicted: bool = False
     camera: str = ""
     cameras: tuple[CameraCheck, ...] = ()
+    score_name: str = ""
     # The kinematic rule's figures (None under the paper's rule): the level of the
     # track's BRAKE stage, the deceleration a stop requires (inf: the gap is gone within
     # the latency), the target's acceleration over ground along the path, and where it

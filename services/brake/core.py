@@ -94,7 +94,7 @@ class BrakeCore:
         self._ttl_ms = s.actuator.ttl_ms
         self.validator = CommandValidator(
             expected_key, s.instance, s.age_clock, _ns(s.max_age_ms), _ns(s.max_future_ms),
-            keys, s.max_command_rate_hz,
+            keys, s.max_command_rate_hz, conflict_ns=_ns(s.deadline_ms),
         )
         self._recover_window = _ns(s.recover_window_ms)
         self._max_data_age = _ns(s.max_data_age_ms)
@@ -161,6 +161,10 @@ class BrakeCore:
         if isinstance(result, Rejection):
             self.rejected[result.value] += 1
             self.version += 1
+            if self.validator.revert_level is not None and self._revert(
+                    self.validator.revert_level, now):
+                self._evaluate(now)
+                return self._send(now, None)
             return self._send_if_due(now)
         self._accept(result, now, alive)
         self._evaluate(now)
@@ -289,7 +293,9 @@ class BrakeCore:
         self.counters["commands"] += 1
         if acc.gap:
             self.counters["seq_gaps"] += acc.gap
-        if acc.restart:
+        if acc.resync:
+            self.counters["seq_resyncs"] += 1
+        elif acc.restart:
             self.counters["stream_restarts"] += 1
         # evidence of a healthy stream (for arming): consecutive commands built from
         # fresh radar data; a command from stale data ends the streak
@@ -311,6 +317,18 @@ class BrakeCore:
             self._held_level = level
             self._held_until = now + self._min_hold
         self.version += 1
+
+    def _revert(self, level: float, now: int) -> bool:
+        """A second sender in the followed session (SEQ_CONFLICT): back to the level the
+        brake followed before it, its minimum hold included; the session's commands are
+        refused from now on, so the deadline decides what comes next (FAILSAFE). True
+        when the level asked of the actuator changed."""
+        self.counters["seq_conflicts_opened"] += 1
+        before = self._command_level(now)
+        self._requested = level
+        self._held_level = min(self._held_level, level)
+        self.version += 1
+        return self._command_level(now) != before
 
     def _deadline_missed(self, now: int) -> bool:
         """No valid command for the deadline, with something new to fail: the stream (or

@@ -2,10 +2,11 @@
 
 import sys
 import threading
+from collections.abc import Mapping
 
 from common import systemd
 from common.bus import Bus, BusError
-from common.command_auth import KeyFileError, load_keyring
+from common.command_auth import CommandKey, KeyFileError, load_keyring
 from common.config.brake import BrakeConfig
 from common.log import kv, setup_logging
 from common.service import (
@@ -15,6 +16,7 @@ from common.service import (
     stop_event_on_signals,
 )
 from common.systemd import Watchdog
+from services.brake.serial_link import simulated_port
 from services.brake.shell import SOURCE, BrakeShell
 
 SHORTCUTS = {"--port": ("brake.serial.port", "actuator serial port")}
@@ -35,6 +37,30 @@ def _serve_bus(cfg: BrakeConfig, shell: BrakeShell, stop: threading.Event,
         shell.attach(bus)
 
 
+def example_key_verdict(cfg: BrakeConfig, keys: Mapping[str, CommandKey]
+                        ) -> tuple[str | None, str | None]:
+    """(error, warning) about published example keys among `keys`: an error when one is
+    meant to move a real actuator without `allow_example_key`, a warning for one that is
+    accepted (a simulated actuator, or the opt-in)."""
+    examples = [k for k in keys.values() if k.published]
+    if not examples:
+        return None, None
+    names = ", ".join(f"{k.key_id} ({k.path})" for k in examples)
+    port = cfg.brake.serial.port
+    if simulated_port(port):
+        return None, (f"INSECURE EXAMPLE KEY {names}: accepted for the simulated actuator "
+                      f"on {port} only")
+    if not cfg.brake.allow_example_key:
+        return (f"brake.command_keys: {names} is an INSECURE EXAMPLE KEY, published with "
+                f"the source (anyone can sign commands with it), and brake.serial.port "
+                f"{port} is not a simulated actuator: make a key with `aeb keygen` (or "
+                f"`aeb init`), or set brake.allow_example_key = true to accept it on this "
+                f"actuator knowingly"), None
+    return None, (f"INSECURE EXAMPLE KEY {names} accepted on the REAL actuator {port} "
+                  f"(brake.allow_example_key = true): anyone on the network can move "
+                  f"this brake")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = service_argparser("brake", __doc__ or "", SHORTCUTS).parse_args(argv)
     cfg = load_service_config(args, BrakeConfig)
@@ -43,9 +69,19 @@ def main(argv: list[str] | None = None) -> int:
     except KeyFileError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    error, warning = example_key_verdict(cfg, keys)
+    if error is not None:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     if args.check:
-        return config_checked("brake", args)
+        if warning is None:
+            return config_checked("brake", args)
+        # the last line is what `aeb up --check` shows: not "configuration ok"
+        print(f"brake: WARNING {warning} ({args.config or 'defaults'})")
+        return 0
     log = setup_logging("brake", cfg.log.level.value)
+    if warning is not None:
+        log.warning(kv("insecure_example_key_accepted", detail=warning))
     stop = stop_event_on_signals()
     # the timer thread waits at most ~1 ms for the GIL instead of the default 5 ms
     sys.setswitchinterval(0.001)

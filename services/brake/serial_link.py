@@ -6,6 +6,7 @@ not through a queue, so that a command reaches the line with the least delay."""
 import contextlib
 import logging
 import os
+import stat
 import threading
 from collections.abc import Callable
 
@@ -20,6 +21,25 @@ READ_TIMEOUT_S = 0.05   # how often the reader looks at the stop flag and write 
 WRITE_TIMEOUT_S = 0.02  # a stuck port blocks the command path at most this long
 RECONNECT_MIN_S = 0.1   # reopening after the port vanished: 100 ms, doubling ...
 RECONNECT_MAX_S = 2.0   # ... up to 2 s
+
+
+# Linux's pseudo-terminal device majors (Documentation/admin-guide/devices.txt): the
+# Unix98 slaves (136-143) and the legacy BSD ones (3)
+_PTY_MAJORS = frozenset({3, *range(136, 144)})
+
+
+def simulated_port(port: str) -> bool:
+    """True when `port` is a simulated actuator: it resolves to a pseudo-terminal (the
+    simulator's pty, `tools/sim/actuator.py`), or it does not exist yet and lies outside
+    /dev (a link the simulator makes in its run folder). Anything else (a USB or UART
+    device, a /dev path that is not there yet) is treated as real hardware."""
+    path = os.path.realpath(port)
+    try:
+        st = os.stat(path)
+    except OSError:
+        return not path.startswith("/dev/")
+    return stat.S_ISCHR(st.st_mode) and (path.startswith("/dev/pts/")
+                                         or os.major(st.st_rdev) in _PTY_MAJORS)
 
 
 class SerialLink:

@@ -36,6 +36,7 @@ from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
 from common.realtime import ThreadRealtime, apply_process, set_fifo
 from common.systemd import Watchdog
+from services.brake.commands import Rejection
 from services.brake.core import BrakeCore, Outgoing
 from services.brake.protocol import SEQ_MODULO, BadLine, Command, Query, encode
 from services.brake.serial_link import SerialLink
@@ -47,6 +48,7 @@ MIN_WAIT_NS = 100_000
 TIMER_PERIOD_S = 0.05    # the timer's longest sleep; it also wakes at every due time
 STATUS_PERIOD_NS = 100_000_000   # BrakeStatus at least at its key's nominal 10 Hz
 _TIMER_PERIOD_NS = round(TIMER_PERIOD_S * 1e9)
+MAX_UNKNOWN_IDS_LOGGED = 64   # a flood of made-up key ids is counted, not logged each
 
 
 class LineAhead:
@@ -92,12 +94,13 @@ class BrakeShell:
         self.core = BrakeCore(s, FUSION_BRAKE_CMD.key(cfg.vehicle, instance=s.instance),
                               mono_ns(), keys)
         for key in keys.values():
-            if key.insecure_example:
+            if key.published:
                 log.warning(kv("insecure_example_key", key_id=key.key_id, path=key.path,
                                note="published with the source: demo and simulator only; "
                                     "make your own with `aeb keygen`"))
         self.link = SerialLink(s.serial, self._on_link_up, self._on_link_down, self._on_rx, log)
         self._lines = LineAhead()
+        self._unknown_ids: set[str] = set()   # unknown key ids logged (once each)
         self._last_frame: Command | None = None   # the last line written
         self._stopping = False
         self._status_pub: TypedPublisher[BrakeStatus] | None = None
@@ -166,9 +169,23 @@ class BrakeShell:
                 self._status_owed(rx_mono_ns, wake_timer=False)
             rejection = self.core.last_rejection
             self._log_transition(before)
-        if rejection is not None:
-            self._rl.warning(f"reject:{rejection.value}", "command_rejected",
-                             reason=rejection.value, key=key)
+            validator = self.core.validator
+            unknown = validator.unknown_key_id if rejection is Rejection.UNKNOWN_KEY else None
+            opened = validator.revert_level is not None
+        if rejection is None:
+            return
+        self._rl.warning(f"reject:{rejection.value}", "command_rejected",
+                         reason=rejection.value, key=key)
+        if opened:
+            self._rl.error("seq_conflict", "seq_conflict_opened",
+                           session=validator.session, level_back_to=validator.revert_level,
+                           note="two senders hold the command key in one session: "
+                                "neither is followed until one is alone")
+        if unknown is not None and unknown not in self._unknown_ids \
+                and len(self._unknown_ids) < MAX_UNKNOWN_IDS_LOGGED:
+            self._unknown_ids.add(unknown)
+            self._log.warning(kv("unknown_command_key", key_id=unknown,
+                                 trusted=",".join(sorted(validator.keys))))
 
     def _on_rx(self, items: list[bytes | BadLine]) -> None:
         with self._lock:

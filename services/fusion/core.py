@@ -5,7 +5,7 @@ recent sideways motion (for path prediction).
 
 Per confirmed track: kinematics and the radar's threat (decision.py); per camera, the
 frame nearest the cycle within the skew bound (frames.py), the track predicted to that
-frame's time and its column projected to a ROI (roi.py); the verifier (verifiers.py) in
+frame's time and its column projected to a ROI (roi.py); the verifier (verifiers/) in
 the cameras that see it, combined (cameras.py); the decision. The command is the most
 severe decision (ties: the smallest TTC_eff), or a heartbeat.
 
@@ -47,6 +47,7 @@ from services.fusion.decision import (
     decide,
     severity,
 )
+from services.fusion.evidence import EVIDENCE_KEY, LLR_KEY, TrackEvidence
 from services.fusion.frames import (
     EXPECTED_CHANGE_SPAN,
     FROZEN_REASON,
@@ -131,6 +132,9 @@ class FusionCore:
         self.lateral = (LateralMotion(p.min_lateral_speed_mps, p.confirm_cycles)
                         if self.rule.predict else None)
         self._moving: set[int] = set()     # this cycle's tracks moving sideways
+        # Per-track evidence of verifiers that report a per-frame llr (None when off).
+        self.evidence = (TrackEvidence(settings.evidence) if settings.evidence.enabled
+                         else None)
         self._seq = 0
         self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
@@ -180,6 +184,8 @@ class FusionCore:
         else:
             lateral_input = confirmed
         self._moving = self.lateral.update(lateral_input) if self.lateral is not None else set()
+        if self.evidence is not None:
+            self.evidence.forget_older(tracks.header.stamp_ns)
         age_ns = now_wall_ns - tracks.header.stamp_ns
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
@@ -313,12 +319,28 @@ class FusionCore:
         decision, reason = threat
         check = check_track(j, views, gate, self.verifier.verify)
         verification = check.verification
-        density = check.result.score if check.result is not None else None
+        result = check.result
+        detail = result.detail if result is not None else {}
+        if result is not None and self.evidence is not None and LLR_KEY in detail:
+            total = self.evidence.add(t.track_id, detail[LLR_KEY], radar_stamp_ns)
+            detail = {**detail, EVIDENCE_KEY: total}
+            verification = (Verification.REJECTED if self.evidence.vetoed(total)
+                            else Verification.UNAVAILABLE if result.unverifiable
+                            else Verification.VERIFIED)
+        elif result is not None and result.unverifiable:
+            verification = Verification.UNAVAILABLE
+        density = result.score if result is not None else None
         if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
-            reason = f"{reason}; {_reasons(views, j)}"
+            why = (_reasons(views, j) if result is None or not result.unverifiable
+                   else "camera cannot tell: " + ", ".join(
+                       k for k, v in detail.items() if k.startswith("depth_") and v))
+            reason = f"{reason}; {why}"
         decision, reason = decide(decision, reason, verification, self.rule.policy)
+        score_name = result.score_name if result is not None else ""
         if verification is Verification.REJECTED:
-            reason = f"{reason}; density {density:.4f}"
+            reason = f"{reason}; {score_name} {density:.4f}"
+            if EVIDENCE_KEY in detail:
+                reason = f"{reason}, evidence {detail[EVIDENCE_KEY]:.2f}"
         # Where a track no camera sees is reported: the first camera with a frame.
         view = check.view or next((v for v in views if v.frame is not None), views[0])
         frame = view.frame
@@ -332,10 +354,10 @@ class FusionCore:
             reason=reason, frame_seq=frame.seq if frame is not None else None,
             frame_age_ms=((radar_stamp_ns - frame.stamp_ns) / 1e6 if frame is not None
                           else None),
-            gate_detail=check.result.detail if check.result is not None else {},
+            gate_detail=detail,
             path_predicted=k.window is not None,
             camera=check.view.name if check.view is not None else "",
-            cameras=check.per_camera, **_kinematic_fields(k))
+            cameras=check.per_camera, score_name=score_name, **_kinematic_fields(k))
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:

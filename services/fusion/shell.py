@@ -1,6 +1,8 @@
 """The fusion I/O shell: each camera's frames (and, for a verifier that needs depth, its
 depth) to its decoder, radar cycles through the core, messages out. Exactly one
-BrakeCommand per RadarTracks, published before its VerifiedTargets."""
+BrakeCommand per radar cycle handled, published before its VerifiedTargets; from the bus,
+at most one cycle per `min_cycle_interval_s` (`RadarGate`): a flood of tracks sheds cycles
+instead of signing a command for each."""
 
 import logging
 import threading
@@ -48,6 +50,48 @@ from services.fusion.frames import FROZEN_REASON, FrameDecoder
 from services.fusion.verifiers import wants_depth
 
 
+class RadarGate:
+    """At most one radar cycle per `interval_ns`, the newest winning: `offer` says whether
+    a cycle may be handled now; one that comes too soon waits (replacing, and shedding,
+    any that waits already) and `due` hands it out once its time has come. Not
+    thread-safe: the shell's gate lock."""
+
+    def __init__(self, interval_ns: int) -> None:
+        self.interval_ns = interval_ns
+        self.shed = 0
+        self._last_ns: int | None = None
+        self._pending: tuple[RadarTracks, int] | None = None
+
+    def offer(self, tracks: RadarTracks, rx_mono_ns: int, now_ns: int) -> bool:
+        """True: handle `tracks` now (its slot is taken). False: it waits (or was shed)."""
+        if self._pending is None and (self._last_ns is None
+                                      or now_ns - self._last_ns >= self.interval_ns):
+            self._last_ns = now_ns
+            return True
+        if self._pending is not None:
+            self.shed += 1
+        self._pending = (tracks, rx_mono_ns)
+        return False
+
+    def due(self, now_ns: int) -> tuple[RadarTracks, int] | None:
+        """The waiting cycle once its slot has come (the slot then taken), else None."""
+        if self._pending is None or self.wait_ns(now_ns) > 0:
+            return None
+        pending, self._pending = self._pending, None
+        self._last_ns = now_ns
+        return pending
+
+    def wait_ns(self, now_ns: int) -> int:
+        """How long until the waiting cycle is due (0: now, or nothing waits)."""
+        if self._pending is None or self._last_ns is None:
+            return 0
+        return max(0, self._last_ns + self.interval_ns - now_ns)
+
+    @property
+    def waiting(self) -> bool:
+        return self._pending is not None
+
+
 class FusionShell:
     """`decoders`: one per camera, in the core's camera order (one FrameDecoder for a
     single camera). `calibrations`: what each camera's CameraInfo is checked against.
@@ -81,6 +125,11 @@ class FusionShell:
         self._cmd_pub = bus.publisher(FUSION_BRAKE_CMD, instance=settings.instance)
         self._tgt_pub = bus.publisher(FUSION_TARGETS, instance=settings.instance)
         self._rt = ThreadRealtime(settings.realtime, log, "fusion radar callback")
+        self._gate = RadarGate(round(settings.min_cycle_interval_s * 1e9))
+        self._gate_cond = threading.Condition()
+        self._gate_stop = False
+        self._gate_thread = threading.Thread(target=self._deferred_loop,
+                                             name="fusion-radar-deferred", daemon=True)
 
     @property
     def decoder(self) -> FrameDecoder:
@@ -94,6 +143,7 @@ class FusionShell:
             if wants_depth(self.core.verifier):
                 self._subs.append(self.bus.subscribe_raw(CAMERA_DEPTH, decoder.submit_depth,
                                                          camera=name))
+        self._gate_thread.start()
         self._subs.append(self.bus.subscribe_raw(RADAR_TRACKS, self._on_tracks,
                                                  sensor=self.s.radar_sensor))
         if self.s.decision.rule is RuleName.KINEMATIC:
@@ -108,6 +158,11 @@ class FusionShell:
         for sub in self._subs:
             sub.undeclare()
         self._subs.clear()
+        with self._gate_cond:
+            self._gate_stop = True
+            self._gate_cond.notify()
+        if self._gate_thread.is_alive():
+            self._gate_thread.join(timeout=5.0)
         for decoder in self.decoders:
             decoder.stop()
 
@@ -129,20 +184,54 @@ class FusionShell:
             self.core.on_vehicle(msg, wall_ns(), mono_ns())
 
     def _on_tracks(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
+        """Zenoh's callback: a cycle is handled here at once unless one was handled less
+        than `min_cycle_interval_s` ago; then it waits for the deferred thread, and a
+        newer one replaces it (`tracks_shed`)."""
         self._rt.ensure()
-        self.on_tracks_payload(payload, key, rx_mono_ns)
+        tracks = self._decoded(payload, key)
+        if tracks is None:
+            return
+        with self._gate_cond:
+            now_here = self._gate.offer(tracks, rx_mono_ns, mono_ns())
+            if not now_here:
+                self._gate_cond.notify()
+        if now_here:
+            self.handle(tracks, rx_mono_ns)
+        else:
+            self._rl.warning("radar:shed", "radar_cycles_shed", shed=self._gate.shed,
+                             min_cycle_interval_s=self.s.min_cycle_interval_s,
+                             detail="tracks faster than one cycle per interval: the newest "
+                                    "in each interval is decided")
 
-    def on_tracks_payload(self, payload: bytes, key: str, rx_mono_ns: int) -> CycleResult | None:
-        """Zenoh's callback for a radar cycle: decode, decide, publish. Returns what was
-        published (None for a payload that is not a RadarTracks)."""
+    def _deferred_loop(self) -> None:
+        """Handles the cycle that waited for its slot (the newest of a flood)."""
+        self._rt.ensure()
+        while True:
+            with self._gate_cond:
+                while not self._gate_stop:
+                    ready = self._gate.due(mono_ns())
+                    if ready is not None:
+                        break
+                    wait = self._gate.wait_ns(mono_ns()) if self._gate.waiting else None
+                    self._gate_cond.wait(None if wait is None else max(wait, 100_000) / 1e9)
+                else:
+                    return
+            self.handle(*ready)
+
+    def _decoded(self, payload: bytes, key: str) -> RadarTracks | None:
         try:
-            tracks = decode(payload, RadarTracks)
+            return decode(payload, RadarTracks)
         except DecodeError as exc:
             # Not a radar cycle: nothing to answer, but never silent.
             self.counters.add("radar_undecodable")
             self._rl.warning("radar:decode", "radar_tracks_undecodable", key=key, error=exc)
             return None
-        return self.handle(tracks, rx_mono_ns)
+
+    def on_tracks_payload(self, payload: bytes, key: str, rx_mono_ns: int) -> CycleResult | None:
+        """A radar cycle's payload handled at once (no gate): decode, decide, publish.
+        Returns what was published (None for a payload that is not a RadarTracks)."""
+        tracks = self._decoded(payload, key)
+        return None if tracks is None else self.handle(tracks, rx_mono_ns)
 
     def handle(self, tracks: RadarTracks, rx_mono_ns: int) -> CycleResult:
         """Process one cycle: its BrakeCommand is published as soon as it is decided, then
@@ -242,7 +331,7 @@ class FusionShell:
                    frames_corrupt=sum(f.corrupt for f in feeds),
                    depth_received=sum(f.depth_received for f in feeds),
                    depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
-                   invalid_tracks=self.core.invalid_tracks)
+                   invalid_tracks=self.core.invalid_tracks, tracks_shed=self._gate.shed)
         if self.s.decision.rule is RuleName.KINEMATIC:
             with self._vehicle_lock:
                 for name, state in (("motion", self.core.vehicle.motion),

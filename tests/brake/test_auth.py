@@ -216,3 +216,60 @@ def test_no_payload_without_the_key_moves_the_brake(junk: bytes, at: int, xor: i
     rig.raw(junk)
     _unmoved(rig, n, last)
     assert sum(rig.core.rejected.values()) == 1 + (xor != 0)
+
+
+# ---- a second sender in the session, and a stream that ran ahead (issue: key holders,
+# floods) --------------------------------------------------------------------------------
+
+def test_a_key_holder_jumping_ahead_does_not_take_the_stream_over():
+    """seq = real + 2 with the key: it may move the brake until the real fusion's next
+    command shows a second sender (at most one cycle); then the brake goes back to the
+    level it followed before, neither stream moves it, and the real stream is taken up
+    again once it is alone."""
+    rig = Rig().armed()
+    rig.stream(5)
+    real = rig.seq
+    rig.send(100.0, seq=real + 1)                    # the intruder, ahead of the real fusion
+    assert rig.level == 100
+    rig.seq = real
+    rig.advance(5)
+    rig.send(0.0)                                    # the real fusion's next: behind
+    assert rig.core.rejected["seq_conflict"] == 1 and rig.level == 0
+    n = len(rig.lines)
+    for _ in range(10):                              # both keep sending: nobody followed
+        rig.advance(10)
+        rig.send(100.0, seq=rig.seq + 1)
+        rig.advance(10)
+        rig.send(0.0, seq=rig.seq - 2)
+    assert rig.level == 0 and rig.core.rejected["seq_conflict"] == 21
+    assert rig.state is BrakeState.FAILSAFE          # the deadline: a visible refusal
+    assert rig.core.rejected.get("old_sequence", 0) == 0
+    rig.stream(40)                                   # the intruder stops: the real alone
+    assert rig.state is BrakeState.ARMED and rig.core.counters["seq_resyncs"] == 1
+    assert {c.level_pct for _, c in rig.lines[n:]} == {0}
+    _stream_goes_on(rig)
+
+
+def test_a_stream_that_ran_far_ahead_while_unfollowed_is_taken_up_at_the_deadline():
+    """A fusion flooded into thousands of commands the brake could not follow: its stream
+    comes back far ahead; the brake follows it again after the deadline, not minutes."""
+    rig = Rig().armed()
+    rig.advance(50)
+    rig.send(0.0, seq=rig.seq + 20_000)              # alive: a jump, refused
+    assert rig.core.rejected["seq_jump"] == 1
+    rig.advance(rig.settings.deadline_ms)
+    rig.stream(20)
+    assert rig.core.counters["seq_resyncs"] == 1 and rig.state is BrakeState.ARMED
+    _stream_goes_on(rig)
+
+
+def test_a_byte_identical_copy_is_a_duplicate_not_a_conflict():
+    rig = Rig().armed()
+    data = SIGNER.sign(command(rig.seq, 0.0, pub_mono_ns=rig.t))
+    rig.raw(data)
+    rig.seq += 1
+    rig.advance(20)
+    rig.send(0.0)
+    rig.raw(data)
+    assert rig.core.rejected["duplicate"] == 1 and "seq_conflict" not in rig.core.rejected
+    _stream_goes_on(rig)

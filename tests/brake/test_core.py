@@ -10,6 +10,7 @@ from common.config.brake import BrakeConfig
 from common.config.loader import parse_config
 from common.keys import FUSION_BRAKE_CMD
 from common.messages import BrakeState, Decision
+from services.brake.commands import RECENT
 from services.brake.core import BrakeCore, Outgoing
 from services.brake.protocol import (
     Ack,
@@ -367,8 +368,9 @@ def test_a_rewound_or_frozen_sequence_of_the_same_session_never_restarts_the_str
         rig.send(0.0, seq=last)
         rig.send(0.0, seq=0)
     assert rig.state is BrakeState.FAILSAFE
-    assert rig.core.counters["stream_restarts"] == 0
-    assert rig.core.rejected["duplicate"] == 3 and rig.core.rejected["old_sequence"] == 3
+    assert rig.core.counters["stream_restarts"] == 0 == rig.core.counters["seq_resyncs"]
+    # new commands at old sequence numbers: a second sender in the session, never a restart
+    assert rig.core.rejected["seq_conflict"] == 6
     assert rig.core.view().last_cmd_seq == last
 
 
@@ -383,6 +385,7 @@ def _assert_unmoved(rig: Rig, before_lines: int, last_seq: int) -> None:
 
 def test_every_rejection_reason_is_counted_and_moves_nothing():
     rig = Rig(age_clock="monotonic").armed()
+    rig.stream(RECENT + 2)
     rig.send(0.0)
     last = rig.seq - 1
     n = len(rig.lines)
@@ -393,8 +396,8 @@ def test_every_rejection_reason_is_counted_and_moves_nothing():
     rig.send(150.0)                                           # level out of range
     rig.send(50.0, decision=Decision.WARNING)                 # level without BRAKE
     rig.send(float("nan"), decision=Decision.BRAKE)
-    rig.send(100.0, seq=last)                                 # duplicate
-    rig.send(100.0, seq=last - 2)                             # old
+    rig.send(0.0, seq=last)                                   # duplicate (the same bytes)
+    rig.send(100.0, seq=last - RECENT - 1)                    # old
     rig.send(100.0, age_ms=101)                               # too old
     rig.send(100.0, age_ms=-10)                               # from the future
     _assert_unmoved(rig, n, last)

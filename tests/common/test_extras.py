@@ -89,8 +89,7 @@ def test_a_missing_extra_is_named_not_a_traceback():
 
 # Commands whose module imports what only their extra installs: --help gives their
 # description and what to install for the options (services and modules owned elsewhere).
-DESCRIBED_ONLY = {"radar", "camera", "fusion", "vehicle", "calib-check", "demo", "faults", "eval",
-                  "train-verifier"}
+DESCRIBED_ONLY = {"radar", "camera", "fusion", "vehicle", "calib-check", "demo", "faults"}
 
 
 def test_every_commands_help_works_without_any_extra():
@@ -119,3 +118,19 @@ def test_every_commands_help_works_without_any_extra():
         else:
             assert text.startswith(f"usage: aeb {name}"), f"aeb {name} --help: {text}"
             assert "--log-level" in text
+
+
+@pytest.mark.parametrize(("argv", "wanted"), [
+    (["eval", "--help"], ["evaluation (Tables II-V", "{rois,run,report,compare"]),
+    (["eval", "compare", "--help"], ["--held-out", "--structures-as-negatives", "--taus"]),
+    (["eval", "rois", "--help"], ["--depth {none,lidar,d435}", "--frames-per-task"]),
+    (["train-verifier", "--help"], ["the decoded picture", "--seeds", "--folds"]),
+])
+def test_eval_and_train_verifier_list_their_options_without_the_eval_extra(argv, wanted):
+    # Described and with every option, not only "needs the package".
+    r = run_without(OPTIONAL, "import sys\nfrom tools.cli import main\n"
+                              f"sys.exit(main({argv!r}))")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(f"usage: aeb {argv[0]}") and "pip install" not in r.stdout
+    for text in wanted:
+        assert text in r.stdout, (text, r.stdout)

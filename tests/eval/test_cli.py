@@ -35,8 +35,17 @@ def test_run_on_a_recording_and_a_data_set_in_two_processes(inputs, tmp_path, ca
         r.truth == "YES" for r in records)
     report = json.loads((out / "report.json").read_text())
     ev = report["verifiers"]["edge_density"]
-    assert ev["n"] == len(records) and ev["ci"][0] <= ev["auc"] <= ev["ci"][1]
-    assert {k["kind"] for k in ev["negative_kinds"]} == {"track", "background", "lidar"}
+    # Real structures (the lidar ROIs) are reported apart, not as negatives.
+    assert ev["n"] + ev["real_structure"]["n"] == len(records)
+    assert ev["real_structure"]["n"] == sum(r.kind == "lidar" for r in records)
+    assert ev["ci"][0] <= ev["auc"] <= ev["ci"][1]
+    # The negatives named for what stands there: the ghost track and the background ROIs
+    # are empty scene, the lidar ROIs real structures.
+    kinds = {k["kind"]: k for k in ev["negative_kinds"]}
+    assert set(kinds) == {"empty scene", "real structure"}
+    assert set(kinds["empty scene"]["members"]) == {"background", "track on no object"}
+    assert set(kinds["real structure"]["members"]) == {"lidar structure"}
+    assert "real structures (lidar structure" in text.out
     assert "Table III: edge_density" in text.out and "Table II" in text.out
     for png in ("roc.png", "confusion.png", "density.png", "timing.png"):
         assert (out / png).read_bytes()[:4] == b"\x89PNG"

@@ -4,6 +4,7 @@ projector with its padding; a simulator run's tracks are labelled by its ground 
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -25,6 +26,7 @@ from tests.eval.fixtures import (
 )
 from tests.fusion.helpers import CAL
 from tools.eval import sim_truth
+from tools.eval.frames import frame_digest
 from tools.eval.recording import RecordingSettings, recording_records
 from tools.eval.scoring import Scorer, VerifierSpec, default_specs
 from tools.recording.reader import Recording, RecordingError
@@ -95,6 +97,25 @@ def test_scores_are_the_verifiers_on_the_decoded_frame(rec):
     # Full-frame timing once per frame used.
     timed = [r for r in records if r.frame_canny_us is not None]
     assert len(timed) == len({r.frame for r in records})
+
+
+def test_records_know_their_frame_by_content_and_their_scenario(rec, tmp_path):
+    records = recording_records(rec.path, RecordingSettings(), Scorer(default_specs()), {})
+    by_frame: dict[str, set[str]] = {}
+    for r in records:
+        by_frame.setdefault(r.frame, set()).add(r.frame_sha256)
+    # One digest per frame (background ROIs share their frame's), a distinct one each.
+    assert all(len(d) == 1 for d in by_frame.values())
+    assert len({next(iter(d)) for d in by_frame.values()}) == len(by_frame)
+    assert {r.scenario for r in records} == {"test"}
+    # The stored digest is the one computed from the frame again: sets written without
+    # it are judged the same way; a copy of the recording elsewhere gives the same.
+    copy = tmp_path / "elsewhere.mcap"
+    copy.write_bytes(rec.path.read_bytes())
+    for r in records[:6]:
+        assert frame_digest(r.frame_ref) == r.frame_sha256
+        moved = msgspec.structs.replace(r.frame_ref, path=str(copy))
+        assert frame_digest(moved) == r.frame_sha256
 
 
 def test_simulator_truth_labels_tracks_and_places_background_off_the_objects(rec):

@@ -10,14 +10,6 @@ import cv2
 import numpy as np
 import pytest
 
-from services.fusion import hog
-from services.fusion.appearance import (
-    HOG_LINEAR_FORMAT,
-    HogLinearModel,
-    hog_linear_features,
-    people_detector,
-    window_around,
-)
 from services.fusion.roi import Roi
 from services.fusion.verifiers import (
     _REGISTRY,
@@ -27,6 +19,14 @@ from services.fusion.verifiers import (
     Verifier,
     VerifierConfigError,
     create,
+    hog,
+)
+from services.fusion.verifiers.appearance import (
+    HOG_LINEAR_FORMAT,
+    HogLinearModel,
+    hog_linear_features,
+    people_detector,
+    window_around,
 )
 from tests.fusion.helpers import CAL
 from tests.fusion.test_depth_check import WIDE, observe, render_depth
@@ -267,7 +267,7 @@ def test_in_fusion_the_combined_verifier_gets_depth_when_the_camera_has_it(monke
 
 
 def test_combined_prepares_its_depth_cue_for_each_camera(monkeypatch):
-    import services.fusion.depth_check as depth_check
+    import services.fusion.verifiers.depth as depth_check
 
     monkeypatch.setitem(_REGISTRY, "hog_linear", fake_look)
     seen = []

@@ -10,11 +10,11 @@ import pytest
 from common.imaging import decode_gray, encode_jpeg
 from services.fusion import verifiers
 from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import (
+from services.fusion.verifiers import VerifierConfigError, create
+from services.fusion.verifiers.edge import (
     AdaptiveEdgeDensity,
     EdgeDensity,
-    VerifierConfigError,
-    create,
+    EdgeDensityParams,
 )
 from tests.fusion.helpers import CAL, T0, feed, frame, make_core, observe, run, track
 from tools.messages import ObjectKind
@@ -186,7 +186,7 @@ def test_registry_creates_verifiers_with_defaults_and_validates_params():
         create("adaptive_edge_density", {"low": 130})
     with pytest.raises(ValueError, match="already registered"):
         verifiers.register("edge_density")(lambda params: EdgeDensity(
-            verifiers.EdgeDensityParams()))
+            EdgeDensityParams()))
 
 
 def test_a_new_verifier_is_selected_by_config_without_touching_fusion(monkeypatch):

@@ -63,7 +63,8 @@ def test_a_threat_is_braked_for_through_every_core_and_the_actuator(scenes):
     last = r.cycles[-2].brake
     assert last is not None and not last.rejected          # every command signed and valid
     assert last.counters["commands"] >= len(r.cycles) - 1   # (and the settling's before)
-    assert braked[0].targets.verifier == "combined" and r.fusion_failures == 0
+    assert braked[0].targets.verifier == DEFAULT.fusion.fusion.verifier.name
+    assert r.fusion_failures == 0
     states = {s.brake_state for s in r.samples}
     assert states == {"ARMED", "BRAKING"} and r.settle_s < 1.0
 

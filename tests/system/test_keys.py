@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from common.command_auth import KeyFileError, load_key, load_keyring
+from common.command_auth import CommandKey, KeyFileError, load_key, load_keyring, new_key, write_key
 from common.resources import EXAMPLE_KEYS
 from tools import init, keygen
 
@@ -65,3 +65,38 @@ def test_the_brake_accepts_only_keys_of_its_instance(tmp_path: Path):
         load_keyring([str(tmp_path / "missing.key")], "primary")
     assert list(load_keyring([str(EXAMPLE_KEYS / "primary.key")], "primary")) == [
         "primary-insecure-example"]
+
+
+def test_a_copy_of_a_published_secret_is_an_example_key_whatever_its_file_says(
+        tmp_path: Path):
+    shipped = load_key(EXAMPLE_KEYS / "primary.key")
+    relabelled = CommandKey("mine", "primary", shipped.secret)    # insecure_example false
+    write_key(tmp_path / "mine.key", relabelled)
+    key = load_key(tmp_path / "mine.key")
+    assert not key.insecure_example and key.published
+    assert not new_key("primary").published
+
+
+@pytest.mark.parametrize("mode", [0o640, 0o604, 0o644, 0o666, 0o700])
+def test_a_secret_key_file_with_group_or_other_bits_is_refused(tmp_path: Path, mode: int):
+    path = tmp_path / "k.key"
+    write_key(path, new_key("primary"))
+    path.chmod(mode)
+    if mode & 0o077:
+        with pytest.raises(KeyFileError, match=f"k.key: mode {mode:04o} .*chmod 600"):
+            load_key(path)
+    else:
+        load_key(path)
+
+
+def test_the_example_keys_load_as_checked_out_and_writing_a_key_makes_it_private(
+        tmp_path: Path):
+    example = tmp_path / "example.key"
+    example.write_text((EXAMPLE_KEYS / "primary.key").read_text())
+    example.chmod(0o644)                                          # as git checks it out
+    assert load_key(example).published                            # public anyway
+    path = tmp_path / "k.key"
+    path.write_text("old")
+    path.chmod(0o666)
+    write_key(path, new_key("primary"), overwrite=True)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600

@@ -8,6 +8,7 @@ import sys
 
 import pytest
 
+from common.command_auth import new_key, write_key
 from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
 from tools.launch.main import main as up
 
@@ -32,8 +33,9 @@ def service(name: str, command: str, config: str, args: str = "") -> str:
 
 @pytest.fixture
 def configs(tmp_path):
+    write_key(tmp_path / "primary.key", new_key("primary"))
     (tmp_path / "brake.toml").write_text(
-        f'[brake]\ndeadline_ms = 200.0\ncommand_keys = ["{EXAMPLE_KEYS / "primary.key"}"]\n')
+        '[brake]\ndeadline_ms = 200.0\ncommand_keys = ["primary.key"]\n')
     (tmp_path / "fusion.toml").write_text(f'[fusion]\ncalibration = "{EXAMPLE_CALIBRATION}"\n')
     return tmp_path
 
@@ -47,6 +49,37 @@ def test_a_valid_table_passes_and_nothing_is_started(configs, capsys):
     for name in ("router", "brake", "fusion"):
         assert f"ok      {name}: " in out
     assert "brake: configuration ok" in out and "--connect tcp/127.0.0.1:1" in out
+
+
+def example_key_brake(folder, extra: str = "") -> str:
+    (folder / "brake.toml").write_text(
+        f'[brake]\ncommand_keys = ["{EXAMPLE_KEYS / "primary.key"}"]\n{extra}'
+        '[brake.serial]\nport = "/dev/ttyACM0"\n')
+    return write_table(folder, service("brake", "brake", "brake.toml"))
+
+
+def test_the_published_example_key_on_a_real_actuator_is_refused(tmp_path, capsys):
+    assert up(["--check", "--table", example_key_brake(tmp_path)]) == 2
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if " brake: " in ln)
+    assert line.split()[0] == "INVALID" and "INSECURE EXAMPLE KEY" in line
+    assert "allow_example_key" in line
+
+
+def test_the_example_key_opt_in_is_said_loudly_not_configuration_ok(tmp_path, capsys):
+    table = example_key_brake(tmp_path, "allow_example_key = true\n")
+    assert up(["--check", "--table", table]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if " brake: " in ln)
+    assert line.split()[0] == "WARNING" and "REAL actuator /dev/ttyACM0" in line
+    assert "configuration ok" not in line
+
+
+def test_a_key_file_readable_by_others_is_refused_naming_file_and_mode(configs, capsys):
+    (configs / "primary.key").chmod(0o644)
+    assert up(["--check", "--table", write_table(
+        configs, service("brake", "brake", "brake.toml"))]) == 2
+    out = capsys.readouterr().out
+    assert "INVALID brake" in out and "primary.key: mode 0644" in out
 
 
 # Each config below loads as a file of the right shape, which is all --check looked at
@@ -104,18 +137,18 @@ def test_programs_that_are_not_aeb_services_are_listed_as_not_checked(configs, c
 
 def test_the_shipped_board_tables_check(capsys):
     # ECU B (fusion) needs no hardware package; the tables with a RealSense camera check
-    # only where pyrealsense2 is installed, and say so otherwise
+    # only where pyrealsense2 is installed, and say so otherwise. ECU A's brake drives a
+    # real actuator with the shipped (published) example key: refused until `aeb init`
+    # or `aeb keygen` gives it a key of its own
     assert up(["--check", "--table", str(DEPLOY / "ecu-b.toml")]) == 0
+    capsys.readouterr()
+    assert up(["--check", "--table", str(DEPLOY / "ecu-a.toml")]) == 2
+    out = capsys.readouterr().out
+    assert "INVALID brake: exit 2: error: brake.command_keys: primary-insecure-example" in out
+    assert "ok      radar:" in out
     try:
         import pyrealsense2  # noqa: F401
-        expected = 0
     except ImportError:
-        expected = 2
-    capsys.readouterr()
-    assert up(["--check", "--table", str(DEPLOY / "ecu-a.toml")]) == expected
-    out = capsys.readouterr().out
-    assert "ok      brake: configuration ok" in out and "ok      radar:" in out
-    if expected:
         assert "INVALID camera: exit 2: error: the realsense source needs pyrealsense2" in out
 
 

@@ -25,11 +25,10 @@ from tools.eval.adapters.paper_rois import (
     scaled,
 )
 from tools.eval.depth import project_depth
-from tools.eval.frames import FrameLoadError, load_image
+from tools.eval.frames import FrameLoadError, prepare_image, read_image, source_digest
+from tools.eval.options import DEPTH_MODES
 from tools.eval.records import KIND_LIDAR, KIND_RADAR, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
-
-DEPTH_MODES = ("none", "lidar", "d435")
 
 
 @dataclass(frozen=True)
@@ -71,7 +70,9 @@ def dataset_records(kind: str, root: Path, frame_ids: list[str], s: DatasetSetti
         try:
             frame = read_frame(kind, root, frame_id, with_lidar=True)
             sc = scaled(frame, p.focal_px)
-            gray, _ = load_image(frame.image_path, sc.scale, s.jpeg_quality)
+            source = read_image(frame.image_path)
+            digest = source_digest(source)
+            gray, _ = prepare_image(source, sc.scale, s.jpeg_quality)
         except (KittiFormatError, FrameLoadError, OSError, ValueError) as exc:
             _bump(counters, "frame_unreadable")
             errors.append(f"{session}/{frame_id}: {exc}")
@@ -120,7 +121,7 @@ def dataset_records(kind: str, root: Path, frame_ids: list[str], s: DatasetSetti
                 obj_class=c.obj_class, truth=c.truth, density=scorer.density(obs, scores),
                 lighting=light, frame_median=median, has_depth=depth is not None,
                 object_in_view=c.object_in_view,
-                scores=scores, frame_canny_us=frame_us))
+                scores=scores, frame_canny_us=frame_us, frame_sha256=digest))
             _bump(counters, f"rois_{c.kind}")
     return out
 

@@ -45,6 +45,7 @@ from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from services.fusion.verifiers import Observation
 from tools.eval import sim_truth
 from tools.eval.adapters.paper_rois import free_rois
+from tools.eval.frames import content_digest
 from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
 from tools.eval.scoring import Scorer, lighting
 from tools.messages import SimWorld
@@ -219,6 +220,7 @@ class _RecordingRois:
         self.max_skew_ns = round(s.fusion.frames.max_skew_s * 1e9)
         self.rng = np.random.default_rng(s.seed)
         self.timed_frames: set[tuple[str, int]] = set()
+        self.digests: dict[tuple[str, int], str] = {}
 
     def take(self, m: Record) -> list[RoiRecord]:
         """The recording's next record; a radar cycle gives its ROIs."""
@@ -277,6 +279,16 @@ class _RecordingRois:
             self.scorer.prepare(cal)
         world = self.truth.world_at(stamp) if self.truth is not None else None
         return _Seen(view, view.frame, gray, depth, lighting(gray), cal, world)
+
+    def _digest(self, seen: _Seen) -> str:
+        """The frame's content digest, computed once per frame and only for frames that
+        give a ROI (hashing every frame would cost as much as the rest of a cycle)."""
+        key = (seen.view.name, seen.frame.seq)
+        if key not in self.digests:
+            if len(self.digests) > 64:
+                self.digests.clear()
+            self.digests[key] = content_digest(seen.gray)
+        return self.digests[key]
 
     def _depth(self, frame: DecodedFrame) -> np.ndarray | None:
         """The frame's recorded depth (metres at its size), or None (the camera's depth
@@ -339,7 +351,8 @@ class _RecordingRois:
             track_id=track.track_id, obj_class=obj_class, truth=label,
             density=self.scorer.density(obs, scores), lighting=seen.light[0],
             frame_median=seen.light[1], has_depth=seen.depth is not None, scores=scores,
-            frame_canny_us=frame_us)
+            frame_canny_us=frame_us, frame_sha256=self._digest(seen),
+            scenario=seen.world.scenario if seen.world is not None else "")
 
 
 def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
@@ -369,5 +382,6 @@ def _background(world: SimWorld, frame_stamp: int, cal: Calibration,
                 image_h=pos.image_h, roi=roi, column=column, range_m=pos.range_m,
                 kind="background", frame_ref=pos.frame_ref,
                 truth="NO", density=scorer.density(obs, scores), lighting=light[0],
-                frame_median=light[1], has_depth=depth is not None, scores=scores))
+                frame_median=light[1], has_depth=depth is not None, scores=scores,
+                frame_sha256=pos.frame_sha256, scenario=pos.scenario))
     return out

@@ -75,6 +75,10 @@ class RoiRecord(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     object_in_view: bool = False        # a negative with a labelled object in its column
     scores: dict[str, Score] = msgspec.field(default_factory=dict)
     frame_canny_us: float | None = None  # full-frame Canny, on one record per frame
+    # The frame's content (tools/eval/frames.py: frame_digest): what held-out checks and
+    # training folds go by, never the path. "" in sets written without it: computed then.
+    frame_sha256: str = ""
+    scenario: str = ""                  # the simulator's scenario (sim/world), else ""
 
     @property
     def frame_key(self) -> str:

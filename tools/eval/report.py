@@ -1,8 +1,18 @@
 """From a ROI set and its labels to the evaluation, as plain data (JSON-ready dicts):
 per verifier the ROC and AUC with a bootstrap interval, the confusion matrices at the
 deployed threshold, at the verifier's own operating point and at the Youden-optimal
-threshold, the threshold sweep, the breakdown per negative kind and per stratum, and
-ROI vs full-frame timing. tools/eval/tables.py renders it as Markdown, plots.py as PNG.
+threshold, the threshold sweep over the verifier's own score range, the breakdown per
+kind of negative and per stratum, warnings where a set is too small for its interval,
+and ROI vs full-frame timing. tools/eval/tables.py renders it as Markdown, plots.py as
+PNG.
+
+Negatives are named for what stands there (`negative_category`): an empty scene (a
+background ROI, a radar track on nothing), something flat on the road (a plate, a
+manhole cover), something overhead (a sign), or a real structure (the lidar's and the
+radar's returns on no labelled object: walls, poles, fences, trees, a guard rail). A car
+must not hit a real structure: keeping it out of the brake decision is the corridor's
+job, not the camera's, so real structures are reported apart (the share the verifier
+confirms) and never counted as false passes in the headline figures.
 """
 
 import fnmatch
@@ -15,19 +25,40 @@ import numpy as np
 
 from tools.eval import metrics
 from tools.eval.labels import AMBIGUOUS, NO, YES
-from tools.eval.records import RoiRecord
+from tools.eval.options import PAPER_SWEEP
+from tools.eval.records import KIND_BACKGROUND, KIND_LIDAR, KIND_RADAR, KIND_TRACK, RoiRecord
 from tools.eval.scoring import PAPER_GATE
 
-PAPER_SWEEP = (0.010, 0.025, 0.050, 0.080, 0.100, 0.150)
 PAPER_TAU = 0.025
 # Range bands of the strata: near (the paper's 8 m example), middle, far.
 RANGE_BANDS = ((3.0, 8.0), (8.0, 15.0), (15.0, 25.0))
 CLEAR_VIEW = ", clear view"
+# Verifiers whose score is an edge density: the paper's thresholds are theirs.
+DENSITY_VERIFIERS = frozenset({"edge_density", "adaptive_edge_density"})
+# Other verifiers' sweep: their YES scores at these quantiles (score >= threshold keeps
+# about 99 %, 95 %, ... 10 % of the obstacles), and their own tau.
+SWEEP_QUANTILES = (0.01, 0.05, 0.10, 0.25, 0.50, 0.75, 0.90)
+# Fewer YES or NO than this (or fewer resampled groups) and an interval means little.
+MIN_FOR_INTERVAL = 10
+
+# What stands at a negative ROI (negative_category).
+EMPTY_SCENE = "empty scene"
+FLAT = "flat"
+OVERHEAD = "overhead"
+REAL_STRUCTURE = "real structure"
+LABELLED_NO = "labelled NO"
+OTHER = "other"
+# The simulator's false targets (tools/messages.py ObjectKind) by what they are.
+CATEGORY_OF_CLASS = {"plate": FLAT, "sign": OVERHEAD, "guard_rail": REAL_STRUCTURE,
+                     "ghost": EMPTY_SCENE}
+CATEGORY_ORDER = (EMPTY_SCENE, FLAT, OVERHEAD, LABELLED_NO, OTHER, REAL_STRUCTURE)
 
 
 @dataclass(frozen=True)
 class ReportSettings:
-    taus: tuple[float, ...] = PAPER_SWEEP
+    # The thresholds of Table IV for every verifier; None: each verifier's own range
+    # (sweep_taus).
+    taus: tuple[float, ...] | None = None
     # The deployed threshold of Table III; None: the verifier's own `tau` parameter.
     tau: float | None = None
     ci_group: str = "frame"            # frame | session | roi
@@ -36,6 +67,8 @@ class ReportSettings:
     seed: int = 0
     # (name, glob on the session) pairs: the session groups of Table V.
     groups: tuple[tuple[str, str], ...] = ()
+    # Count real structures as negatives (false passes) as figures before did.
+    structures_as_negatives: bool = False
 
 
 @dataclass
@@ -61,6 +94,67 @@ def range_band(r: float) -> str:
         if lo <= r < hi or (hi == RANGE_BANDS[-1][1] and r == hi):
             return f"{lo:g}-{hi:g} m"
     return "out of 3-25 m"
+
+
+def negative_category(r: RoiRecord) -> str:
+    """What stands at a negative ROI: EMPTY_SCENE, FLAT, OVERHEAD, REAL_STRUCTURE,
+    LABELLED_NO (a person said NO; what is there is not known) or OTHER."""
+    if r.kind == KIND_BACKGROUND:
+        return EMPTY_SCENE
+    if r.kind in (KIND_LIDAR, KIND_RADAR):
+        return REAL_STRUCTURE
+    if r.kind == KIND_TRACK:
+        if r.obj_class in CATEGORY_OF_CLASS:
+            return CATEGORY_OF_CLASS[r.obj_class]
+        if r.truth == NO and not r.obj_class:
+            return EMPTY_SCENE          # the simulator's truth: a track on no object
+        return LABELLED_NO
+    return OTHER
+
+
+def negative_member(r: RoiRecord) -> str:
+    """The ROI kind within its category (how the ROI was made)."""
+    if r.kind == KIND_TRACK:
+        return f"track on {r.obj_class or 'no object'}" if r.truth is not None else "track"
+    return {KIND_LIDAR: "lidar structure", KIND_RADAR: "radar returns"}.get(r.kind, r.kind)
+
+
+def sweep_taus(verifier: str, scores: np.ndarray, truth: np.ndarray, tau: float | None,
+               given: tuple[float, ...] | None) -> tuple[tuple[float, ...], str]:
+    """(thresholds, what they are) of a verifier's Table IV: `given` for every verifier;
+    else the paper's for an edge density; else its YES scores at SWEEP_QUANTILES (all
+    its scores without a YES) and its own tau, so that every row means something on its
+    own scale."""
+    if given:
+        return tuple(given), "given (--taus)"
+    if verifier.partition(":")[0] in DENSITY_VERIFIERS:
+        return PAPER_SWEEP, "the paper's thresholds (edge density)"
+    base = scores[truth] if truth.any() else scores
+    if len(base) == 0:
+        return (() if tau is None else (tau,)), "its own tau"
+    values = {float(v) for v in np.quantile(base, SWEEP_QUANTILES, method="lower")}
+    if tau is not None:
+        values.add(float(tau))
+    which = "YES" if truth.any() else "all"
+    return (tuple(sorted(values)),
+            f"its own score range: its {which} scores at quantiles "
+            f"{', '.join(f'{q:g}' for q in SWEEP_QUANTILES)}"
+            + (" and its tau" if tau is not None else ""))
+
+
+def few_warning(n_yes: int, n_no: int, groups: int | None, what: str) -> str | None:
+    """Why an interval on this set means little, or None."""
+    parts = []
+    if n_yes < MIN_FOR_INTERVAL:
+        parts.append(f"{n_yes} YES")
+    if n_no < MIN_FOR_INTERVAL:
+        parts.append(f"{n_no} NO")
+    if groups is not None and groups < MIN_FOR_INTERVAL:
+        parts.append(f"{groups} resampled groups")
+    if not parts:
+        return None
+    return (f"{what}: only {' and '.join(parts)} (fewer than {MIN_FOR_INTERVAL}): too few "
+            "for its interval; a check, not a measurement")
 
 
 def select(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str) -> Labelled:
@@ -107,10 +201,13 @@ def auc_block(scores: np.ndarray, truth: np.ndarray, groups: list[str] | None,
     n_yes, n_no = int(truth.sum()), int((~truth).sum())
     if n_yes == 0 or n_no == 0:
         return {"auc": None, "ci": None, "n_yes": n_yes, "n_no": n_no,
-                "why": "needs YES and NO"}
+                "why": "needs YES and NO",
+                "few": few_warning(n_yes, n_no, None, "AUC")}
     ci = metrics.bootstrap_auc(scores, truth, groups, s.n_boot, s.level, s.seed)
     return {"auc": metrics.auc(scores, truth), "ci": [ci.low, ci.high], "level": ci.level,
-            "replicates": ci.replicates, "groups": ci.groups, "n_yes": n_yes, "n_no": n_no}
+            "replicates": ci.replicates, "groups": ci.groups, "n_yes": n_yes, "n_no": n_no,
+            "few": few_warning(n_yes, n_no, ci.groups if groups is not None else None,
+                               "AUC")}
 
 
 def _tau_of(params: dict[str, Any]) -> float | None:
@@ -138,18 +235,47 @@ def _strata(sel: Labelled, key: Callable[[RoiRecord], str], tau: float | None,
     return out
 
 
+def _subset(sel: Labelled, keep: np.ndarray) -> Labelled:
+    return Labelled([r for r, k in zip(sel.records, keep, strict=True) if k],
+                    sel.scores[keep], sel.verdicts[keep], sel.truth[keep], dict(sel.counts))
+
+
+def _structures(sel: Labelled, mask: np.ndarray, tau: float | None) -> dict[str, Any]:
+    """The real structures among the negatives: how many, of what kind, and the share
+    the verifier confirms (passes), which is what it should do with them."""
+    members: dict[str, int] = {}
+    for r, m in zip(sel.records, mask, strict=True):
+        if m:
+            members[negative_member(r)] = members.get(negative_member(r), 0) + 1
+    n = int(mask.sum())
+    out: dict[str, Any] = {"n": n, "members": members,
+                           "confirmed_operating": float(sel.verdicts[mask].mean()) if n
+                           else None,
+                           "median_score": float(np.median(sel.scores[mask])) if n else None}
+    if tau is not None:
+        out["confirmed_tau"] = float((sel.scores[mask] >= tau).mean()) if n else None
+    return out
+
+
 def evaluate(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str,
              params: dict[str, Any], settings: ReportSettings) -> dict[str, Any]:
-    """Everything about one verifier on the labelled ROIs. Raises ValueError when there
-    is nothing labelled to judge."""
-    sel = select(records, labels, verifier)
-    if sel.counts["labelled"] == 0:
-        raise ValueError(f"{verifier}: no labelled ROI it applies to ({sel.counts})")
+    """Everything about one verifier on the labelled ROIs: obstacles (YES) against the
+    negatives a camera may reject; real structures apart (see the module's doc). Raises
+    ValueError when there is nothing labelled to judge."""
+    every = select(records, labels, verifier)
+    if every.counts["labelled"] == 0:
+        raise ValueError(f"{verifier}: no labelled ROI it applies to ({every.counts})")
     s = settings
     tau = s.tau if s.tau is not None else _tau_of(params)
-    out: dict[str, Any] = {"verifier": verifier, "params": params, "counts": sel.counts,
+    structure = np.array([not y and negative_category(r) == REAL_STRUCTURE
+                          for r, y in zip(every.records, every.truth, strict=True)],
+                         dtype=bool)
+    sel = every if s.structures_as_negatives else _subset(every, ~structure)
+    out: dict[str, Any] = {"verifier": verifier, "params": params, "counts": every.counts,
                            "n": len(sel.records), "n_yes": int(sel.truth.sum()),
-                           "n_no": int((~sel.truth).sum()), "tau": tau}
+                           "n_no": int((~sel.truth).sum()), "tau": tau,
+                           "structures_as_negatives": s.structures_as_negatives}
+    out["real_structure"] = _structures(every, structure, tau)
     groups = _group_keys(sel.records, s.ci_group)
     out["ci_group"] = s.ci_group
     out.update(auc_block(sel.scores, sel.truth, groups, s))
@@ -163,9 +289,12 @@ def evaluate(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str
         y_tau, j = metrics.youden(sel.scores, sel.truth)
         out["youden"] = {"tau": y_tau, "j": j,
                          **metrics.at_threshold(sel.scores, sel.truth, y_tau).as_dict()}
+    taus, basis = sweep_taus(verifier, sel.scores, sel.truth, tau, s.taus)
+    out["sweep_basis"] = basis
     out["sweep"] = [{"tau": t, **c.as_dict()}
-                    for t, c in metrics.sweep(sel.scores, sel.truth, s.taus)]
-    out["negative_kinds"] = _negative_kinds(sel, groups, tau, s)
+                    for t, c in metrics.sweep(sel.scores, sel.truth, taus)]
+    out["negative_kinds"] = _negative_kinds(every, _group_keys(every.records, s.ci_group),
+                                            tau, taus, s)
     out["strata"] = {
         "lighting": _strata(sel, lambda r: r.lighting or "unknown", tau),
         "range": _strata(sel, lambda r: range_band(r.range_m), tau,
@@ -177,8 +306,20 @@ def evaluate(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str
     if s.groups:
         out["strata"]["group"] = _strata(sel, lambda r: session_group(r.session, s.groups),
                                          tau, [name for name, _ in s.groups])
-    out["score_by_class"] = _score_summary(sel)
-    out["timing_us"] = _timing(sel.records, verifier)
+    out["score_by_class"] = _score_summary(every)
+    out["timing_us"] = _timing(every.records, verifier)
+    out["warnings"] = _warnings(out)
+    return out
+
+
+def _warnings(ev: dict[str, Any]) -> list[str]:
+    """Every figure of `ev` whose set is too small for its interval, named."""
+    out = []
+    if ev.get("few"):
+        out.append(f"{ev['verifier']}: {ev['few']}")
+    for k in ev["negative_kinds"]:
+        if k.get("few"):
+            out.append(f"{ev['verifier']} vs {k['kind']}: {k['few']}")
     return out
 
 
@@ -200,33 +341,42 @@ def _recall_by_class(sel: Labelled, tau: float | None) -> list[dict[str, Any]]:
 
 
 def _negative_kinds(sel: Labelled, groups: list[str] | None, tau: float | None,
-                    s: ReportSettings) -> list[dict[str, Any]]:
-    """Every YES against the NOs of one kind: how well the verifier tells obstacles from
-    that kind of negative, and how many of them pass."""
-    kinds = sorted({r.kind for r, y in zip(sel.records, sel.truth, strict=True) if not y})
+                    taus: Sequence[float], s: ReportSettings) -> list[dict[str, Any]]:
+    """Every YES against the NOs of one category (negative_category): how well the
+    verifier tells obstacles from that kind of negative, and how many of them pass (for
+    real structures: how many it confirms, as it should)."""
+    cats = [negative_category(r) for r in sel.records]
+    present = {c for c, y in zip(cats, sel.truth, strict=True) if not y}
+    kinds = [c for c in CATEGORY_ORDER if c in present]
     # A kind whose negatives sometimes have an object in view is also judged on the others.
     clear = [f"{k}{CLEAR_VIEW}" for k in kinds
-             if any(r.object_in_view for r in sel.records if r.kind == k)]
+             if any(r.object_in_view for r, c, y in zip(sel.records, cats, sel.truth,
+                                                       strict=True) if c == k and not y)]
     out = []
     for kind in kinds + clear:
         base = kind.removesuffix(CLEAR_VIEW)
         only_clear = kind != base
-        idx = np.array([bool(y) or (r.kind == base and not (only_clear and r.object_in_view))
-                        for r, y in zip(sel.records, sel.truth, strict=True)])
+        idx = np.array([bool(y) or (c == base and not (only_clear and r.object_in_view))
+                        for r, c, y in zip(sel.records, cats, sel.truth, strict=True)])
         neg = idx & ~sel.truth
         g = None if groups is None else [k for k, keep in zip(groups, idx, strict=True)
                                          if keep]
-        row: dict[str, Any] = {"kind": kind, "n_no": int(neg.sum())}
+        members: dict[str, int] = {}
+        for r, m in zip(sel.records, neg, strict=True):
+            if m:
+                members[negative_member(r)] = members.get(negative_member(r), 0) + 1
+        row: dict[str, Any] = {"kind": kind, "n_no": int(neg.sum()), "members": members,
+                               "real_structure": base == REAL_STRUCTURE}
         row.update(auc_block(sel.scores[idx], sel.truth[idx], g, s))
         if row["auc"] is not None:
-            r = metrics.roc(sel.scores[idx], sel.truth[idx])
-            row["roc"] = {"fpr": r.fpr.tolist(), "tpr": r.tpr.tolist()}
+            curve = metrics.roc(sel.scores[idx], sel.truth[idx])
+            row["roc"] = {"fpr": curve.fpr.tolist(), "tpr": curve.tpr.tolist()}
         row["pass_rate_operating"] = float(sel.verdicts[neg].mean())
         row["operating"] = metrics.confusion(sel.verdicts[idx], sel.truth[idx]).as_dict()
         if tau is not None:
             row["pass_rate_tau"] = float((sel.scores[neg] >= tau).mean())
         row["pass_rate_sweep"] = {f"{t:g}": float((sel.scores[neg] >= t).mean())
-                                  for t in s.taus}
+                                  for t in taus}
         row["median_score"] = float(np.median(sel.scores[neg]))
         out.append(row)
     return out
@@ -237,7 +387,7 @@ def _score_summary(sel: Labelled) -> dict[str, dict[str, float]]:
     out = {}
     buckets: dict[str, list[float]] = {}
     for r, y, v in zip(sel.records, sel.truth, sel.scores, strict=True):
-        buckets.setdefault("YES" if y else f"NO {r.kind}", []).append(float(v))
+        buckets.setdefault("YES" if y else f"NO {negative_category(r)}", []).append(float(v))
     for name, vals in sorted(buckets.items()):
         a = np.array(vals)
         out[name] = {"n": len(a), "median": float(np.median(a)),

@@ -25,12 +25,11 @@ from common.config.loader import ConfigError
 from services.fusion.verifiers import VerifierConfigError
 from tools.eval.adapters import detect, frame_ids
 from tools.eval.dataset_rois import DatasetSettings, dataset_records
+from tools.eval.options import FRAMES_PER_TASK
 from tools.eval.recording import RecordingSettings, recording_records
 from tools.eval.records import RoiRecord
 from tools.eval.scoring import Scorer, VerifierSpec
 from tools.recording.reader import RecordingError
-
-FRAMES_PER_TASK = 8
 
 
 class SourceError(ValueError):

@@ -17,10 +17,46 @@ def _md(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 
 def _auc_text(block: dict[str, Any]) -> str:
+    """AUC [interval], marked "(too few)" where the set is too small for it."""
     if block.get("auc") is None:
         return "-"
     lo, hi = block["ci"]
-    return f"{block['auc']:.3f} [{lo:.3f}, {hi:.3f}]"
+    few = " (too few)" if block.get("few") else ""
+    return f"{block['auc']:.3f} [{lo:.3f}, {hi:.3f}]{few}"
+
+
+def tau_text(t: float) -> str:
+    """A threshold: 3 decimals as the paper prints them, 3 significant digits where
+    that would hide it (scores far from 0.01-1000)."""
+    return f"{t:.3f}" if t == 0 or 0.01 <= abs(t) < 1000 else f"{t:.3g}"
+
+
+def _kind_name(row: dict[str, Any]) -> str:
+    members = ", ".join(f"{k} {n}" for k, n in sorted(row.get("members", {}).items()))
+    return f"{row['kind']} ({members})" if members else row["kind"]
+
+
+def warnings_text(result: dict[str, Any]) -> str:
+    """The sets too small for their intervals, one line each ("" when none)."""
+    lines = [f"warning: {w}" for ev in result["verifiers"].values()
+             for w in ev.get("warnings", [])]
+    return "\n".join(lines)
+
+
+def structures_line(ev: dict[str, Any]) -> str:
+    """Real structures: reported apart, never as false passes."""
+    st = ev.get("real_structure") or {}
+    if not st.get("n"):
+        return ""
+    members = ", ".join(f"{k} {n}" for k, n in sorted(st["members"].items()))
+    tau = (f", {st['confirmed_tau']:.3f} at τ={ev['tau']:.3f}"
+           if st.get("confirmed_tau") is not None and ev.get("tau") is not None else "")
+    counted = ("counted as negatives above (--structures-as-negatives)"
+               if ev.get("structures_as_negatives") else
+               "not counted as negatives above: a car must not hit them, keeping them out "
+               "of the brake decision is the corridor's job")
+    return (f"{ev['verifier']}: real structures ({members}): {st['n']}, confirmed "
+            f"{st['confirmed_operating']:.3f} at the operating point{tau}; {counted}")
 
 
 def table_iii(ev: dict[str, Any]) -> str:
@@ -47,17 +83,18 @@ def table_iii(ev: dict[str, Any]) -> str:
 
 def table_iv(ev: dict[str, Any]) -> str:
     """The threshold sweep."""
-    youden = round(ev["youden"]["tau"], 3) if ev.get("youden") else None
+    youden = ev["youden"]["tau"] if ev.get("youden") else None
     rows = []
     for row in ev["sweep"]:
         notes = []
         if ev.get("tau") is not None and abs(row["tau"] - ev["tau"]) < 1e-12:
             notes.append("deployed")
-        if youden is not None and abs(row["tau"] - youden) < 1e-12:
+        if youden is not None and tau_text(row["tau"]) == tau_text(youden):
             notes.append("Youden-optimal")
-        rows.append([f"{row['tau']:.3f}", num(row["precision"]), num(row["recall"]),
+        rows.append([tau_text(row["tau"]), num(row["precision"]), num(row["recall"]),
                      num(row["f1"]), num(row["fpr"]), ", ".join(notes)])
-    return (f"Table IV: {ev['verifier']}, threshold sensitivity\n\n"
+    basis = f" (thresholds: {ev['sweep_basis']})" if ev.get("sweep_basis") else ""
+    return (f"Table IV: {ev['verifier']}, threshold sensitivity{basis}\n\n"
             + _md(["Threshold", "Precision", "Recall", "F1", "FPR", "Notes"], rows))
 
 
@@ -105,17 +142,22 @@ def table_ii(t: dict[str, Any]) -> str:
 
 
 def negative_kinds_table(ev: dict[str, Any]) -> str:
-    """Every YES against each kind of NO."""
+    """Every YES against each kind of NO, the kinds named for what they are; for real
+    structures the share passing is the share confirmed (as it should be)."""
     rows = []
     for row in ev["negative_kinds"]:
-        rows.append([row["kind"], str(row["n_no"]), _auc_text(row),
+        name = _kind_name(row) + (": passing = confirmed" if row.get("real_structure")
+                                  else "")
+        rows.append([name, str(row["n_no"]), _auc_text(row),
                      num(row["pass_rate_operating"]),
                      num(row.get("pass_rate_tau")), num(row["median_score"])])
     tau = f"τ={ev['tau']:.3f}" if ev.get("tau") is not None else "τ"
-    return (f"{ev['verifier']}: all YES against each kind of NO "
+    text = (f"{ev['verifier']}: all YES against each kind of NO "
             f"({round(100 * ev.get('level', 0.95))}% CI by {ev['ci_group']})\n\n"
             + _md(["negatives", "n", "AUC [CI]", "pass rate at operating point",
                    f"pass rate at {tau}", "median score"], rows))
+    line = structures_line(ev)
+    return text + ("\n\n" + line if line else "")
 
 
 def class_table(ev: dict[str, Any]) -> str:
@@ -146,10 +188,12 @@ def compare_table(evs: Sequence[dict[str, Any]]) -> str:
                      num(y.get("tau"), 4), num(y.get("recall")), num(y.get("fpr")),
                      "-" if t is None else f"{t['mean']:.0f}"]
                     + [_auc_text(by_kind[k]) if k in by_kind else "-" for k in kinds])
+    structures = [line for ev in evs if (line := structures_line(ev))]
     return ("Verifiers side by side on the same ROIs (recall, precision, FPR at each "
             "verifier's own operating point; @Y: at its Youden-optimal threshold; n/a: "
-            "ROIs it cannot judge, e.g. no depth)\n\n"
-            + _md(header, rows))
+            "ROIs it cannot judge, e.g. no depth; the negatives are those a camera may "
+            "reject: real structures apart)\n\n"
+            + _md(header, rows) + "".join("\n\n" + line for line in structures))
 
 
 def compare_kinds_table(evs: Sequence[dict[str, Any]]) -> str:
@@ -159,10 +203,12 @@ def compare_kinds_table(evs: Sequence[dict[str, Any]]) -> str:
     for ev in evs:
         for k in ev["negative_kinds"]:
             op = k["operating"]
-            rows.append([ev["verifier"], k["kind"], f"{k['n_yes']}/{k['n_no']}", _auc_text(k),
-                         num(op["recall"]), num(op["fpr"]), num(op["precision"])])
+            rows.append([ev["verifier"], _kind_name(k), f"{k['n_yes']}/{k['n_no']}",
+                         _auc_text(k), num(op["recall"]), num(op["fpr"]),
+                         num(op["precision"])])
     return ("Per kind of negative (all YES against the NOs of that kind; at each "
-            "verifier's operating point)\n\n"
+            "verifier's operating point; for real structures \"negatives passing\" is "
+            "the share confirmed, as it should be)\n\n"
             + _md(["verifier", "negatives", "n YES/NO", "AUC [CI]", "recall",
                    "negatives passing", "precision"], rows))
 
@@ -170,6 +216,9 @@ def compare_kinds_table(evs: Sequence[dict[str, Any]]) -> str:
 def full_report(result: dict[str, Any], stratum: str | None = None) -> str:
     """Every table of an evaluation, one verifier after the other."""
     parts = []
+    warned = warnings_text(result)
+    if warned:
+        parts.append(warned)
     evs = list(result["verifiers"].values())
     if len(evs) > 1:
         parts.append(compare_table(evs))

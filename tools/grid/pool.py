@@ -35,13 +35,15 @@ from tools.sim.scenario import Scenario
 class Case:
     """One run: a scenario, the followed fusion config (and a candidate in shadow mode),
     the loop's seed; `name` is how progress and results call it (default: the
-    scenario's name)."""
+    scenario's name); `plot`: where the worker writes the run's timeline plot (as `aeb
+    demo` draws it), None for none."""
 
     scenario: Scenario
     fusion_config: Path
     candidate_config: Path | None = None
     loop_seed: int = 0
     name: str = ""
+    plot: Path | None = None
 
     @property
     def label(self) -> str:
@@ -85,7 +87,20 @@ def run_case(index: int, case: Case) -> Outcome:
     except Exception as exc:     # reported with the case; the other cases go on
         return Outcome(index, case, None, f"{type(exc).__name__}: {exc}",
                        traceback.format_exc())
+    if case.plot is not None:
+        try:
+            _plot(result, _configs[key], case.plot)
+        except OSError as exc:   # the run stands; its plot is missing, and said so
+            return Outcome(index, case, result, detail=f"plot not written: {exc}")
     return Outcome(index, case, result)
+
+
+def _plot(result: LockstepResult, config: LoopConfig, path: Path) -> None:
+    # matplotlib only for the runs that draw (the plot module imports it)
+    from tools.sim.plot import plot_timeline
+
+    d = config.fusion.fusion.decision
+    plot_timeline(result.samples, result.verdict, path, d.ttc_offset_s, d.brake_ttc_eff_s)
 
 
 def run_cases(cases: Sequence[Case], workers: int = 2, progress: Progress | None = None,

@@ -88,6 +88,8 @@ def check(launches: list[Launch]) -> int:
     failed = 0
     for result in check_all(launches):
         mark = {True: "ok", False: "INVALID", None: "--"}[result.ok]
+        if result.ok and result.detail.startswith("WARNING"):
+            mark = "WARNING"     # valid, but e.g. an insecure example key is accepted
         print(f"  {mark:<7} {result.name}: {result.detail}")
         failed += result.ok is False
     if failed:

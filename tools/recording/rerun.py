@@ -36,7 +36,7 @@ from common.config.overrides import add_set_argument
 from common.config.radar import RadarConfig
 from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
 from common.log import add_log_level, setup_logging
-from common.messages import encode
+from common.messages import VerifiedTargets, encode
 from common.resources import DEPLOY
 from tools.recording.compare import Comparison, Difference, check_declared, summary_table
 from tools.recording.format import stack_channel
@@ -92,6 +92,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--start", type=float, default=None, help="seconds from the start")
     parser.add_argument("--end", type=float, default=None, help="seconds from the start")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--evidence", action="store_true",
+                        help="fusion: print each cycle's per-track evidence (the verifier's "
+                             "per-frame llr and the track's sum), for verifiers that have one")
     add_log_level(parser, "WARNING")
     return parser.parse_args(argv)
 
@@ -141,6 +144,9 @@ def run_fusion(args: argparse.Namespace, rec: "Recording",
                 for topic, view in views:
                     kind, data = encode_derived(view)
                     writer.write(topic, kind, data, log_ns, log_ns)
+        if args.evidence:
+            for line in evidence_lines(result.targets, span_start):
+                print(line)
         progress(cycle.log_ns - span_start, rerun.stats.cycles)
     wall_s = time.perf_counter() - t0
     if writer is not None:
@@ -165,6 +171,23 @@ def run_fusion(args: argparse.Namespace, rec: "Recording",
         print(f"note: {st.depth_missing} frame(s) had their depth in the live instance, but "
               "the recording does not hold it: the cycles checked in them may differ")
     return comparison, timing
+
+
+def evidence_lines(targets: VerifiedTargets, first_ns: int) -> list[str]:
+    """`t=  1.234 s  track 7  18.2 m  llr -1.00  sum -3.00  depth_sees_through  REJECTED
+    NONE`: one line per target whose gate_detail holds an accumulated llr."""
+    out = []
+    for t in targets.targets:
+        d = t.gate_detail
+        if "evidence_llr" not in d:
+            continue
+        why = ",".join(k for k, v in d.items()
+                       if v and (k.startswith("depth_") or k == "appearance_veto"))
+        out.append(f"t={(targets.header.stamp_ns - first_ns) / 1e9:8.3f} s  track "
+                   f"{t.track_id:<4} {t.range_m:5.1f} m  llr {d.get('llr', 0.0):+.2f}  sum "
+                   f"{d['evidence_llr']:+.2f}  {why or '-'}  {t.verification.value}  "
+                   f"{t.decision.value}")
+    return out
 
 
 def run_radar(args: argparse.Namespace, rec: "Recording",

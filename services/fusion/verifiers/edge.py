@@ -1,11 +1,4 @@
-"""Verifiers: does the image show an obstacle inside a track's ROI?
-
-A verifier takes an `Observation` of one track (the decoded grayscale frame, the ROI, the
-projected column, the radar range, and aligned depth when the camera has it) and returns
-a score and a verdict. Verifiers are registered by name with a factory
-that validates their parameters, so that a config selects one (`[fusion.verifier]`) and
-an A/B instance can run another without touching fusion. Every published decision
-records the verifier's name and parameters.
+"""The edge-density verifiers.
 
 - `edge_density`: the paper's gate. Canny(40, 120) on the ROI, d = edges / pixels,
   verified iff d >= tau (0.025).
@@ -15,130 +8,27 @@ records the verifier's name and parameters.
   saturated blobs (lamps, headlights, reflections) are not counted and the density is
   compared with its own threshold. On a lit ROI with little noise it equals
   `edge_density` exactly.
-- `depth`: depth consistency (depth_check.py): the share of the column's pixels, 0.3 to
-  2.2 m above the ground, whose aligned depth puts a surface at the track's range within
-  the D435's error; needs depth.
-
-To add one: write a class with `name`, `needs_depth`, `params()` and `verify()`, a msgspec
-Struct for its parameters, and register a factory with `@register("name")` (see docs/fusion.md).
-A verifier may also define `prepare(calibration)`: fusion calls it for each camera when it
-starts (the depth verifier computes its ray maps there).
 """
 
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from typing import Annotated, Protocol, TypeVar
+from collections.abc import Mapping
+from typing import Annotated
 
 import cv2
 import msgspec
 import numpy as np
 
-from common.calibration import Calibration
-from services.fusion.roi import Roi
+from services.fusion.verifiers.base import (
+    Fraction,
+    GateResult,
+    Observation,
+    ParamValue,
+    Threshold,
+    Verifier,
+    parse_params,
+)
 
-ParamValue = float | int | str | bool
-S = TypeVar("S", bound=msgspec.Struct)
-
-# On a ROI this small, OpenCV's thread pool costs more than it gains (FACTS.md).
-cv2.setNumThreads(1)
-
-
-class VerifierConfigError(ValueError):
-    """An unknown verifier name or an invalid parameter; the message names it."""
-
-
-@dataclass(frozen=True, slots=True)
-class Observation:
-    """What the camera shows of one radar track: every verifier's input.
-
-    `gray`: the frame, 2-D uint8 (common.imaging.decode_gray). `roi`: the padded box
-    around the track's projected column, inside the frame and non-empty. `column`: the
-    column's own box (z from 0 to the column height at the track), clipped to the frame.
-    `range_m`: the track's radar range at the frame's time. `depth_m`: depth aligned to
-    `gray` in metres (float32, 0 where there is no return), None when the camera has no
-    depth. `calibration`: the calibration the column was projected with, and `xy_m` the
-    track's (x, y) in its ground frame (the column's foot) at the frame's time; verifiers
-    that place depth in 3-D need both (None when unknown)."""
-
-    gray: np.ndarray
-    roi: Roi
-    column: Roi
-    range_m: float
-    depth_m: np.ndarray | None = None
-    calibration: Calibration | None = None
-    xy_m: tuple[float, float] | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class GateResult:
-    """`score` is what the verifier compares with its threshold (the edge density for the
-    edge-density verifiers); `detail` says how it got there."""
-
-    score: float
-    verified: bool
-    detail: dict[str, float] = field(default_factory=dict)
-
-
-class Verifier(Protocol):
-    name: str
-    # True: the verifier needs `Observation.depth_m`; without depth it cannot check.
-    needs_depth: bool
-
-    def params(self) -> dict[str, ParamValue]:
-        """Every parameter, defaults included, as recorded with each decision."""
-        ...
-
-    def verify(self, obs: Observation) -> GateResult:
-        """Check one track's observation."""
-        ...
-
-
-def wants_depth(v: Verifier) -> bool:
-    """Whether fusion should bring this verifier the camera's depth: it needs depth, or it
-    uses depth when a frame has some (`uses_depth = True`: the combined verifier, which
-    falls back to appearance without it)."""
-    return bool(v.needs_depth or getattr(v, "uses_depth", False))
-
-
-VerifierFactory = Callable[[Mapping[str, ParamValue]], Verifier]
-_REGISTRY: dict[str, VerifierFactory] = {}
-
-
-def register(name: str) -> Callable[[VerifierFactory], VerifierFactory]:
-    """Decorator: make a factory available under `name` (raises ValueError if taken)."""
-
-    def add(factory: VerifierFactory) -> VerifierFactory:
-        if name in _REGISTRY:
-            raise ValueError(f"verifier {name!r} is already registered")
-        _REGISTRY[name] = factory
-        return factory
-
-    return add
-
-
-def available() -> list[str]:
-    return sorted(_REGISTRY)
-
-
-def create(name: str, params: Mapping[str, ParamValue] | None = None) -> Verifier:
-    """A verifier from the registry. Raises VerifierConfigError naming the problem."""
-    factory = _REGISTRY.get(name)
-    if factory is None:
-        raise VerifierConfigError(
-            f"unknown verifier {name!r}; available: {', '.join(available())}")
-    return factory(params or {})
-
-
-def _parse(params: Mapping[str, ParamValue], spec: type[S], name: str) -> S:
-    try:
-        return msgspec.convert(dict(params), spec, strict=True)
-    except msgspec.ValidationError as exc:
-        raise VerifierConfigError(f"verifier {name!r}: invalid params: {exc}") from exc
-
-
-Threshold = Annotated[float, msgspec.Meta(ge=0, le=2000)]
-Fraction = Annotated[float, msgspec.Meta(ge=0, le=1)]
+SCORE = "edge_density"
 
 
 def _check_thresholds(low: float, high: float) -> None:
@@ -171,12 +61,11 @@ class EdgeDensity:
         roi = obs.roi
         patch = obs.gray[roi.y:roi.y + roi.h, roi.x:roi.x + roi.w]
         density = cv2.countNonZero(cv2.Canny(patch, self.p.low, self.p.high)) / roi.area
-        return GateResult(density, density >= self.p.tau)
+        return GateResult(density, density >= self.p.tau, score_name=SCORE)
 
 
-@register("edge_density")
-def _edge_density(params: Mapping[str, ParamValue]) -> Verifier:
-    return EdgeDensity(_parse(params, EdgeDensityParams, "edge_density"))
+def make_edge_density(params: Mapping[str, ParamValue]) -> Verifier:
+    return EdgeDensity(parse_params(params, EdgeDensityParams, "edge_density"))
 
 
 class AdaptiveEdgeDensityParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -272,14 +161,9 @@ class AdaptiveEdgeDensity:
         tau = p.tau_dark if dark else p.tau
         return GateResult(density, density >= tau,
                           {"low": low, "high": high, "noise": sigma, "masked": masked_frac,
-                           "dark": float(dark), "tau": tau})
+                           "dark": float(dark), "tau": tau}, SCORE)
 
 
-@register("adaptive_edge_density")
-def _adaptive(params: Mapping[str, ParamValue]) -> Verifier:
+def make_adaptive(params: Mapping[str, ParamValue]) -> Verifier:
     return AdaptiveEdgeDensity(
-        _parse(params, AdaptiveEdgeDensityParams, "adaptive_edge_density"))
-
-
-# Registers the verifiers defined in their own modules (they import this one).
-from services.fusion import appearance, combined, depth_check  # noqa: E402,F401
+        parse_params(params, AdaptiveEdgeDensityParams, "adaptive_edge_density"))

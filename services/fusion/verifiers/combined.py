@@ -31,19 +31,18 @@ from typing import Annotated
 import msgspec
 
 from common.calibration import Calibration
-from services.fusion import appearance
-from services.fusion.verifiers import (
+from services.fusion.verifiers import appearance, create
+from services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,
     Verifier,
     VerifierConfigError,
-    _parse,
-    create,
-    register,
+    parse_params,
 )
 
 APPEARANCE = ("hog_linear", "hog_people", "none")
+SCORE = "cue_ratio_product"   # min(depth ratio, 1) x appearance ratio
 # A ratio this large is "certainly passes"; it keeps scores finite for the tables.
 _MAX_RATIO = 1000.0
 
@@ -125,25 +124,24 @@ class Combined:
             # Nothing stands at the range: the product is 0 whatever the appearance, so
             # appearance (the dearer cue) is not computed.
             detail["decided_depth"] = 1.0
-            return GateResult(0.0, False, detail)
+            return GateResult(0.0, False, detail, SCORE)
         if self.look is not None:
             look, ratio = self._look_ratio(obs)
             detail["appearance"] = look
             ratios["appearance"] = detail["appearance_ratio"] = ratio
         if not ratios:
             # use_depth only, and this frame has no depth: nothing can confirm.
-            return GateResult(0.0, False, detail)
+            return GateResult(0.0, False, detail, SCORE)
         cue = min(ratios, key=lambda k: ratios[k])
         detail[f"decided_{cue}"] = 1.0
         score = min(ratios.get("depth", 1.0), 1.0) * ratios.get("appearance", 1.0)
         if self.look is None:
             score = ratios["depth"]
-        return GateResult(score, score >= self.p.tau, detail)
+        return GateResult(score, score >= self.p.tau, detail, SCORE)
 
 
-@register("combined")
-def _combined(params: Mapping[str, ParamValue]) -> Verifier:
-    p = _parse(params, CombinedParams, "combined")
+def make(params: Mapping[str, ParamValue]) -> Verifier:
+    p = parse_params(params, CombinedParams, "combined")
     try:
         return Combined(p)
     except VerifierConfigError as exc:

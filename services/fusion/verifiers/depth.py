@@ -1,4 +1,4 @@
-"""The depth verifier: does a surface stand in the track's column at the radar's range?
+"""The depth verifier (`depth`): does a surface stand in the track's column at the radar's range?
 
 A real obstacle fills part of the column 0.3-2.2 m above the ground at the track's range;
 a radar false target - metal on the road (a plate, a manhole cover), a sign overhead, a
@@ -47,15 +47,15 @@ import numpy as np
 
 from common.calibration import Calibration
 from common.depth_error import D435Noise
-from services.fusion.verifiers import (
+from services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,
     Verifier,
-    _parse,
-    register,
+    parse_params,
 )
 
+SCORE = "depth_share"        # hits / band pixels with a return
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
 # Depth at or below this (metres) is "no return" (0); also the strictness of "nearer".
 _NO_RETURN = 1e-6
@@ -177,40 +177,69 @@ class DepthConsistency:
     def verify(self, obs: Observation) -> GateResult:
         """Raises ValueError when the observation lacks depth, calibration or xy_m
         (fusion and the evaluation give all three to a verifier that needs depth)."""
-        if obs.depth_m is None or obs.calibration is None or obs.xy_m is None:
-            raise ValueError("the depth verifier needs depth_m, calibration and xy_m")
-        p, cal, roi = self.p, obs.calibration, obs.roi
-        c0, c1 = _window_cols(obs, p.min_width_px)
-        r0, r1 = roi.y, roi.y + roi.h
-        # The camera's centre in the ground frame, and the track's distance from it.
-        centre = -cal.r.T @ cal.t
-        expected = float(np.hypot(obs.xy_m[0] - centre[0], obs.xy_m[1] - centre[1]))
+        p = self.p
+        col = column_depth(obs, p.min_width_px, p.min_height_m, p.max_height_m)
+        expected = col.expected_m
         tol = self.tolerance_m(expected)
-        maps = ray_maps(cal)
-        cz = float(centre[2])
-        d = obs.depth_m[r0:r1, c0:c1]
-        if d.dtype != np.float32:
-            d = d.astype(np.float32)
-        # In the band: the ray at the track's distance stands min..max height above the
-        # ground, i.e. rise / run within [(min - cz) / r, (max - cz) / r].
-        band = cv2.inRange(maps.slope[r0:r1, c0:c1], (p.min_height_m - cz) / expected,
-                           (p.max_height_m - cz) / expected)
-        returns = cv2.bitwise_and(band, cv2.inRange(d, _NO_RETURN, np.inf))
-        n_returns = cv2.countNonZero(returns)
-        dist = cv2.multiply(d, maps.run[r0:r1, c0:c1])
-        lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
-        at = cv2.inRange(dist, expected - tol, expected + tol + p.extent_m)
-        high = cv2.inRange(lift, p.min_height_m - cz, p.max_height_m - cz)
-        n_hit = cv2.countNonZero(cv2.bitwise_and(cv2.bitwise_and(returns, at), high))
+        n_returns = cv2.countNonZero(col.returns)
+        at = cv2.inRange(col.dist, expected - tol, expected + tol + p.extent_m)
+        high = cv2.inRange(col.lift, p.min_height_m - col.camera_z_m,
+                           p.max_height_m - col.camera_z_m)
+        n_hit = cv2.countNonZero(cv2.bitwise_and(cv2.bitwise_and(col.returns, at), high))
         near = cv2.countNonZero(cv2.bitwise_and(
-            returns, cv2.inRange(dist, -np.inf, expected - tol - _NO_RETURN)))
+            col.returns, cv2.inRange(col.dist, -np.inf, expected - tol - _NO_RETURN)))
         score = n_hit / n_returns if n_returns >= p.min_returns else 0.0
         return GateResult(score, score >= p.tau,
                           {"returns": float(n_returns), "hits": float(n_hit),
                            "nearer": near / n_returns if n_returns else 0.0,
-                           "expected_m": expected, "tol_m": tol})
+                           "expected_m": expected, "tol_m": tol}, SCORE)
 
 
-@register("depth")
-def _depth(params: Mapping[str, ParamValue]) -> Verifier:
-    return DepthConsistency(_parse(params, DepthParams, "depth"))
+@dataclass(frozen=True, slots=True)
+class ColumnDepth:
+    """A track's column window seen in depth, in the ground frame. Per pixel of the
+    window (float32 / uint8 masks of 255, window-sized): `dist` the measured point's
+    horizontal distance from the camera, `lift` its height above the camera, `band` the
+    pixels whose ray at the track's distance lies in the height band asked for, `returns`
+    those of them with a depth return. `expected_m`: the track's distance from the
+    camera; `camera_z_m`: the camera's height above the ground."""
+
+    dist: np.ndarray
+    lift: np.ndarray
+    band: np.ndarray
+    returns: np.ndarray
+    expected_m: float
+    camera_z_m: float
+
+
+def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
+                 band_max_m: float) -> ColumnDepth:
+    """The column window of `obs` in depth (see ColumnDepth): the ROI's rows, the column
+    box's columns widened to `min_width_px`; the band `band_min_m`..`band_max_m` above the
+    ground at the track. Raises ValueError when the observation lacks depth, calibration
+    or xy_m."""
+    if obs.depth_m is None or obs.calibration is None or obs.xy_m is None:
+        raise ValueError("the depth verifier needs depth_m, calibration and xy_m")
+    cal, roi = obs.calibration, obs.roi
+    c0, c1 = _window_cols(obs, min_width_px)
+    r0, r1 = roi.y, roi.y + roi.h
+    # The camera's centre in the ground frame, and the track's distance from it.
+    centre = -cal.r.T @ cal.t
+    expected = float(np.hypot(obs.xy_m[0] - centre[0], obs.xy_m[1] - centre[1]))
+    maps = ray_maps(cal)
+    cz = float(centre[2])
+    d = obs.depth_m[r0:r1, c0:c1]
+    if d.dtype != np.float32:
+        d = d.astype(np.float32)
+    # In the band: the ray at the track's distance stands min..max height above the
+    # ground, i.e. rise / run within [(min - cz) / r, (max - cz) / r].
+    band = cv2.inRange(maps.slope[r0:r1, c0:c1], (band_min_m - cz) / expected,
+                       (band_max_m - cz) / expected)
+    returns = cv2.bitwise_and(band, cv2.inRange(d, _NO_RETURN, np.inf))
+    dist = cv2.multiply(d, maps.run[r0:r1, c0:c1])
+    lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
+    return ColumnDepth(dist, lift, band, returns, expected, cz)
+
+
+def make(params: Mapping[str, ParamValue]) -> Verifier:
+    return DepthConsistency(parse_params(params, DepthParams, "depth"))

@@ -1,0 +1,203 @@
+"""The recall-first camera check (`recall_first`): a threat is vetoed only on positive
+evidence that nothing stands at the radar's range.
+
+For emergency braking a missed obstacle is a collision, and the camera check exists to
+stop the radar's false targets (metal on the road, a sign overhead, a multipath ghost):
+it may stop a brake only where the camera shows that nothing stands there. So the check
+asks depth one question - does the column at the radar's range stand empty? - and
+every other answer, "something is there" or "cannot tell", confirms the threat.
+
+Depth (the column window of `depth.py`: the ROI's rows, the column box's columns widened
+to `min_width_px`; a band pixel is one whose ray at the track's distance r lies
+`band_min_m` to `max_height_m` above the ground). Each band pixel with a return is
+    at       its point lies at the range (r - tol <= d <= r + tol + extent_m) and above
+             the floor: `min_obstacle_m` plus the height the road's depth error gives it
+             (k_sigma x rms(r) x camera height / r; the road at the range is no obstacle)
+    near     its point is nearer than r - tol, above the floor (something stands in
+             front of the range)
+    through  any other: the ray passed the range and met the road, the background or a
+             surface farther away
+with tol(r) = k_sigma x the D435's RMS depth error at r + margin_m (common/depth_error.py,
+as `depth`). The band starts low (0.1 m) and `at` is counted as the surface it covers,
+not as a share of the whole 0.3-2.2 m column, so a 0.4 m box, or the thin frame of a
+bicycle, is seen where most of the column looks past it.
+
+Per frame, in this order (`detail` says which with a 1: `depth_<...>`, `appearance_veto`):
+    depth_sparse       fewer than `min_returns` band pixels with a return, or fewer than
+                       `min_density` of the band: depth cannot tell
+    depth_confirms     at least `confirm_px` pixels at the range, covering at least
+                       `confirm_area_m2` there (0.02 m2: a 14 cm square; a pixel spans
+                       r / focal_px metres): a surface stands there, never vetoed,
+                       whatever it looks like
+    depth_sees_through at least `through_share` of the returns see through: veto
+    depth_ambiguous    neither
+    depth_missing      the frame has no depth
+Appearance (`weights`: a `hog_linear` file; none by default) is asked only where depth
+neither confirms nor sees through, and vetoes only when it is confident: the classifier's
+probability of an obstacle at most `appearance_veto_p`.
+
+The score is the frame's log-likelihood ratio of "an obstacle stands there" (`llr`):
+`confirm_llr` where depth confirms, `through_llr` (negative) where it sees through,
+`appearance_llr` (negative) on a confident appearance veto, 0 where nothing is known;
+verified iff llr >= 0. Fusion adds the frames' llr up per track (`[fusion.evidence]`), so
+that one frame neither brakes nor vetoes. Missing evidence (sparse or missing depth, no
+confident appearance) confirms the threat (`missing = "confirm"`) or, with `missing =
+"unverifiable"`, makes it unverifiable: the decision's `unverifiable_policy` applies.
+
+Where it stops: a structure that really stands at the range (a wall, a guard rail, a
+pole) is confirmed - keeping those out of the brake is the corridor's job; a false target
+with something standing behind it within `extent_m` is confirmed; without depth, and
+without appearance weights, nothing is ever vetoed.
+"""
+
+from collections.abc import Mapping
+from typing import Annotated, Literal
+
+import cv2
+import msgspec
+import numpy as np
+
+from common.calibration import Calibration
+from common.depth_error import D435Noise
+from services.fusion.verifiers.appearance import load_hog_linear
+from services.fusion.verifiers.base import (
+    GateResult,
+    Observation,
+    ParamValue,
+    Verifier,
+    VerifierConfigError,
+    parse_params,
+)
+from services.fusion.verifiers.depth import column_depth, ray_maps
+
+SCORE = "llr"
+Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
+Share = Annotated[float, msgspec.Meta(ge=0, le=1)]
+Llr = Annotated[float, msgspec.Meta(ge=-20, le=20)]
+
+# The per-frame outcomes, as gate_detail keys.
+SPARSE, CONFIRMS, THROUGH, AMBIGUOUS, MISSING = (
+    "depth_sparse", "depth_confirms", "depth_sees_through", "depth_ambiguous",
+    "depth_missing")
+APPEARANCE_VETO = "appearance_veto"
+
+
+class RecallFirstParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    band_min_m: Metres = 0.1
+    max_height_m: Metres = 2.2
+    min_obstacle_m: Metres = 0.12
+    k_sigma: Annotated[float, msgspec.Meta(ge=0, le=10)] = 2.0
+    margin_m: Metres = 0.3
+    extent_m: Metres = 1.0
+    focal_px: Annotated[float, msgspec.Meta(gt=0, le=10000)] = 449.0
+    baseline_m: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.050
+    subpixel: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.08
+    min_width_px: Annotated[int, msgspec.Meta(ge=1, le=1000)] = 24
+    min_returns: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 12
+    min_density: Share = 0.3
+    confirm_px: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 4
+    confirm_area_m2: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.02
+    through_share: Share = 0.9
+    weights: str = ""               # hog_linear weights; empty: no appearance cue
+    appearance_veto_p: Share = 0.02
+    missing: Literal["confirm", "unverifiable"] = "confirm"
+    confirm_llr: Llr = 1.5
+    through_llr: Llr = -1.0
+    appearance_llr: Llr = -0.5
+
+    def __post_init__(self) -> None:
+        if self.band_min_m >= self.max_height_m:
+            raise ValueError("band_min_m must be below max_height_m")
+        if self.confirm_llr <= 0 or self.through_llr >= 0 or self.appearance_llr >= 0:
+            raise ValueError("confirm_llr must be positive, through_llr and "
+                             "appearance_llr negative")
+
+
+class RecallFirst:
+    """The recall-first check (module docstring)."""
+
+    name = "recall_first"
+    needs_depth = False         # without depth it confirms (or says unverifiable)
+    uses_depth = True
+
+    def __init__(self, p: RecallFirstParams, look: Verifier | None) -> None:
+        self.p = p
+        self.look = look
+        self.model = D435Noise(focal_px=p.focal_px, baseline_m=p.baseline_m,
+                               subpixel=p.subpixel, hole_rate=0.0)
+
+    def params(self) -> dict[str, ParamValue]:
+        return msgspec.structs.asdict(self.p)
+
+    def prepare(self, calibration: Calibration) -> None:
+        """Compute the calibration's ray maps now rather than in the first verify()."""
+        ray_maps(calibration)
+
+    def tolerance_m(self, distance_m: float) -> float:
+        return float(self.p.k_sigma * self.model.rms_m(distance_m) + self.p.margin_m)
+
+    def depth_evidence(self, obs: Observation) -> tuple[str, dict[str, float]]:
+        """The depth outcome of one observation (one of the module's names) and its
+        counts."""
+        if obs.depth_m is None or obs.calibration is None or obs.xy_m is None:
+            return MISSING, {}
+        p = self.p
+        col = column_depth(obs, p.min_width_px, p.band_min_m, p.max_height_m)
+        r, cz = col.expected_m, col.camera_z_m
+        tol = self.tolerance_m(r)
+        n_band = cv2.countNonZero(col.band)
+        n_ret = cv2.countNonZero(col.returns)
+        # The road beyond the range, its depth short by the tolerance, rises to
+        # tol x cz / r in the band's rays: "above the ground" is above that too.
+        lift_tol = p.k_sigma * float(self.model.rms_m(r)) * max(cz, 0.0) / r
+        detail_floor = p.min_obstacle_m + lift_tol
+        above = cv2.inRange(col.lift, detail_floor - cz, np.inf)
+        standing = cv2.bitwise_and(col.returns, above)
+        at = cv2.bitwise_and(standing, cv2.inRange(
+            col.dist, r - tol, r + tol + p.extent_m))
+        near = cv2.bitwise_and(standing, cv2.inRange(col.dist, -np.inf, r - tol))
+        n_at, n_near = cv2.countNonZero(at), cv2.countNonZero(near)
+        n_through = n_ret - n_at - n_near
+        detail = {"band_px": float(n_band), "returns": float(n_ret), "at_px": float(n_at),
+                  "near_px": float(n_near), "through_px": float(n_through),
+                  "expected_m": r, "tol_m": tol, "floor_m": detail_floor}
+        if n_ret < p.min_returns or n_ret < p.min_density * n_band:
+            return SPARSE, detail
+        # The surface the pixels at the range cover there (a pixel spans r / f metres).
+        detail["at_area_m2"] = area = n_at * (r / p.focal_px) ** 2
+        if n_at >= p.confirm_px and area >= p.confirm_area_m2:
+            return CONFIRMS, detail
+        if n_through >= p.through_share * n_ret:
+            return THROUGH, detail
+        return AMBIGUOUS, detail
+
+    def verify(self, obs: Observation) -> GateResult:
+        p = self.p
+        outcome, detail = self.depth_evidence(obs)
+        detail[outcome] = 1.0
+        if outcome == CONFIRMS:
+            llr = p.confirm_llr
+        elif outcome == THROUGH:
+            llr = p.through_llr
+        else:
+            llr = 0.0
+            if self.look is not None:
+                prob = self.look.verify(obs).score
+                detail["appearance"] = prob
+                if prob <= p.appearance_veto_p:
+                    detail[APPEARANCE_VETO] = 1.0
+                    llr = p.appearance_llr
+        detail["llr"] = llr
+        unverifiable = (p.missing == "unverifiable" and llr == 0.0
+                        and outcome in (SPARSE, MISSING))
+        return GateResult(llr, llr >= 0.0 and not unverifiable, detail, SCORE,
+                          unverifiable=unverifiable)
+
+
+def make(params: Mapping[str, ParamValue]) -> Verifier:
+    p = parse_params(params, RecallFirstParams, "recall_first")
+    try:
+        look = load_hog_linear({"weights": p.weights}) if p.weights else None
+    except VerifierConfigError as exc:
+        raise VerifierConfigError(f"verifier 'recall_first': {exc}") from exc
+    return RecallFirst(p, look)

@@ -1,0 +1,93 @@
+"""Evidence over time: a per-frame llr summed per track between a floor and a ceiling,
+so that one bad frame neither brakes nor vetoes; published per cycle in gate_detail."""
+
+import pytest
+
+from common.config.loader import ConfigError
+from common.messages import Decision, Verification
+from services.fusion.verifiers import GateResult, Observation, ParamValue
+from tests.fusion.helpers import MS, T0, make_core, run, settings, track
+
+CYCLE_NS = 74 * MS
+
+
+class Scripted:
+    """Answers the llr of a script, one per call (a recall_first-like verifier)."""
+
+    name = "scripted"
+    needs_depth = False
+
+    def __init__(self, *llrs: float, unverifiable: bool = False) -> None:
+        self.llrs = list(llrs)
+        self.unverifiable = unverifiable
+
+    def params(self) -> dict[str, ParamValue]:
+        return {}
+
+    def verify(self, obs: Observation) -> GateResult:
+        llr = self.llrs.pop(0)
+        return GateResult(llr, llr >= 0, {"llr": llr}, "llr", self.unverifiable)
+
+
+def drive(core, n: int, tid: int = 1, start: int = 0):
+    """n cycles of a track closing at 8 m/s 2.5 s away (a BRAKE if confirmed)."""
+    out = []
+    for i in range(start, start + n):
+        result = run(core, track(tid, x=20.0 - 0.6 * (i - start), vx=-8.0),
+                     stamp_ns=T0 + i * CYCLE_NS,
+                     seq=i)
+        out.append(result.targets.targets[0])
+    return out
+
+
+def test_a_real_obstacle_keeps_its_brake_through_one_bad_frame():
+    core = make_core(Scripted(1.5, 1.5, 1.5, -1.0, 1.5), decision={"hold_s": 0.0})
+    got = drive(core, 5)
+    assert [t.gate_detail["evidence_llr"] for t in got] == [1.5, 3.0, 4.0, 3.0, 4.0]
+    assert all(t.verification is Verification.VERIFIED for t in got)
+    assert got[3].gate_detail["llr"] == -1.0 and got[3].decision is Decision.BRAKE
+
+
+def test_a_false_target_stays_vetoed_through_one_good_frame():
+    core = make_core(Scripted(-1.0, -1.0, -1.0, -1.0, -1.0, 1.5, -1.0))
+    got = drive(core, 7)
+    assert [t.gate_detail["evidence_llr"] for t in got] == [-1.0, -2.0, -3.0, -4.0, -4.0,
+                                                             -2.5, -3.5]
+    assert all(t.verification is Verification.REJECTED for t in got)
+    assert all(t.decision is Decision.NONE for t in got)
+    assert "evidence -2.50" in got[5].reason
+
+
+def test_evidence_is_per_track_and_forgotten_after_forget_s():
+    core = make_core(Scripted(-1.0, -1.0, 1.5), evidence={"forget_s": 0.5})
+    a = drive(core, 2, tid=1)
+    assert a[-1].gate_detail["evidence_llr"] == -2.0
+    # The same id 2 s later is a new track as far as evidence goes.
+    (b,) = drive(core, 1, tid=1, start=30)
+    assert b.gate_detail["evidence_llr"] == 1.5 and b.verification is Verification.VERIFIED
+
+
+def test_unverifiable_frames_follow_the_policy_unless_evidence_vetoes():
+    core = make_core(Scripted(0.0, 0.0, unverifiable=True))
+    got = drive(core, 1)
+    assert got[0].verification is Verification.UNAVAILABLE
+    assert got[0].decision is Decision.WARNING          # the default policy: warn
+    assert "camera cannot tell" in got[0].reason
+
+
+def test_a_verifier_without_llr_decides_per_frame_and_evidence_can_be_off():
+    from tests.fusion.helpers import FixedVerifier
+    core = make_core(FixedVerifier(verdict=True))
+    (t,) = drive(core, 1)
+    assert "evidence_llr" not in t.gate_detail and t.verification is Verification.VERIFIED
+    off = make_core(Scripted(-1.0), evidence={"enabled": False})
+    (t,) = drive(off, 1)
+    assert "evidence_llr" not in t.gate_detail and t.verification is Verification.REJECTED
+
+
+def test_evidence_settings_are_validated():
+    assert settings().evidence.floor == -4.0 and settings().evidence.ceiling == 4.0
+    with pytest.raises(ConfigError):
+        settings(evidence={"floor": -1.0, "veto_at": -2.0})
+    with pytest.raises(ConfigError):
+        settings(evidence={"veto_at": 0.5})

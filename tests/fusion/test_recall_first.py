@@ -1,0 +1,132 @@
+"""The recall-first check: it vetoes only where depth sees through the column at the
+radar's range; a small box, a surface at the range, sparse or missing depth and an
+unknown appearance all confirm; appearance alone never vetoes what depth confirms."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from common.depth_error import D435Noise
+from services.fusion.verifiers import GateResult, Observation, VerifierConfigError, create
+from services.fusion.verifiers.recall_first import RecallFirst, RecallFirstParams
+from tests.fusion.helpers import CAL
+from tests.fusion.test_depth_check import WIDE, observe, render_depth
+
+CHECK = create("recall_first")
+
+
+def box(x: float, edge: float = 0.4, y: float = 0.0) -> tuple[float, ...]:
+    """A cardboard box `edge` m a side standing on the road, its front at x."""
+    return (x, x + edge, y - edge / 2, y + edge / 2, 0.0, edge)
+
+
+def outcome(result: GateResult) -> str:
+    (name,) = [k for k in result.detail if k.startswith("depth_")]
+    return name
+
+
+@pytest.mark.parametrize("x", [4.0, 8.0, 15.0, 25.0])
+def test_a_0_4_m_box_at_the_range_is_confirmed(x):
+    got = CHECK.verify(observe(render_depth(CAL, boxes=(box(x),)), x))
+    assert got.verified and outcome(got) == "depth_confirms" and got.score > 0, got
+    assert got.score_name == "llr"
+
+
+@pytest.mark.parametrize("x", [4.0, 8.0, 15.0, 25.0])
+def test_the_road_alone_is_seen_through_and_vetoed(x):
+    got = CHECK.verify(observe(render_depth(CAL), x))
+    assert not got.verified and outcome(got) == "depth_sees_through" and got.score < 0, got
+
+
+def test_a_sign_overhead_or_a_plate_on_the_road_is_seen_through():
+    sign = (12.0, 12.3, -2.0, 2.0, 4.5, 5.5)
+    plate = (11.6, 12.4, -0.4, 0.4, 0.0, 0.02)
+    for obstacle in (sign, plate):
+        got = CHECK.verify(observe(render_depth(CAL, boxes=(obstacle,)), 12.0))
+        assert not got.verified and outcome(got) == "depth_sees_through", got
+
+
+def test_with_d435_noise_the_box_is_confirmed_and_the_road_still_vetoed():
+    rng = np.random.default_rng(5)
+    noise = D435Noise()
+    for x in (6.0, 12.0, 20.0):
+        with_box = noise.apply(render_depth(CAL, boxes=(box(x),)), rng)
+        road = noise.apply(render_depth(CAL), rng)
+        assert outcome(CHECK.verify(observe(with_box, x))) == "depth_confirms"
+        assert outcome(CHECK.verify(observe(road, x))) == "depth_sees_through"
+
+
+def test_something_nearer_than_the_range_is_never_vetoed():
+    got = CHECK.verify(observe(render_depth(CAL, boxes=(box(6.0, 1.0),)), 12.0))
+    assert got.verified and got.detail["near_px"] > 0, got
+
+
+def test_sparse_or_missing_depth_confirms_or_follows_the_policy():
+    depth = render_depth(CAL)
+    sparse = np.zeros_like(depth)
+    sparse[::16, ::16] = depth[::16, ::16]             # a few returns: cannot tell
+    for d, name in ((sparse, "depth_sparse"), (None, "depth_missing")):
+        got = CHECK.verify(observe(d, 12.0))
+        assert got.verified and not got.unverifiable and outcome(got) == name, got
+        strict = create("recall_first", {"missing": "unverifiable"}).verify(observe(d, 12.0))
+        assert strict.unverifiable and not strict.verified, strict
+    # No return at all in the band (a black, textureless column): sparse, not "empty".
+    assert outcome(CHECK.verify(observe(render_depth(CAL, road=False), 12.0))) == \
+        "depth_sparse"
+
+
+class Look:
+    """An appearance cue that answers a fixed probability."""
+
+    name = "look"
+    needs_depth = False
+
+    def __init__(self, prob: float) -> None:
+        self.prob = prob
+
+    def params(self) -> dict[str, float]:
+        return {}
+
+    def verify(self, obs: Observation) -> GateResult:
+        return GateResult(self.prob, self.prob >= 0.5, score_name="probability")
+
+
+def test_appearance_never_vetoes_what_depth_confirms():
+    sure_not = RecallFirst(RecallFirstParams(), Look(0.0))
+    x = 10.0
+    got = sure_not.verify(observe(render_depth(CAL, boxes=(box(x),)), x, projector=WIDE))
+    assert got.verified and outcome(got) == "depth_confirms", got
+    assert "appearance" not in got.detail      # not even asked
+
+
+def test_appearance_vetoes_only_when_confident_and_depth_cannot_tell():
+    obs = observe(None, 10.0)
+    assert not RecallFirst(RecallFirstParams(), Look(0.01)).verify(obs).verified
+    unsure = RecallFirst(RecallFirstParams(), Look(0.3)).verify(obs)
+    assert unsure.verified and unsure.score == 0.0, unsure
+    vetoed = RecallFirst(RecallFirstParams(), Look(0.01)).verify(obs)
+    assert vetoed.detail["appearance_veto"] == 1.0 and vetoed.score < 0
+
+
+def test_bad_params_are_refused():
+    with pytest.raises(VerifierConfigError, match="recall_first"):
+        create("recall_first", {"through_llr": 1.0})
+    with pytest.raises(VerifierConfigError, match="recall_first"):
+        create("recall_first", {"missing": "maybe"})
+    with pytest.raises(VerifierConfigError, match="recall_first"):
+        create("recall_first", {"weights": "/nonexistent/w.json"})
+
+
+def test_the_name_table_imports_a_verifier_only_when_it_is_asked_for():
+    code = ("import sys; import services.fusion.verifiers as v; "
+            "before = sorted(m for m in sys.modules if m.startswith(v.__name__ + '.')); "
+            "v.create('edge_density'); "
+            "after = sorted(m for m in sys.modules if m.startswith(v.__name__ + '.')); "
+            "print(before, after)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == ("['services.fusion.verifiers.base'] "
+                           "['services.fusion.verifiers.base', "
+                           "'services.fusion.verifiers.edge']"), out
