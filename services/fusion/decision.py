@@ -546,8 +546,9 @@ class CommandStage:
             what = ("AEB released to the driver" if override == OVERRIDE_BRAKE_PEDAL
                     else "AEB suppressed")
             cancelled = ", brake cancelled" if braking else ""
-            return StagedCommand(capped, 0.0, False,
-                                 f"driver override ({override}): {what}{cancelled}", override)
+            note = (f"driver override ({override}): {what}{cancelled}"
+                    if braking or decision is not Decision.NONE else "")
+            return StagedCommand(capped, 0.0, False, note, override)
         k = self.s.kinematic
         stopped = rule.motion_ok and rule.ego_mps <= k.standstill_mps
         if not stopped:

@@ -27,6 +27,8 @@ from tools.sim.world import World
 DT = 0.02
 # Families whose objects never fall behind the ego (they keep ahead, or drive away).
 ENDLESS = {"lead_pulling_away"}
+# Families whose driver brakes to a stop before the object ([driver] brake_at_s).
+DRIVER_STOPS = {"override_brake"}
 
 
 def drive_unbraked(sc: Scenario) -> World:
@@ -43,7 +45,9 @@ def check_outcome(case: Case, sc: Scenario, world: World) -> None:
         assert world.collision.ego_speed_mps == pytest.approx(case.speed_kph / 3.6)
     else:
         assert world.collision is None, f"{case.name}: hit {world.collision}"
-        if case.family not in ENDLESS:
+        if case.family in DRIVER_STOPS:
+            assert world.ego.speed_mps == 0.0, f"{case.name}: the driver stops"
+        elif case.family not in ENDLESS:
             assert world.passed_everything(), f"{case.name}: the ego passes everything"
 
 

@@ -99,8 +99,8 @@ class LoopConfig:
     @classmethod
     def load(cls, fusion: Path, candidate: Path | None = None) -> "LoopConfig":
         """From fusion config files; the radar's settings are the defaults (the paper's
-        prefilter, 25 m), widened to what a kinematic fusion's range gate reaches (as
-        deploy/radar.toml is). Raises ConfigError."""
+        prefilter, 25 m), widened to what a kinematic fusion's range gate reaches.
+        Raises ConfigError."""
         cfg = load_config(fusion, FusionConfig)
         cand = load_config(candidate, FusionConfig) if candidate is not None else None
         return cls(cfg, cand, radar=radar_for(cfg, cand), name=fusion.stem)

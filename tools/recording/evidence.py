@@ -323,6 +323,21 @@ class EvidenceCollector:
                 "half_width_m": c.half_width_m, "margin_m": c.margin_m,
                 "lateral_offset_m": t.y_m - c.center_y_m, "in_path": t.in_path,
                 "path_predicted": t.path_predicted}
+        if e.targets is not None and (e.targets.path or cmd.override):
+            # The kinematic rule: the vehicle's state it used and the driver's override.
+            k = d.kinematic
+            out["vehicle_state"] = {
+                "ego_speed_mps": e.targets.ego_speed_mps,
+                "ego_yaw_rate_dps": e.targets.ego_yaw_rate_dps, "path": e.targets.path,
+                "degraded": e.targets.vehicle_state, "override": cmd.override}
+            if t is not None:
+                out["kinematic"] = {
+                    "required_decel_mps2": t.required_decel_mps2, "accel_mps2": t.accel_mps2,
+                    "path_s_m": t.path_s_m, "path_d_m": t.path_d_m,
+                    "brake_level_pct": t.brake_level_pct,
+                    "bounds": {"warning": [k.warning_decel_mps2, k.warning_ttc_s],
+                               "partial": [k.partial_decel_mps2, k.partial_ttc_s],
+                               "full": [k.full_decel_mps2, k.full_ttc_s]}}
         out["stages"] = self._stages(e)
         return out
 
@@ -409,6 +424,27 @@ def _readme(s: dict[str, Any]) -> str:
             f"{'on' if c['enabled'] else 'off'} |",
             f"| frame | seq {t['frame_seq']}, {_fmt(t['frame_age_ms'], ' ms', 1)} before the "
             f"radar cycle | |", ""]
+    v, k = s.get("vehicle_state"), s.get("kinematic")
+    if v is not None:
+        lines += [
+            "## Vehicle state (kinematic rule)", "", "| what | value |", "|---|---|",
+            f"| ego speed | {_fmt(v['ego_speed_mps'], ' m/s')} |",
+            f"| yaw rate | {_fmt(v['ego_yaw_rate_dps'], ' deg/s')} |",
+            f"| path | {v['path'] or '-'} |",
+            f"| state | {v['degraded'] or 'fresh'} |",
+            f"| driver override | {v['override'] or 'none'} |", ""]
+    if k is not None:
+        b = k["bounds"]
+        lines += [
+            "| kinematic check | value | stages (m/s^2, or TTC below s) |", "|---|---|---|",
+            f"| required deceleration | {_fmt(k['required_decel_mps2'], ' m/s^2')} | "
+            f"warning {b['warning'][0]} / {b['warning'][1]} s, partial {b['partial'][0]} / "
+            f"{b['partial'][1]} s, full {b['full'][0]} / {b['full'][1]} s |",
+            f"| target acceleration | {_fmt(k['accel_mps2'], ' m/s^2')} | over ground, "
+            "along the path |",
+            f"| on the path | s {_fmt(k['path_s_m'], ' m', 1)}, offset "
+            f"{_fmt(k['path_d_m'], ' m')} | |",
+            f"| stage level | {_fmt(k['brake_level_pct'], ' %', 0)} | |", ""]
     lines += ["## Stages", "", "| stage | clock | ms |", "|---|---|---|"]
     lines += [f"| {r['stage']} | {r['clock']} | {_fmt(r['ms'])} |" for r in s["stages"]]
     lines += ["", "Monotonic times are from the radar cycle's last CAN frame (valid when the "

@@ -41,15 +41,26 @@ from typing import Any
 import msgspec
 
 from common.config.fusion import FusionConfig
-from common.keys import CAMERA_DEPTH, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from common.keys import (
+    CAMERA_DEPTH,
+    CAMERA_JPEG,
+    EGO_MOTION,
+    FUSION_BRAKE_CMD,
+    FUSION_TARGETS,
+    RADAR_TRACKS,
+    VEHICLE_DRIVER,
+)
 from common.messages import (
     BrakeCommand,
     DecodeError,
+    DriverInputs,
+    EgoMotion,
     RadarTracks,
     VerifiedTargets,
     VerifierStatus,
     decode,
 )
+from common.vehicle_state import VehicleState
 from services.fusion.core import CycleResult
 from services.fusion.frames import DecodedFrame, FrameFeed, select_frame
 from services.fusion.main import build_core
@@ -114,11 +125,18 @@ class FusionRerun:
         self._targets_topic = FUSION_TARGETS.key(vehicle, instance=self.instance)
         self._frame_topics = {CAMERA_JPEG.key(vehicle, camera=c): c for c in self.cameras}
         self._depth_topics = {CAMERA_DEPTH.key(vehicle, camera=c): c for c in self.cameras}
+        # vehicle/motion and vehicle/driver as recorded, applied in log time before each
+        # cycle: the kinematic rule re-run on the state the live instance had.
+        self._vehicle_topics: dict[str, type] = {EGO_MOTION.key(vehicle): EgoMotion,
+                                                 VEHICLE_DRIVER.key(vehicle): DriverInputs}
+        vs = self.s.vehicle_state
+        self._vehicle = VehicleState(vs.stamp_check, vs.max_age_s)
+        self._vehicle_queue: deque[tuple[int, EgoMotion | DriverInputs]] = deque()
 
     @property
     def topics(self) -> list[str]:
         return [self._tracks_topic, self._cmd_topic, self._targets_topic,
-                *self._frame_topics, *self._depth_topics]
+                *self._frame_topics, *self._depth_topics, *self._vehicle_topics]
 
     def run(self, recording: Recording, start_ns: int | None = None,
             end_ns: int | None = None) -> Iterator[Cycle]:
@@ -140,7 +158,12 @@ class FusionRerun:
         topic = rec.topic
         camera = self._frame_topics.get(topic)
         try:
-            if topic in self._depth_topics:
+            if topic in self._vehicle_topics:
+                msg: EgoMotion | DriverInputs = (
+                    decode(rec.data, EgoMotion) if self._vehicle_topics[topic] is EgoMotion
+                    else decode(rec.data, DriverInputs))
+                self._vehicle_queue.append((rec.log_time_ns, msg))
+            elif topic in self._depth_topics:
                 self.frames.add_depth(self._depth_topics[topic], rec.data, rec.log_time_ns)
             elif camera is not None:
                 self.stats.frames_in_recording += 1
@@ -195,8 +218,16 @@ class FusionRerun:
         now_mono = (cycle.recorded_cmd.header.pub_mono_ns if cycle.recorded_cmd is not None
                     else cycle.log_ns)
         feeds = [self._feed(c, tracks.header.stamp_ns, cycle) for c in self.cameras]
+        q = self._vehicle_queue
+        while q and q[0][0] <= cycle.log_ns:
+            log_ns, msg = q.popleft()
+            if isinstance(msg, EgoMotion):
+                self._vehicle.motion.observe(msg, log_ns, log_ns)
+            else:
+                self._vehicle.driver.observe(msg, log_ns, log_ns)
+        vehicle = self._vehicle.sample(cycle.log_ns)
         try:
-            decided = self.core.decide(tracks, feeds, now_wall, now_mono)
+            decided = self.core.decide(tracks, feeds, now_wall, now_mono, vehicle)
             targets = self.core.report(decided)
             result = CycleResult(targets, decided.command)
         except Exception as exc:  # answered as the live shell answers a failing cycle

@@ -40,6 +40,7 @@ from tools.messages import Lighting, ObjectKind
 from tools.sim.scenario import (
     DEFAULT_SIZE,
     CameraLook,
+    DriverSpec,
     EgoSpec,
     Motion,
     RadarLook,
@@ -162,7 +163,8 @@ class Family:
 
     name: str
     kind: ScenarioKind
-    group: str                   # euro_ncap | bend | no_threat | false_target | obstacle
+    group: str                   # euro_ncap | bend | no_threat | false_target | obstacle |
+    #                              override
     description: str
     speeds_kph: tuple[float, ...]
     points: tuple[Params, ...]
@@ -192,6 +194,7 @@ class Build:
         self.v = case.speed_kph * KPH
         self.objects: list[SceneObject] = []
         self.road = RoadSpec()
+        self.driver = DriverSpec()
         self.duration_s = 10.0
         light = case.params and dict(case.params).get("light")
         self.lighting = Lighting(str(light)) if light else Lighting(
@@ -245,7 +248,8 @@ class Build:
             name=c.name, kind=self.family.kind, ego=EgoSpec(speed_kph=c.speed_kph),
             object=tuple(self.objects), description=self.description,
             duration_s=round(min(self.duration_s, 120.0), 1), seed=d.scene_seed,
-            lighting=self.lighting, road=self.road, radar=radar, camera=camera)
+            lighting=self.lighting, road=self.road, radar=radar, camera=camera,
+            driver=self.driver)
 
 
 # -- the makers ------------------------------------------------------------------------------
@@ -400,6 +404,32 @@ def _pulling_away(b: Build) -> None:
     b.add(ObjectKind.CAR, gap + car[0] / 2, b.draw.jitter(0.0, 0.1), 0.0, car,
           Motion(speed_mps=b.v + b.pf("faster_kph") * KPH), "lead car pulling away")
     b.duration_s = 8.0
+
+
+def _override(what: str) -> Callable[[Build], None]:
+    """A car stopped in the lane; the driver acts 3.5 s before impact, before AEB's
+    brake stages at these speeds, while the car is still in the path when they come:
+    `steer` (a swerve into the next lane, the wheel at 250 deg/s), `kickdown` (floored,
+    with a gentle lane change below the steering thresholds), `brake` (the pedal, 4
+    m/s^2 to a stop). AEB must leave it to the driver: no activation, and the driver's
+    own manoeuvre avoids the car."""
+    def make(b: Build) -> None:
+        gap = b.approach()
+        car = b.scaled(ObjectKind.CAR, 0.05)
+        b.add(ObjectKind.CAR, gap + car[0] / 2, b.draw.jitter(0.0, 0.1), 0.0, car,
+              name="stopped car")
+        at = round(max(gap / b.v - 3.5, 0.0) + b.draw.jitter(0.0, 0.1), 2)
+        if what == "steer":
+            b.driver = DriverSpec(steer_at_s=at, steer_rate_dps=250.0, steer_duration_s=0.4,
+                                  lane_change_m=LANE_WIDTH_M, lane_change_s=2.5)
+        elif what == "kickdown":
+            b.driver = DriverSpec(kickdown_at_s=at, steer_at_s=at, steer_rate_dps=40.0,
+                                  steer_duration_s=0.5, lane_change_m=LANE_WIDTH_M,
+                                  lane_change_s=2.5)
+        else:
+            b.driver = DriverSpec(brake_at_s=at, brake_decel_mps2=4.0)
+        b.until(gap)
+    return make
 
 
 def _pedestrian_clears(b: Build) -> None:
@@ -613,6 +643,16 @@ _FAMILY_LIST = [
            "A guard rail along the outside edge of a bend the ego approaches and follows: "
            "it crosses the straight line ahead.", ALL_SPEEDS,
            _points(radius_m=(-100.0, -50.0, 50.0, 100.0)), _rail_bend, allowed=_bend_allowed),
+    Family("override_steer", ScenarioKind.NO_THREAT, "override",
+           "The driver swerves round a car stopped in the lane (wheel at 250 deg/s): "
+           "AEB is suppressed.", ALL_SPEEDS[2:], NO_PARAMS, _override("steer")),
+    Family("override_kickdown", ScenarioKind.NO_THREAT, "override",
+           "The driver floors the accelerator (kick-down) and changes lanes gently past a "
+           "car stopped in the lane: AEB is suppressed.", ALL_SPEEDS[2:], NO_PARAMS,
+           _override("kickdown")),
+    Family("override_brake", ScenarioKind.NO_THREAT, "override",
+           "The driver brakes (4 m/s^2) for a car stopped in the lane: AEB leaves the "
+           "stop to the driver.", ALL_SPEEDS[2:], NO_PARAMS, _override("brake")),
     Family("obstacle_standing", ScenarioKind.THREAT, "obstacle",
            "An obstacle of every kind the simulator has standing in the lane (0.4-2 m), "
            "facing the ego or side-on, by day or at dusk.",

@@ -105,8 +105,9 @@ class DriverSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     - `kickdown_at_s`: the accelerator floored (kick-down switch) from then on; the ego
       keeps its speed (the simulated car does not accelerate).
     - `steer_at_s`: a steering manoeuvre: the wheel turned at `steer_rate_dps` for
-      `steer_duration_s`, then held; the ego still keeps its lane (the manoeuvre is an
-      input to the stack, not a lane change).
+      `steer_duration_s`, then held; with `lane_change_m` the ego moves that far
+      sideways (left positive) over `lane_change_s` (a smooth S, its heading kept along
+      the road), else it keeps its lane.
     - `brake_at_s`: the brake pedal pressed from then on, decelerating the ego at
       `brake_decel_mps2` (or the actuator's, whichever is larger)."""
 
@@ -115,6 +116,8 @@ class DriverSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     steer_at_s: NonNeg | None = None
     steer_rate_dps: Annotated[float, msgspec.Meta(ge=-1000, le=1000)] = 300.0
     steer_duration_s: Positive = 0.4
+    lane_change_m: Annotated[float, msgspec.Meta(ge=-5, le=5)] = 0.0
+    lane_change_s: Positive = 2.0
     brake_at_s: NonNeg | None = None
     brake_decel_mps2: Annotated[float, msgspec.Meta(gt=0, le=12)] = 4.0
 

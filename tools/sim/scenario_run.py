@@ -163,6 +163,11 @@ def vehicle_messages(run: ScenarioRun | None, header: Header) -> tuple[EgoMotion
         turning = t - d.steer_at_s
         angle += d.steer_rate_dps * min(turning, d.steer_duration_s)
         rate = d.steer_rate_dps if turning < d.steer_duration_s else 0.0
+        # A lane change ends with the wheel turned back as fast, over its last part.
+        back = turning - (d.lane_change_s - d.steer_duration_s)
+        if d.lane_change_m and back > 0.0:
+            angle -= d.steer_rate_dps * min(back, d.steer_duration_s)
+            rate = -d.steer_rate_dps if back < d.steer_duration_s else 0.0
     kickdown = d.kickdown_at_s is not None and t >= d.kickdown_at_s
     braking = d.brake_at_s is not None and t >= d.brake_at_s
     motion = EgoMotion(header=header, speed_mps=w.ego.speed_mps, yaw_rate_dps=w.yaw_rate_dps())

@@ -195,6 +195,10 @@ class World:
         ego.speed_mps = v1
         ego.s_m += moved
         ego.odometer_m += moved
+        if driver.steer_at_s is not None and driver.lane_change_m:
+            done = min(max((self.t_s + dt_s - driver.steer_at_s) / driver.lane_change_s,
+                           0.0), 1.0)
+            ego.d_m = driver.lane_change_m * (1.0 - math.cos(math.pi * done)) / 2.0
         for m in self._movers:
             self._move(m, dt_s)
         self.t_s += dt_s
