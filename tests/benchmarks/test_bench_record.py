@@ -9,6 +9,8 @@ from benchmarks import bench_record, bench_rerun
 
 pytestmark = pytest.mark.slow
 
+DROPS_WHEN_CONGESTED = {"aeb/ego/camera/front/jpeg", "aeb/ego/can/radar/frames"}
+
 
 def test_the_loss_run_counts_every_key_and_the_recorder_loses_nothing_delivered(tmp_path):
     m = bench_record.measure(0.1, tmp_path)
@@ -18,9 +20,11 @@ def test_the_loss_run_counts_every_key_and_the_recorder_loses_nothing_delivered(
     for key, n in m["published"].items():
         # A key that drops when congested (frames, raw CAN) may lose a sample on the
         # recorder's link that the plain subscriber got, on a loaded machine: the recorder
-        # then counts it as dropped (a gap in the publisher's numbers), never silently.
+        # then counts it as dropped (a gap in the publisher's numbers), never silently -
+        # except the publisher's very last sample, which no later number reveals.
         got = m["recorded"].get(key, 0) + m["dropped"].get(key, 0)
-        assert got >= m["baseline"].get(key, 0), key
+        trailing = 1 if key in DROPS_WHEN_CONGESTED else 0
+        assert got >= m["baseline"].get(key, 0) - trailing, key
         assert n >= m["recorded"].get(key, 0)
     figs = bench_record.figures_from(m)
     assert {f.name for f in figs} >= {"file size", "recorder CPU"}

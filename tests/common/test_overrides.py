@@ -119,7 +119,16 @@ def test_every_service_refuses_an_unknown_setting_at_check(service):
 def test_check_takes_a_valid_override_as_a_start_would():
     proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
                            str(DEPLOY / "fusion.toml"), "--check", "--set",
-                           "fusion.verifier.params.tau=0.03"],
+                           "fusion.verifier.params.confirm_llr=2.0"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "fusion: configuration ok" in proc.stdout
+
+
+def test_check_refuses_a_parameter_the_verifier_does_not_have():
+    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
+                           str(DEPLOY / "fusion.toml"), "--check", "--set",
+                           "fusion.verifier.params.tau=0.03"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "invalid params: Object contains unknown field `tau`" in proc.stderr

@@ -10,6 +10,7 @@ import pytest
 
 from common.depth_error import D435Noise
 from services.fusion.verifiers import GateResult, Observation, VerifierConfigError, create
+from services.fusion.verifiers.base import ParamValue
 from services.fusion.verifiers.recall_first import RecallFirst, RecallFirstParams
 from tests.fusion.helpers import CAL
 from tests.fusion.test_depth_check import WIDE, observe, render_depth
@@ -17,7 +18,8 @@ from tests.fusion.test_depth_check import WIDE, observe, render_depth
 CHECK = create("recall_first")
 
 
-def box(x: float, edge: float = 0.4, y: float = 0.0) -> tuple[float, ...]:
+def box(x: float, edge: float = 0.4,
+        y: float = 0.0) -> tuple[float, float, float, float, float, float]:
     """A cardboard box `edge` m a side standing on the road, its front at x."""
     return (x, x + edge, y - edge / 2, y + edge / 2, 0.0, edge)
 
@@ -86,7 +88,7 @@ class Look:
     def __init__(self, prob: float) -> None:
         self.prob = prob
 
-    def params(self) -> dict[str, float]:
+    def params(self) -> dict[str, ParamValue]:
         return {}
 
     def verify(self, obs: Observation) -> GateResult:

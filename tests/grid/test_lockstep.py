@@ -54,7 +54,8 @@ def test_a_threat_is_braked_for_through_every_core_and_the_actuator(scenes):
     # The kinematic rule's partial stage at 30 km/h: TTC below 2.2 s (the required
     # deceleration reaches 3 m/s^2 later, at 1.96 s), seen within a radar cycle or two.
     assert v.first_brake_ttc_s is not None and 2.2 - 2 * RADAR_CYCLE_S < v.first_brake_ttc_s <= 2.2
-    assert v.actuation_t_s is not None and v.actuation_t_s > v.first_brake_t_s
+    assert v.first_brake_t_s is not None and v.actuation_t_s is not None
+    assert v.actuation_t_s > v.first_brake_t_s
     braked = [c for c in r.cycles if c.command.decision is Decision.BRAKE]
     assert braked and all(c.brake is not None for c in braked[:-1])
     assert "partial brake" in braked[0].command.reason and braked[0].command.brake_level_pct == 50
@@ -99,7 +100,7 @@ def test_only_the_frames_fusion_reads_are_rendered(scenes):
     assert beside.profile.frames_rendered == len(seen) < beside.profile.frames_captured / 2
     r = run("cardboard_box_30kph", scenes)
     checked = {t.frame_seq for c in r.cycles for t in c.targets.targets if t.density is not None}
-    assert 0 < r.profile.frames_rendered == len(checked) < r.profile.frames_captured / 4
+    assert 0 < r.profile.frames_rendered == len(checked) < r.profile.frames_captured / 2
     assert r.profile.seconds["render"] > 0 and r.profile.fusion_own_s > 0
 
 
