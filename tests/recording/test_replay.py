@@ -18,6 +18,7 @@ import pytest
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
 from common.messages import BrakeCommand, BrakeState, RadarTracks, decode
 from common.net import free_port
+from common.resources import DEPLOY
 from tests.support import (
     REPO,
     START_TIMEOUT_S,
@@ -50,10 +51,16 @@ def replay(router: str, *args: str, timeout: float = 120) -> subprocess.Complete
 def test_fusion_and_brake_on_a_replay_decide_as_recorded(router, tmp_path):
     actuator, _pair = SimActuator.on_pty(tmp_path / "actuator")
     actuator.start()
+    # Fusion as it was when the recording was made (the combined check and the paper's
+    # rule), under the recorded instance's name and key.
     configs = write_configs(tmp_path / "configs", router, str(tmp_path / "actuator"),
-                            "/dev/null")
+                            "/dev/null", fusion_config=DEPLOY / "fusion-combined.toml")
+    as_recorded = {"fusion": ("--instance", "primary", "--set",
+                              f"fusion.command_key={DEPLOY / 'keys' / 'primary.key'}"),
+                   "brake": ()}
     procs = [ServiceProcess(name, python_module(f"services.{name}", "--config",
-                                                str(configs.of(name)), "--connect", router),
+                                                str(configs.of(name)), "--connect", router,
+                                                *as_recorded[name]),
                             tmp_path) for name in ("fusion", "brake")]
     try:
         with open_bus(router, source="test") as bus:

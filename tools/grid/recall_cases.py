@@ -3,9 +3,9 @@ lockstep, on generated HELD-OUT cases (tools/sim/families.py, seeds of SPLITS['h
 nothing here was used to fit anything), the shipped deploy/fusion.toml against
 deploy/fusion-paper.toml. A SIMULATION.
 
-    python -m tools.sim.recall_cases --out out/recall            # the >= 200 cases
-    python -m tools.sim.recall_cases --issue-rows --runs 10       # issue 25's four rows
-    python -m tools.sim.recall_cases --quick                      # a few cases (tests)
+    python -m tools.grid.recall_cases --out out/recall            # the >= 200 cases
+    python -m tools.grid.recall_cases --issue-rows --runs 10       # issue 25's four rows
+    python -m tools.grid.recall_cases --quick                      # a few cases (tests)
 
 The cases: threat families at 10-30 km/h with every obstacle kind the simulator has
 (obstacle_standing: boxes 0.4-1.5 m, pedestrians, a bicycle, a car, facing or side-on;
@@ -236,7 +236,7 @@ def run_issue_rows(runs: int, workers: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.sim.recall_cases",
+    parser = argparse.ArgumentParser(prog="python -m tools.grid.recall_cases",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="out/recall", help="where the results go")

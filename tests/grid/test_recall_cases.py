@@ -1,9 +1,9 @@
 """The recall study's plan and tables: >= 200 held-out cases covering every obstacle kind,
 size, pose and light; a regression is a threat the paper avoids and the default hits."""
 
+from tools.grid.recall_cases import PLAN, Row, generated, issue_rows, markdown, summarise
 from tools.messages import ObjectKind
 from tools.sim.families import SPLITS
-from tools.sim.recall_cases import PLAN, Row, generated, issue_rows, markdown, summarise
 
 
 def test_the_plan_is_200_held_out_cases_over_every_kind_pose_and_light():
