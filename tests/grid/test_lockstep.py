@@ -109,3 +109,13 @@ def test_the_timeline_plots_as_the_demos(scenes, tmp_path):
     png = plot_timeline(r.samples, r.verdict, tmp_path / "crossing.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert r.samples[0].t_s > 0 and r.samples[-1].t_s == r.verdict.duration_s
+
+
+def test_a_shadow_config_unsigned_in_its_file_can_be_the_followed_one(scenes):
+    # deploy/fusion-combined.toml has no command_key: the run signs with a key of its own.
+    combined = LoopConfig.load(DEPLOY / "fusion-combined.toml")
+    assert combined.fusion.fusion.command_key == ""
+    r = run("stationary_car_30kph", scenes, combined)
+    assert r.verdict.passed and r.cycles[-2].brake is not None
+    assert not r.cycles[-2].brake.rejected
+    assert r.cycles[-2].targets.verifier == "combined"

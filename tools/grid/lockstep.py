@@ -33,7 +33,7 @@ from pathlib import Path
 import msgspec
 
 from common.calibration import Calibration
-from common.command_auth import CommandSigner, load_keyring, load_signing_key
+from common.command_auth import CommandKey, CommandSigner, load_signing_key, new_key
 from common.config.brake import BrakeSettings
 from common.config.fusion import FusionConfig, RuleName
 from common.config.loader import load_config
@@ -143,16 +143,25 @@ class LockstepResult:
         return self.verdict.first_brake_t_s
 
 
+def followed_key(cfg: FusionConfig) -> CommandKey:
+    """The key the followed instance signs with and the brake accepts: its
+    `command_key`, or - a shadow config, unsigned in its file - a key made for this
+    simulated run, so that any fusion config can be the one the brake follows. Raises
+    KeyFileError."""
+    s = cfg.fusion
+    if not s.command_key:
+        return new_key(s.instance)
+    return load_signing_key(s.command_key, s.instance)
+
+
 class _Fusion:
     """One fusion instance: its core, its signer (None: shadow, never signed)."""
 
-    def __init__(self, cfg: FusionConfig, signed: bool, session: int) -> None:
+    def __init__(self, cfg: FusionConfig, key: CommandKey | None, session: int) -> None:
         self.cfg = cfg
         self.core: FusionCore = build_core(cfg)[0]
         self.cameras = [c.name for c in cfg.fusion.camera_inputs]
-        self.signer = (CommandSigner(load_signing_key(cfg.fusion.command_key,
-                                                      cfg.fusion.instance), session)
-                       if signed else None)
+        self.signer = CommandSigner(key, session) if key is not None else None
         self.failures = 0
 
     def process(self, tracks: RadarTracks, frames: FrameSource, wall_ns: int,
@@ -183,15 +192,16 @@ class Lockstep:
         _check_camera(config.fusion, config.camera)
         if config.candidate is not None:
             _check_camera(config.candidate, config.camera)
-        self.primary = _Fusion(config.fusion, True, self.rng.getrandbits(63))
-        self.candidate = (_Fusion(config.candidate, False, 0)
+        key = followed_key(config.fusion)
+        self.primary = _Fusion(config.fusion, key, self.rng.getrandbits(63))
+        self.candidate = (_Fusion(config.candidate, None, 0)
                           if config.candidate is not None else None)
         depth = any(wants_depth(f.core.verifier) for f in self._instances())
         self.frames = FrameSource({config.camera.name: (scenes.cal.width, scenes.cal.height)})
         self.camera = LockstepCamera(scenes, self.frames, config.camera, depth, self.profile)
         self.scenes = scenes
         self.radar = LockstepRadar(ev, config.radar, d, RadarLook(), 0)
-        keys = load_keyring([s.command_key], s.instance)
+        keys = {key.key_id: key}
         self.brake = LockstepBrake(ev, BrakeSettings(instance=s.instance,
                                                      command_keys=(s.command_key,)), keys, d)
         self.schedule = RadarSchedule(config.loop.radar_period_s, self.rng, 0.0)
