@@ -132,3 +132,22 @@ def test_the_name_table_imports_a_verifier_only_when_it_is_asked_for():
     assert out.strip() == ("['services.fusion.verifiers.base'] "
                            "['services.fusion.verifiers.base', "
                            "'services.fusion.verifiers.edge']"), out
+
+
+@pytest.mark.parametrize("x", [3.5, 4.0])
+def test_an_object_beside_the_radars_point_is_not_seen_through(x):
+    # The radar reports a cyclist ahead near the edge of its 0.6 m body (0.15 m off
+    # it, within its lateral error): the window must reach across the body's possible
+    # extent, or it looks past it at the road and vetoes.
+    body = (x, x + 1.75, -0.75, -0.15, 0.0, 1.75)
+    obs = observe(render_depth(CAL, boxes=(body,)), x, y=0.0)
+    narrow = RecallFirst(RecallFirstParams(lateral_m=0.0), None).verify(obs)
+    assert outcome(narrow) == "depth_sees_through" and not narrow.verified, narrow
+    got = CHECK.verify(obs)
+    assert got.verified and outcome(got) == "depth_confirms", got
+
+
+def test_the_road_beside_a_false_target_still_sees_through():
+    obs = observe(render_depth(CAL), 4.0, y=-0.1)
+    got = CHECK.verify(obs)
+    assert not got.verified and outcome(got) == "depth_sees_through", got

@@ -80,16 +80,16 @@ class DepthParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError("min_height_m must be below max_height_m")
 
 
-def _window_cols(obs: Observation, min_width: int) -> tuple[int, int]:
+def _window_cols(obs: Observation, min_width: int, image_width: int) -> tuple[int, int]:
     """Columns [c0, c1) of the window: the column box's, widened about its centre to
-    `min_width` within the ROI."""
-    col, roi = obs.column, obs.roi
+    `min_width` within the image."""
+    col = obs.column
     c0, c1 = col.x, col.x + col.w
     if c1 - c0 < min_width:
         mid = (c0 + c1) / 2.0
         c0 = round(mid - min_width / 2.0)
         c1 = c0 + min_width
-    return max(c0, roi.x), min(c1, roi.x + roi.w)
+    return max(c0, 0), min(c1, image_width)
 
 
 @dataclass(frozen=True)
@@ -213,19 +213,21 @@ class ColumnDepth:
 
 
 def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
-                 band_max_m: float) -> ColumnDepth:
+                 band_max_m: float, half_width_m: float = 0.0) -> ColumnDepth:
     """The column window of `obs` in depth (see ColumnDepth): the ROI's rows, the column
-    box's columns widened to `min_width_px`; the band `band_min_m`..`band_max_m` above the
-    ground at the track. Raises ValueError when the observation lacks depth, calibration
-    or xy_m."""
+    box's columns widened to `min_width_px`, and to `half_width_m` either side at the
+    track's distance; the band `band_min_m`..`band_max_m` above the ground at the track.
+    Raises ValueError when the observation lacks depth, calibration or xy_m."""
     if obs.depth_m is None or obs.calibration is None or obs.xy_m is None:
         raise ValueError("the depth verifier needs depth_m, calibration and xy_m")
     cal, roi = obs.calibration, obs.roi
-    c0, c1 = _window_cols(obs, min_width_px)
-    r0, r1 = roi.y, roi.y + roi.h
     # The camera's centre in the ground frame, and the track's distance from it.
     centre = -cal.r.T @ cal.t
     expected = float(np.hypot(obs.xy_m[0] - centre[0], obs.xy_m[1] - centre[1]))
+    width = max(min_width_px, round(2.0 * half_width_m * float(cal.k[0, 0])
+                                    / max(expected, 0.1)))
+    c0, c1 = _window_cols(obs, width, obs.depth_m.shape[1])
+    r0, r1 = roi.y, roi.y + roi.h
     maps = ray_maps(cal)
     cz = float(centre[2])
     d = obs.depth_m[r0:r1, c0:c1]

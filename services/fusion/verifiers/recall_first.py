@@ -8,7 +8,8 @@ asks depth one question - does the column at the radar's range stand empty? - an
 every other answer, "something is there" or "cannot tell", confirms the threat.
 
 Depth (the column window of `depth.py`: the ROI's rows, the column box's columns widened
-to `min_width_px`; a band pixel is one whose ray at the track's distance r lies
+to `min_width_px` and to `lateral_m` either side of the radar's point at its range; a
+band pixel is one whose ray at the track's distance r lies
 `band_min_m` to `max_height_m` above the ground). Each band pixel with a return is
     at       its point lies at the range (r - tol <= d <= r + tol + extent_m) and above
              the floor: `min_obstacle_m` plus the height the road's depth error gives it
@@ -93,6 +94,11 @@ class RecallFirstParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     baseline_m: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.050
     subpixel: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.08
     min_width_px: Annotated[int, msgspec.Meta(ge=1, le=1000)] = 24
+    # The window reaches this far either side of the radar's point at its range: a radar
+    # reports an object's strongest reflection, which may be its edge (a cyclist ahead
+    # is seen at the near edge of a 0.6 m body), so "nothing stands there" must hold
+    # across the object's possible extent, not beside it.
+    lateral_m: Metres = 0.5
     min_returns: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 12
     min_density: Share = 0.3
     confirm_px: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 4
@@ -143,7 +149,7 @@ class RecallFirst:
         if obs.depth_m is None or obs.calibration is None or obs.xy_m is None:
             return MISSING, {}
         p = self.p
-        col = column_depth(obs, p.min_width_px, p.band_min_m, p.max_height_m)
+        col = column_depth(obs, p.min_width_px, p.band_min_m, p.max_height_m, p.lateral_m)
         r, cz = col.expected_m, col.camera_z_m
         tol = self.tolerance_m(r)
         n_band = cv2.countNonZero(col.band)
