@@ -210,3 +210,20 @@ def test_why_a_collision_was_not_avoided():
     assert miss_reason([], 5.0, None, False) == "no radar cycle before the impact"
     avoided = score(approach(30.0, 40.0, 3.0))
     assert avoided.why == ""
+
+
+def test_the_kinematic_rules_reach_and_due_follow_its_range_gate_and_first_stage():
+    reach = Reach.of(LoopConfig.load(DEPLOY / "fusion.toml"))
+    assert reach.brake_decel_mps2 is not None and reach.range_base_m is not None
+    # 50 km/h: the gate reaches 15 + 3.5 x 13.9 = 63.6 m; a stop needs 3 m/s^2 (the
+    # partial stage) from about 32.3 + 1 + 6.25 m, before the TTC falls to 2.2 s (30.6 m).
+    v = 50 * KPH
+    assert reach.reach_m(v) == pytest.approx(15.0 + 3.5 * v)
+    samples = approach(50.0, 80.0, None, until_s=5.0)
+    s = score_case(samples, judge("case", ScenarioKind.THREAT, samples, None), reach,
+                   name="case", family="CCRs", group="euro_ncap", config="fusion",
+                   speed_kph=50.0, params={}, seed=0)
+    assert s.in_reach_t_s == pytest.approx((80.0 - 15.0 - 3.5 * v) / v, abs=0.011)
+    need_gap = v * v / (2 * 3.0) + 1.0 + 0.45 * v
+    assert s.due_t_s is not None and s.due_t_s == pytest.approx((80.0 - need_gap) / v, abs=0.011)
+    assert (80.0 - s.due_t_s * v) / v > 2.2          # due on the deceleration, not the TTC

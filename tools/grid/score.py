@@ -4,9 +4,11 @@ Euro NCAP-style testing reads from it, and the cases of a family to its points.
 Per case: avoided or the impact speed; time and ground-truth TTC of the first WARNING
 and the first BRAKE; the reaction time from the first moment an object is in the ego's
 path (or on a collision course with it: the timeline's `gap_m`) within the radar's reach
-(the radar service's prefilter range) to the first BRAKE command and to the actuator at
-50 %; the lag from the moment a brake was due (in reach and the ground-truth TTC under
-the configuration's BRAKE bound, TTC_eff + offset) to the first BRAKE. Both are set
+(the paper's rule: the radar service's prefilter range; the kinematic rule: its range
+gate at the ego's speed) to the first BRAKE command and to the actuator at 50 %; the lag
+from the moment a brake was due (in reach and, on the ground truth, the paper's TTC bound
+(TTC_eff + offset) or the kinematic rule's first braking stage: `Reach`) to the first
+BRAKE. Both are set
 beside the floor the sensors set (`SensorFloor`): the radar's confirmation cycles, a
 camera frame period and the loop's modelled delays - no system built of these sensors
 brakes sooner after a threat appears.
@@ -97,16 +99,54 @@ def sensor_floor(config: "LoopConfig", tau_s: float = ACTUATOR_TAU_S) -> SensorF
 
 @dataclass(frozen=True)
 class Reach:
-    """What the scoring needs of a configuration: the radar's reach (m) and the BRAKE
-    bound on the ground-truth TTC (s)."""
+    """What the scoring needs of a configuration: the decision's reach (m) and when a
+    BRAKE is due on the ground truth. The paper's rule: the radar's prefilter range and
+    its TTC bound (TTC_eff + offset). The kinematic rule: its range gate, which follows
+    the ego's speed (`range_base_m` + `range_time_s` x v, at most `range_m`), and its
+    first braking stage - the ground-truth TTC under `brake_ttc_s`, or a stop short of
+    the object needing `brake_decel_mps2` after `latency_s` and `stop_margin_m`."""
 
     range_m: float
     brake_ttc_s: float
+    range_base_m: float | None = None
+    range_time_s: float = 0.0
+    brake_decel_mps2: float | None = None
+    stop_margin_m: float = 0.0
+    latency_s: float = 0.0
 
     @classmethod
     def of(cls, config: "LoopConfig") -> "Reach":
+        from common.config.fusion import RuleName
+
         d = config.fusion.fusion.decision
-        return cls(config.radar.prefilter.max_range_m, d.ttc_offset_s + d.brake_ttc_eff_s)
+        if d.rule is not RuleName.KINEMATIC:
+            return cls(config.radar.prefilter.max_range_m,
+                       d.ttc_offset_s + d.brake_ttc_eff_s)
+        k = d.kinematic
+        reach = min(k.range_max_m, d.path.length_m, config.radar.prefilter.max_range_m)
+        return cls(reach, k.partial_ttc_s,
+                   range_base_m=k.range_base_m, range_time_s=k.range_time_s,
+                   brake_decel_mps2=k.partial_decel_mps2, stop_margin_m=k.stop_margin_m,
+                   latency_s=k.latency_s)
+
+    def reach_m(self, ego_mps: float) -> float:
+        if self.range_base_m is None:
+            return self.range_m
+        return min(self.range_m, self.range_base_m + self.range_time_s * max(ego_mps, 0.0))
+
+    def in_reach(self, s: Sample) -> bool:
+        return s.gap_m is not None and s.gap_m <= self.reach_m(s.ego_speed_mps)
+
+    def due(self, s: Sample) -> bool:
+        if not self.in_reach(s) or s.ttc_s is None or s.gap_m is None:
+            return False
+        if s.ttc_s <= self.brake_ttc_s:
+            return True
+        if self.brake_decel_mps2 is None or s.ttc_s <= 0.0:
+            return False
+        closing = s.gap_m / s.ttc_s
+        room = s.gap_m - self.stop_margin_m - s.ego_speed_mps * self.latency_s
+        return room <= 0.0 or closing * closing / (2.0 * room) >= self.brake_decel_mps2
 
 
 @dataclass(frozen=True)
@@ -186,9 +226,8 @@ def score_case(samples: Sequence[Sample], verdict: Verdict, reach: Reach, *, nam
     warning = _first(samples, lambda s: s.decision == "WARNING")
     brake = _first(samples, lambda s: s.decision == "BRAKE")
     half = _first(samples, lambda s: s.position_pct >= HALF_POSITION_PCT)
-    in_reach = _first(samples, lambda s: s.gap_m is not None and s.gap_m <= reach.range_m)
-    due = _first(samples, lambda s: s.gap_m is not None and s.gap_m <= reach.range_m
-                 and s.ttc_s is not None and s.ttc_s <= reach.brake_ttc_s)
+    in_reach = _first(samples, reach.in_reach)
+    due = _first(samples, reach.due)
     threat = verdict.kind is ScenarioKind.THREAT
 
     def since(a: Sample | None, b: Sample | None) -> float | None:
