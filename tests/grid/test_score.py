@@ -208,6 +208,11 @@ def test_why_a_collision_was_not_avoided():
     warned = [(4.0, ["verified, TTC_eff 3.07 s < 4 s"])]
     assert miss_reason(warned, 5.0, None, False).startswith("verified, TTC not under")
     assert miss_reason([], 5.0, None, False) == "no radar cycle before the impact"
+    # the kinematic rule's reasons
+    aside = [(4.0, ["out of path (s 7.3 m, offset -3.72 m, limit 1.2 m, straight path)"])]
+    assert miss_reason(aside, 5.0, None, False).startswith("outside the predicted path")
+    early = [(4.0, ["no stage reached: needs 0.41 m/s^2, TTC 6.26 s, target accel -0.3"])]
+    assert miss_reason(early, 5.0, None, False).startswith("verified, no braking stage")
     avoided = score(approach(30.0, 40.0, 3.0))
     assert avoided.why == ""
 

@@ -261,6 +261,8 @@ _MISS_CATEGORIES = (
     ("camera not visible", "not visible to the camera"),
     ("camera unavailable", "camera check unavailable"),
     ("out of corridor", "outside the corridor"),
+    ("out of path", "outside the predicted path"),
+    ("no stage reached", "verified, no braking stage reached"),
     ("verified, ", "verified, TTC not under the BRAKE bound"),
     ("TTC_eff", "TTC above the bounds"),
     ("not closing", "not closing"),
