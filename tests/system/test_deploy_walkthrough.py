@@ -189,7 +189,9 @@ def test_the_two_board_walk_through_as_written_arms_the_brake_and_brakes(tmp_pat
             # A standing pedestrian: fusion on B decides BRAKE, the brake on A brakes.
             verdict = wait_event(sim, "scenario", ARM_TIMEOUT_S, procs)
             assert verdict["passed"], f"{verdict}\n{_tails(procs)}"
-            assert verdict["max_level_pct"] >= 50      # the kinematic rule's partial stage at least
+            # the kinematic rule's partial stage at least
+            level = verdict["max_level_pct"]
+            assert isinstance(level, (int, float)) and level >= 50
             assert sim.proc.wait(120) == 0
             for proc in (up_b, up_a):
                 proc.signal(signal.SIGTERM)
