@@ -32,7 +32,7 @@ def test_the_issue_rows_are_ten_runs_each_on_held_out_or_loop_seeds():
 
 
 def row(case, config, threat, avoided, activations=0, impact=None):
-    return Row("fam", case, config, threat, avoided, impact, activations, 0)
+    return Row("fam", case, 20.0, config, threat, avoided, impact, activations, 0)
 
 
 def test_regressions_are_threats_the_paper_avoids_and_the_default_hits():

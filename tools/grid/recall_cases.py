@@ -79,6 +79,7 @@ class Row:
 
     family: str
     case: str
+    speed_kph: float
     config: str
     threat: bool
     avoided: bool
@@ -92,10 +93,11 @@ def _row(family: str, config: str, o: Outcome) -> Row:
     sc = o.case.scenario
     threat = sc.kind is ScenarioKind.THREAT
     if o.result is None:
-        return Row(family, sc.name, config, threat, False, None, 0, 0, o.error)
+        return Row(family, sc.name, sc.ego.speed_kph, config, threat, False, None, 0, 0,
+                   o.error)
     v = o.result.verdict
-    return Row(family, sc.name, config, threat, not v.collision, v.impact_speed_kph,
-               v.brake_activations, v.warnings)
+    return Row(family, sc.name, sc.ego.speed_kph, config, threat, not v.collision,
+               v.impact_speed_kph, v.brake_activations, v.warnings)
 
 
 def run_all(scenarios: Sequence[tuple[str, Scenario]], configs: dict[str, Path],
@@ -169,14 +171,14 @@ def plot_family(family: str, rows: list[Row], configs: Sequence[str], path: Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    speeds = sorted({_speed(r.case) for r in rows})
+    speeds = sorted({r.speed_kph for r in rows})
     threat = rows[0].threat
     fig, ax = plt.subplots(figsize=(6, 3.4))
     width = 0.8 / len(configs)
     for k, cfg in enumerate(configs):
         shares = []
         for v in speeds:
-            rs = [r for r in rows if r.config == cfg and _speed(r.case) == v]
+            rs = [r for r in rows if r.config == cfg and r.speed_kph == v]
             good = sum(r.avoided for r in rs) if threat else sum(r.activations > 0 for r in rs)
             shares.append(100.0 * good / len(rs) if rs else 0.0)
         ax.bar([i + k * width for i in range(len(speeds))], shares, width,
@@ -192,11 +194,6 @@ def plot_family(family: str, rows: list[Row], configs: Sequence[str], path: Path
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
     plt.close(fig)
-
-
-def _speed(case: str) -> float:
-    part = next(p for p in case.split("_") if p.endswith("kph"))
-    return float(part[:-3])
 
 
 def issue_rows(runs: int) -> list[tuple[str, Scenario, int]]:
