@@ -26,6 +26,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from common.config.fusion import RuleName
 from tools.sim.scenario import ScenarioKind
 from tools.sim.verdict import Sample, Verdict
 
@@ -116,8 +117,6 @@ class Reach:
 
     @classmethod
     def of(cls, config: "LoopConfig") -> "Reach":
-        from common.config.fusion import RuleName
-
         d = config.fusion.fusion.decision
         if d.rule is not RuleName.KINEMATIC:
             return cls(config.radar.prefilter.max_range_m,
