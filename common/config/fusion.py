@@ -155,8 +155,10 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     full_decel_mps2: Positive = 4.5
     partial_level_pct: Annotated[float, msgspec.Meta(gt=0, le=100)] = 50.0
     full_level_pct: Annotated[float, msgspec.Meta(gt=0, le=100)] = 100.0
-    # The range gate follows the speed: range_base_m + range_time_s x ego speed, at most
-    # range_max_m (min_range_m of [fusion.decision] below it).
+    # The range gate: from range_min_m to range_base_m + range_time_s x ego speed, at
+    # most range_max_m. Its own near bound, not the paper's 3 m: a slowly closing cyclist
+    # reaches the braking stages inside 3 m (the ARS408 measures from 0.2 m).
+    range_min_m: NonNegative = 0.5
     range_base_m: Positive = 15.0
     range_time_s: NonNegative = 3.5
     range_max_m: Positive = 80.0
@@ -184,6 +186,8 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
             raise ValueError("warning_ttc_s >= partial_ttc_s >= full_ttc_s required")
         if self.partial_level_pct > self.full_level_pct:
             raise ValueError("partial_level_pct must not exceed full_level_pct")
+        if self.range_min_m >= min(self.range_base_m, self.range_max_m):
+            raise ValueError("range_min_m must be below range_base_m and range_max_m")
 
 
 class OverrideSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -233,6 +237,15 @@ class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     path: PathSettings = msgspec.field(default_factory=PathSettings)
     kinematic: KinematicSettings = msgspec.field(default_factory=KinematicSettings)
     override: OverrideSettings = msgspec.field(default_factory=OverrideSettings)
+
+    @property
+    def range_bounds_m(self) -> tuple[float, float]:
+        """The nearest and farthest range the rule decides on: the paper's
+        `min_range_m`, `max_range_m`; the kinematic rule's `range_min_m` and (at speed)
+        `range_max_m`."""
+        if self.rule is RuleName.KINEMATIC:
+            return self.kinematic.range_min_m, self.kinematic.range_max_m
+        return self.min_range_m, self.max_range_m
 
     def __post_init__(self) -> None:
         if self.min_range_m >= self.max_range_m:

@@ -320,7 +320,7 @@ class KinematicRule:
         self.k = s.kinematic
         self.paper = DecisionRule(s)
         self.policy = s.unverifiable_policy
-        self.min_range = s.min_range_m
+        self.min_range = s.kinematic.range_min_m
         p = s.corridor.prediction
         self.predict = p.enabled
         self.horizon = p.horizon_s

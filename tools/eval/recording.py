@@ -171,9 +171,9 @@ def recording_records(path: Path, s: RecordingSettings, scorer: Scorer,
 
 def _tracks_in_range(cycle: RadarTracks, s: FusionSettings) -> list[RadarTrack]:
     """The tracks fusion decides on (confirmed, finite) within the decision's range."""
-    decision = s.decision
+    near, far = s.decision.range_bounds_m
     return [t for t in cycle.tracks if t.confirmed and finite_track(t)
-            and decision.min_range_m <= t.range_m <= decision.max_range_m]
+            and near <= t.range_m <= far]
 
 
 @dataclass(frozen=True)

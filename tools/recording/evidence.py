@@ -304,8 +304,8 @@ class EvidenceCollector:
             "can_frames": can_frames,
             "thresholds": {"brake_ttc_eff_s": d.brake_ttc_eff_s,
                            "warning_ttc_eff_s": d.warning_ttc_eff_s,
-                           "ttc_offset_s": d.ttc_offset_s, "min_range_m": d.min_range_m,
-                           "max_range_m": d.max_range_m},
+                           "ttc_offset_s": d.ttc_offset_s, "min_range_m": d.range_bounds_m[0],
+                           "max_range_m": d.range_bounds_m[1]},
         }
         if e.targets is not None:
             out["verifier"] = {"name": e.targets.verifier, "params": e.targets.verifier_params}
