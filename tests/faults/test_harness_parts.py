@@ -4,6 +4,7 @@ stands in for a cut link, the mutations, and the fault table."""
 import random
 import socket
 import threading
+from pathlib import Path
 
 from tools.faults.catalogue import Outcome
 from tools.faults.harness import Record, RunInfo
@@ -126,3 +127,18 @@ def test_tables_of_two_runs_combine_into_one(tmp_path):
     assert [o.ok for o in by["frozen camera"].outcomes] == [True, False]
     assert info.seconds == 90.0 and len(info.runs) == 2
     assert "2 runs" in markdown(rows(records), info)
+
+
+def test_the_run_folder_is_absolute_when_out_is_relative(tmp_path, monkeypatch):
+    # the services a fault starts run in that folder on files named by it: a relative
+    # `--out` once made every "bad config strings" start read a path that did not exist
+    from types import SimpleNamespace
+    from typing import Any, cast
+
+    from tools.faults.robust import run_dir
+
+    monkeypatch.chdir(tmp_path)
+    ctx = cast(Any, SimpleNamespace(loop=SimpleNamespace(log_path=Path("out/x/stack.log"))))
+    folder = run_dir(ctx)
+    assert folder.is_absolute()
+    assert folder == tmp_path / "out" / "x" / "run"

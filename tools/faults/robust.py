@@ -34,8 +34,9 @@ _BASIC_STRING = re.compile(r'"(?:[^"\\\n]|\\.)*"')
 
 
 def run_dir(ctx: Context) -> Path:
-    """The folder holding the running stack's configs (tools/sim/session.py)."""
-    return ctx.loop.log_path.parent / "run"
+    """The folder holding the running stack's configs (tools/sim/session.py), absolute:
+    the services started on its files run in it."""
+    return (ctx.loop.log_path.parent / "run").resolve()
 
 
 class BadConfigStrings(Fault):
