@@ -3,7 +3,7 @@ default profile): fusion decides at most one cycle per `min_cycle_interval_s`, t
 of each interval, and sheds the rest (`tracks_shed`) instead of signing a command for
 every message. The gate on a fake clock, then the fusion service as its own process."""
 
-import itertools
+import bisect
 import logging
 import re
 import time
@@ -119,7 +119,12 @@ def test_a_track_flood_gets_one_command_per_cycle_interval(router, tmp_path: Pat
     span_s = (stamps[-1] - stamps[0]) / 1e9
     assert len(during) >= 5 and (len(during) - 1) / span_s <= 1 / 0.05 * 1.1, \
         (len(during), span_s, elapsed)
-    assert min(b - a for a, b in itertools.pairwise(stamps)) >= 30 * MS
+    # Any 500 ms hold at most 11 cycles' commands and one more: the gate spaces the
+    # decisions 50 ms apart, and a command published late (its processing starved on a
+    # loaded host) may land next to the one after it, but cannot add commands.
+    window = 500 * MS
+    busiest = max(bisect.bisect_right(stamps, t + window) - i for i, t in enumerate(stamps))
+    assert busiest <= window // (50 * MS) + 2, (busiest, stamps)
     seqs = [m.header.seq for m in commands.messages]
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))       # contiguous commands
     # counted: those the radar thread left for a newer one (Zenoh's ring drops more)
