@@ -5,12 +5,15 @@ import random
 import socket
 import threading
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any, cast
 
 from tools.faults.catalogue import Outcome
 from tools.faults.harness import Record, RunInfo
 from tools.faults.links import CanGate, RelayLink
 from tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
 from tools.faults.report import markdown, rows, write
+from tools.faults.robust import run_dir
 
 
 class ListSink:
@@ -132,11 +135,6 @@ def test_tables_of_two_runs_combine_into_one(tmp_path):
 def test_the_run_folder_is_absolute_when_out_is_relative(tmp_path, monkeypatch):
     # the services a fault starts run in that folder on files named by it: a relative
     # `--out` once made every "bad config strings" start read a path that did not exist
-    from types import SimpleNamespace
-    from typing import Any, cast
-
-    from tools.faults.robust import run_dir
-
     monkeypatch.chdir(tmp_path)
     ctx = cast(Any, SimpleNamespace(loop=SimpleNamespace(log_path=Path("out/x/stack.log"))))
     folder = run_dir(ctx)

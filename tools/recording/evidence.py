@@ -294,6 +294,7 @@ class EvidenceCollector:
                  images: list[str]) -> dict[str, Any]:
         cmd, d = e.command, self.decision
         c = d.corridor
+        near_m, far_m = d.range_bounds_m
         out: dict[str, Any] = {
             "vehicle": self.vehicle, "instance": e.instance, "decision": cmd.decision.value,
             "brake_level_pct": cmd.brake_level_pct, "radar_seq": cmd.radar_seq,
@@ -304,8 +305,8 @@ class EvidenceCollector:
             "can_frames": can_frames,
             "thresholds": {"brake_ttc_eff_s": d.brake_ttc_eff_s,
                            "warning_ttc_eff_s": d.warning_ttc_eff_s,
-                           "ttc_offset_s": d.ttc_offset_s, "min_range_m": d.range_bounds_m[0],
-                           "max_range_m": d.range_bounds_m[1]},
+                           "ttc_offset_s": d.ttc_offset_s, "min_range_m": near_m,
+                           "max_range_m": far_m},
         }
         if e.targets is not None:
             out["verifier"] = {"name": e.targets.verifier, "params": e.targets.verifier_params}
