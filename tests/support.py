@@ -1,10 +1,12 @@
 """Helpers for multi-process tests: free ports, a router process, service processes with
 captured logs, and polling with deadlines (never fixed sleeps as synchronisation)."""
 
+import fcntl
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -36,6 +38,30 @@ def wait_for(
         if time.monotonic() > deadline:
             raise TimeoutError(f"timed out after {timeout_s} s waiting for {what or predicate}")
         time.sleep(interval_s)
+
+
+@contextmanager
+def host_exclusive(name: str, timeout_s: float = 600.0) -> Iterator[None]:
+    """A lock shared by every copy of the suite on this host (a file in the temporary
+    directory), for the few tests that load the machine on purpose: two 10,000/s floods
+    through the real-time chain at once take both cores of a 2-core host, and a pty's
+    bytes then wait for the kernel's tty worker (normal scheduling) for hundreds of
+    milliseconds. The rest of another copy's load runs beside it. Raises TimeoutError."""
+    path = Path(tempfile.gettempdir()) / f"aeb-tests-{name}.lock"
+    with open(path, "a", encoding="utf-8") as f:
+
+        def taken() -> bool:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return False
+            return True
+
+        wait_for(taken, timeout_s, 0.05, f"the host-wide lock {path}")
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 class ServiceProcess:
@@ -85,12 +111,15 @@ def python_module(module: str, *args: str) -> list[str]:
 
 
 @contextmanager
-def router_process(log_dir: Path, port: int | None = None) -> Iterator[str]:
-    """A Zenoh router on 127.0.0.1; yields its endpoint once it accepts connections."""
+def router_process(log_dir: Path, port: int | None = None,
+                   realtime_priority: int = 0) -> Iterator[str]:
+    """A Zenoh router on 127.0.0.1 (its I/O threads at SCHED_FIFO `realtime_priority`
+    when > 0, as deployed); yields its endpoint once it accepts connections."""
     port = port or free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    proc = ServiceProcess(f"router-{port}", python_module("common.router", "--listen", endpoint),
-                          log_dir)
+    proc = ServiceProcess(f"router-{port}", python_module(
+        "common.router", "--listen", endpoint, "--realtime-priority", str(realtime_priority)),
+        log_dir)
     try:
         wait_for(lambda: port_open(port) or not proc.alive(), START_TIMEOUT_S, 0.05,
                  "router port")

@@ -12,11 +12,11 @@
   timeout) and at least every TIMER_PERIOD_S, so that silence is detected without any
   message arriving; it also publishes BrakeStatus (at once on a change of state, and at
   the key's nominal rate);
-- the serial reader thread (`brake-serial`): acknowledgements and faults from the
-  actuator, port loss and reopening; it publishes the status owed for a command when the
-  actuator acknowledges its line (the timer does at its next wake-up, at most
-  TIMER_PERIOD_S later, if no acknowledgement comes first), and builds the line most
-  likely written next (`LineAhead`), so that the command path finds it ready.
+- the serial reader thread (`brake-serial`, at the timer's priority): acknowledgements
+  and faults from the actuator, port loss and reopening; it publishes the status owed
+  for a command when the actuator acknowledges its line (the timer does at its next
+  wake-up, at most TIMER_PERIOD_S later, if no acknowledgement comes first), and builds
+  the line most likely written next (`LineAhead`), so that the command path finds it ready.
 
 The timer and the serial link start before the Zenoh session exists (`attach` comes
 later, from whatever thread opened the session), so that a silent bus from the very
@@ -35,11 +35,12 @@ from common.bus import Bus, TypedPublisher
 from common.clock import mono_ns, wall_ns
 from common.command_auth import CommandKey, load_keyring
 from common.config.brake import AgeClock, BrakeConfig
+from common.config.realtime import RealtimeSettings
 from common.counters import saturated
 from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
 from common.log import RateLimitedLog, kv
 from common.messages import BrakeState, BrakeStatus, Header
-from common.realtime import ThreadRealtime, apply_process, set_fifo
+from common.realtime import ThreadRealtime, apply_process
 from common.systemd import Watchdog
 from services.brake.commands import Rejection
 from services.brake.core import BrakeCore, Outgoing
@@ -122,6 +123,13 @@ class BrakeShell:
         self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
         self._drainer: threading.Thread | None = None
         self._rt = ThreadRealtime(s.realtime, log, "brake command callback")
+        # The timer and the serial reader one priority above the command path: a flood
+        # that keeps the command thread busy delays neither the detection of silence nor
+        # the reading of the actuator's acknowledgements (late, they fault the link)
+        above = RealtimeSettings(priority=min(99, s.realtime.priority + 1)) \
+            if s.realtime.priority > 0 else s.realtime
+        self._rt_timer = ThreadRealtime(above, log, "brake timer")
+        self._rt_serial = ThreadRealtime(above, log, "brake serial reader")
 
     # ---- life cycle ---------------------------------------------------------------
 
@@ -224,6 +232,7 @@ class BrakeShell:
                                  trusted=",".join(sorted(validator.keys))))
 
     def _on_rx(self, items: list[bytes | BadLine]) -> None:
+        self._rt_serial.ensure()
         with self._lock:
             now = mono_ns()
             before = (self.core.state, self.core.command_state)
@@ -255,6 +264,7 @@ class BrakeShell:
         self._on_link(False, reason)
 
     def _on_link(self, up: bool, reason: str) -> None:
+        self._rt_serial.ensure()
         with self._lock:
             before = (self.core.state, self.core.command_state)
             out = self.core.on_link(up, mono_ns(), reason)
@@ -266,7 +276,7 @@ class BrakeShell:
     # ---- timer ----------------------------------------------------------------------
 
     def _timer_loop(self) -> None:
-        self._set_realtime_priority()
+        self._rt_timer.ensure()
         with self._lock:
             while not self._stopping:
                 try:
@@ -331,19 +341,6 @@ class BrakeShell:
             except zenoh.ZError as exc:   # the session is closing
                 self.errors["status_publish_failed"] += 1
                 self._rl.error("status", "status_publish_failed", error=repr(exc))
-
-    def _set_realtime_priority(self) -> None:
-        """The deadline timer above the command path: a command callback that runs long
-        never delays the detection of silence."""
-        base = self.cfg.brake.realtime.priority
-        if base <= 0:
-            return
-        prio = min(99, base + 1)
-        try:
-            set_fifo(prio)
-            self._log.info(kv("timer_realtime", priority=prio))
-        except (OSError, AttributeError) as exc:
-            self._log.warning(kv("timer_realtime_refused", priority=prio, error=exc))
 
     # ---- helpers (lock held) --------------------------------------------------------
 

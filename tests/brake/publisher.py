@@ -6,6 +6,7 @@ SIGTERM. The tests SIGKILL or SIGSTOP it to make the command stream stop.
 """
 
 import argparse
+import logging
 import sys
 import time
 
@@ -13,7 +14,9 @@ import msgspec
 
 from common.bus import Bus
 from common.command_auth import CommandSigner, load_key
+from common.config.realtime import RealtimeSettings
 from common.keys import FUSION_BRAKE_CMD
+from common.realtime import apply_process
 from common.service import stop_event_on_signals
 from tests.brake.helpers import command
 from tests.support import client_settings
@@ -28,6 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--level", type=float, default=0.0)
     parser.add_argument("--key", help="key file to sign with (default: unsigned)")
     parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 (a TLS client)")
+    parser.add_argument("--realtime-priority", type=int, default=0,
+                        help="SCHED_FIFO for its threads, as a deployed fusion's")
     args = parser.parse_args(argv)
     stop = stop_event_on_signals()
     signer = CommandSigner(load_key(args.key)) if args.key else None
@@ -36,6 +41,8 @@ def main(argv: list[str] | None = None) -> int:
                                        config_file=args.zenoh_config)
     with Bus.open(settings, args.vehicle, f"fusion/{args.instance}") as bus:
         pub = bus.publisher(FUSION_BRAKE_CMD, instance=args.instance)
+        apply_process(RealtimeSettings(priority=args.realtime_priority),
+                      logging.getLogger("publisher"))
         seq = 0
         next_t = time.monotonic()
         while not stop.is_set():

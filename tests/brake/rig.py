@@ -93,6 +93,7 @@ class BrakeRig:
     deadline_ms: float
     period_ms: float
     secure: SecureProfile | None = None
+    realtime_priority: int = 0   # the brake's; the publishers and the router run at it too
 
     def publisher(self, level: float = 0.0, period_ms: float = 20.0,
                   instance: str = "primary", name: str = "publisher",
@@ -105,6 +106,7 @@ class BrakeRig:
             name, python_module("tests.brake.publisher", "--connect", self.endpoint,
                                 "--level", str(level), "--period-ms", str(period_ms),
                                 "--instance", instance,
+                                "--realtime-priority", str(self.realtime_priority),
                                 "--key", str(key or write_test_key(self.log_dir)), *zenoh),
             self.log_dir,
         )
@@ -134,8 +136,11 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
     `secure`: the secure profile (TLS router with access control; this process observes as the
     monitor, which may read everything and write nothing). `watch_commands` false: this
     process does not subscribe to the commands (a flood test: a slow subscriber of a
-    BLOCK key slows the router's delivery to every subscriber)."""
+    BLOCK key slows the router's delivery to every subscriber).
+    `realtime={"priority": p}`: the brake, the router and the publishers at SCHED_FIFO p,
+    as deployed (fusion and router at the brake's priority)."""
     nested = {k: brake.pop(k) for k in ("serial", "actuator", "realtime") if k in brake}
+    priority = int(nested.get("realtime", {}).get("priority", 0))
     link = log_dir / "actuator"
     brake.setdefault("command_keys", [str(write_test_key(log_dir))])
     tables: dict[str, dict[str, Any]] = {
@@ -149,7 +154,7 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
     with ExitStack() as stack:
         profile = stack.enter_context(secure_router(log_dir)) if secure else None
         endpoint = profile.endpoint if profile else stack.enter_context(
-            router_process(log_dir))
+            router_process(log_dir, realtime_priority=priority))
         if profile is not None:
             tables = {"zenoh": {"config_file": str(profile.client("brake"))}, **tables}
         config.write_text(toml_text(tables))
@@ -173,7 +178,7 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
             raise AssertionError(f"brake did not start:\n{proc.output()}") from None
         rig = BrakeRig(endpoint, log_dir, link, sim, pair, proc, bus, status, commands,
                        float(brake.get("deadline_ms", 200.0)),
-                       TIMER_PERIOD_S * 1000, profile)
+                       TIMER_PERIOD_S * 1000, profile, priority)
         yield rig
         # the test may have replaced the process (a restart): the one running now
         assert rig.brake.alive(), f"brake process died:\n{rig.brake.output()}"

@@ -21,6 +21,7 @@ from common.messages import BrakeState, BrakeStatus
 from tests.brake.helpers import write_test_key
 from tests.brake.rig import BrakeRig, brake_rig
 from tests.brake.test_intruder import finished, intruder
+from tests.support import host_exclusive
 
 pytestmark = pytest.mark.slow
 
@@ -84,12 +85,13 @@ def test_a_flood_on_the_brakes_own_key_is_shed_before_the_deadline(rig: BrakeRig
     try:
         rig.wait_live(start, timeout_s=60)
         _, before = rig.wait_status(lambda s: True, len(rig.status))
-        mark = len(rig.status)
-        t0 = time.monotonic_ns()
-        sent = finished(intruder(rig, "--blind", "--attacks", "keyed-flood", "--flood-s", "3.0",
-                                 "--flood-hz", "10000",
-                                 "--key", str(write_test_key(rig.log_dir))))
-        t1 = time.monotonic_ns()
+        with host_exclusive("flood"):
+            mark = len(rig.status)
+            t0 = time.monotonic_ns()
+            sent = finished(intruder(rig, "--blind", "--attacks", "keyed-flood", "--flood-s",
+                                     "3.0", "--flood-hz", "10000",
+                                     "--key", str(write_test_key(rig.log_dir))))
+            t1 = time.monotonic_ns()
         total = sent["keyed-flood"]
 
         def settled(s: BrakeStatus) -> bool:
@@ -112,11 +114,11 @@ def test_a_flood_on_the_brakes_own_key_is_shed_before_the_deadline(rig: BrakeRig
     refused = grew.get("other_session", 0)
     full = (later.counters.get("command_queue_full", 0)
             - before.counters.get("command_queue_full", 0))
-    # every one refused (too_old: delayed upstream of the brake on a loaded host), or
-    # shed by the brake (it found its queue full)
+    # every one refused (too_old: delayed upstream of the brake on a loaded host, which
+    # a real command delayed with them is too), or shed by the brake (its queue full)
     assert set(grew) <= {"other_session", "too_old"}, grew
     refused += grew.get("too_old", 0)
-    assert refused == sent["keyed-flood"] or (full > 0 and refused > 0.3 * sent["keyed-flood"]), \
+    assert refused >= sent["keyed-flood"] or (full > 0 and refused > 0.3 * sent["keyed-flood"]), \
         (refused, sent, full)
     window = [s for s in statuses if t0 <= s.header.pub_mono_ns <= t1]
     assert window and all(s.state is BrakeState.ARMED for s in window), \
