@@ -158,6 +158,30 @@ class VehicleState:
         driver, driver_check = self.driver.current(now_mono_ns)
         return VehicleSample(motion, driver, motion_check, driver_check)
 
+    def sample_as(self, recorded_reason: str, now_mono_ns: int) -> "VehicleSample":
+        """Both inputs as a recorded decision judged them, for a re-run: an input that
+        `recorded_reason` (that decision's `VehicleSample.reason`) names is not used, with
+        the recorded reason; the other is used with the newest message held, whatever its
+        age here. A live instance on a loaded host may have received a message later than
+        the recorder did: its own verdict, not the recording's arrival times, says what it
+        decided on. Each input is checked (and counted) at `now_mono_ns` as by `sample`."""
+        said = recorded_reason.split("; ") if recorded_reason else []
+        motion = self._as_recorded(self.motion, said, now_mono_ns)
+        driver = self._as_recorded(self.driver, said, now_mono_ns)
+        return VehicleSample(motion[0], driver[0], motion[1], driver[1])
+
+    @staticmethod
+    def _as_recorded(state: "StateInput[Any]", said: list[str],
+                     now_mono_ns: int) -> tuple[Any, StateCheck]:
+        check = state.check(now_mono_ns)
+        reason = next((r for r in said if r.startswith(f"{state.name}:")), None)
+        if reason is not None:
+            freshness = StateFreshness.MISSING if state.latest is None else StateFreshness.STALE
+            return None, StateCheck(freshness, reason, check.age_s)
+        if state.latest is None:
+            return None, check
+        return state.latest, StateCheck(StateFreshness.FRESH, "", check.age_s)
+
 
 @dataclass(frozen=True)
 class VehicleSample:

@@ -76,3 +76,20 @@ def test_bounds_must_be_positive():
         StateInput("x", 0.0)
     with pytest.raises(ValueError, match="max_stamp_age_s"):
         StateInput("x", 0.1, 0.0)
+
+
+def test_a_re_run_takes_each_input_as_the_recorded_decision_judged_it():
+    state = VehicleState(stamp_check=False)
+    state.motion.observe(motion(WALL), 0, WALL)
+    # the recording's arrival times say fresh (50 ms); the live instance found it stale
+    live = "vehicle/motion: newest is 0.130 s old (bound 0.100 s)"
+    assert state.sample(50 * MS).motion is not None
+    pinned = state.sample_as(f"{live}; vehicle/driver: nothing received", 50 * MS)
+    assert pinned.motion is None and pinned.motion_check.freshness is StateFreshness.STALE
+    assert pinned.driver_check.freshness is StateFreshness.MISSING
+    assert pinned.reason == f"{live}; vehicle/driver: nothing received"
+    # and the other way: stale by the recording's times, fresh live
+    late = state.sample_as("vehicle/driver: nothing received", 300 * MS)
+    assert late.motion is not None and late.motion_check.fresh
+    assert late.reason == "vehicle/driver: nothing received"
+    assert state.sample(300 * MS).motion is None

@@ -38,8 +38,9 @@ async def receive(port: int, wanted: dict[str, int], timeout_s: float):
     """Connect, subscribe to `wanted` topics as they are advertised, and return
     {topic: [(log time, payload, channel)]} once each has its count."""
     got: dict[str, list] = {t: [] for t in wanted}
-    async with websockets.connect(f"ws://127.0.0.1:{port}",
-                                  subprotocols=SUBPROTOCOLS) as ws:
+    # the opening handshake waits for a bridge a loaded host may not schedule for seconds
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS,
+                                  open_timeout=timeout_s) as ws:
         assert ws.subprotocol == "foxglove.sdk.v1"
         channels: dict[int, dict] = {}
         subs: dict[int, int] = {}

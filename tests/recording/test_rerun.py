@@ -166,7 +166,7 @@ def test_numbers_compare_to_rounding_unless_exact():
     recorded = radar_tracks(1, (track(1, x=12.0),))
     t = recorded.tracks[0]
     last_bit = msgspec.structs.replace(t, x_m=t.x_m * (1 + 2e-16))
-    moved = msgspec.structs.replace(t, x_m=t.x_m + 1e-6)
+    moved = msgspec.structs.replace(t, x_m=t.x_m + 1e-4)
     for rerun, rounded, exact in ((last_bit, 0, 1), (moved, 1, 1)):
         other = msgspec.structs.replace(recorded, tracks=(rerun,))
         assert len(Comparison().add_tracks(1, 0, recorded, other)) == rounded

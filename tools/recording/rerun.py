@@ -83,7 +83,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--compare", action="store_true",
                         help="compare with the recorded outputs, cycle by cycle")
     parser.add_argument("--exact", action="store_true",
-                        help="compare numbers bit for bit (default: to a relative 1e-9)")
+                        help="compare numbers bit for bit (default: to a relative 1e-6)")
     parser.add_argument("--expect", default="", help="differences declared allowed (JSON)")
     parser.add_argument("--write-expected", default="",
                         help="write the differences found as a declaration (JSON)")

@@ -126,7 +126,8 @@ class FusionRerun:
         self._frame_topics = {CAMERA_JPEG.key(vehicle, camera=c): c for c in self.cameras}
         self._depth_topics = {CAMERA_DEPTH.key(vehicle, camera=c): c for c in self.cameras}
         # vehicle/motion and vehicle/driver as recorded, applied in log time before each
-        # cycle: the kinematic rule re-run on the state the live instance had.
+        # cycle, fresh or not as the live instance found them (its recorded output): the
+        # kinematic rule re-run on the state the live instance had.
         self._vehicle_topics: dict[str, type] = {EGO_MOTION.key(vehicle): EgoMotion,
                                                  VEHICLE_DRIVER.key(vehicle): DriverInputs}
         vs = self.s.vehicle_state
@@ -225,7 +226,12 @@ class FusionRerun:
                 self._vehicle.motion.observe(msg, log_ns, log_ns)
             else:
                 self._vehicle.driver.observe(msg, log_ns, log_ns)
-        vehicle = self._vehicle.sample(cycle.log_ns)
+        live = cycle.recorded
+        if live is not None and (live.vehicle_state or live.ego_speed_mps is not None):
+            # the live instance's verdict on the vehicle state, as its frame is pinned
+            vehicle = self._vehicle.sample_as(live.vehicle_state, cycle.log_ns)
+        else:
+            vehicle = self._vehicle.sample(cycle.log_ns)
         try:
             decided = self.core.decide(tracks, feeds, now_wall, now_mono, vehicle)
             targets = self.core.report(decided)
