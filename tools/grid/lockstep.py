@@ -35,7 +35,7 @@ import msgspec
 from common.calibration import Calibration
 from common.command_auth import CommandKey, CommandSigner, load_signing_key, new_key
 from common.config.brake import BrakeSettings
-from common.config.fusion import FusionConfig, RuleName
+from common.config.fusion import FusionConfig
 from common.config.loader import load_config
 from common.config.radar import RadarSettings
 from common.messages import (
@@ -61,6 +61,7 @@ from tools.grid.profile import Profile
 from tools.grid.radar import LockstepRadar
 from tools.messages import SimWorld
 from tools.recording.frame_source import FrameSource
+from tools.sim.radar_reach import radar_for
 from tools.sim.scenario import RadarLook, Scenario
 from tools.sim.scenario_run import (
     LoopSettings,
@@ -355,19 +356,6 @@ def _published(command: BrakeCommand, pub_mono_ns: int) -> BrakeCommand:
     """The command as the shell publishes it: stamped when it was decided."""
     return msgspec.structs.replace(
         command, header=msgspec.structs.replace(command.header, pub_mono_ns=pub_mono_ns))
-
-
-def radar_for(*configs: FusionConfig | None) -> RadarSettings:
-    """The radar service's settings for these fusion instances: the defaults, with the
-    prefilter's range out to the farthest kinematic range gate among them."""
-    radar = RadarSettings()
-    reach = max((c.fusion.decision.kinematic.range_max_m for c in configs
-                 if c is not None and c.fusion.decision.rule is RuleName.KINEMATIC),
-                default=0.0)
-    if reach <= radar.prefilter.max_range_m:
-        return radar
-    return msgspec.structs.replace(
-        radar, prefilter=msgspec.structs.replace(radar.prefilter, max_range_m=reach))
 
 
 def _check_camera(cfg: FusionConfig, camera: CameraSettings) -> None:

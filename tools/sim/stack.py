@@ -17,6 +17,7 @@ from pathlib import Path
 from common.config.fusion import FusionConfig
 from common.config.loader import load_config, relocated_text
 from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
+from tools.sim.radar_reach import radar_for
 
 CALIBRATION = EXAMPLE_CALIBRATION
 FUSION_CONFIG = DEPLOY / "fusion.toml"
@@ -64,6 +65,7 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
     zenoh = f"[zenoh]\nconnect = {_toml_list([endpoint])}\n"
     options = "{ sleep_after_open = 0 }" if can_interface == "slcan" else "{}"
     bitrate = 500_000 if can_interface == "slcan" else 0
+    reach_m = radar_for(load_config(fusion_config, FusionConfig)).prefilter.max_range_m
     radar = folder / "radar.toml"
     radar.write_text(
         "# SIMULATION: the radar service on the simulated ARS408's CAN link.\n"
@@ -71,7 +73,9 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
         f'channel = "{can_channel}"\nbitrate = {bitrate}\noptions = {options}\n\n'
         '[[radar.sensors]]\nname = "front"\nsensor_id = 0\n'
         # the simulator publishes vehicle/motion: the radar forwards it as 0x300 / 0x301
-        '\n[radar.ego_motion]\nforward = true\n' + rt.format("radar")
+        '\n[radar.ego_motion]\nforward = true\n'
+        # out to the fusion rule's range gate, as deploy/radar.toml for deploy/fusion.toml
+        + f'\n[radar.prefilter]\nmax_range_m = {reach_m}\n' + rt.format("radar")
         + ("\n[radar.raw_can]\npublish = true\n" if raw_can else ""))
     camera = folder / "camera.toml"
     camera.write_text(
