@@ -123,7 +123,7 @@ class PathSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     is given, else the path is straight."""
 
     half_width_m: NonNegative = 0.9
-    margin_m: NonNegative = 0.2          # as deploy/fusion.toml (chosen on train seeds)
+    margin_m: NonNegative = 0.3
     length_m: Positive = 80.0
     min_yaw_speed_mps: NonNegative = 3.0
     wheelbase_m: Positive | None = None
