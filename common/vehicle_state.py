@@ -164,8 +164,13 @@ class VehicleState:
         the recorded reason; the other is used with the newest message held, whatever its
         age here. A live instance on a loaded host may have received a message later than
         the recorder did: its own verdict, not the recording's arrival times, says what it
-        decided on. Each input is checked (and counted) at `now_mono_ns` as by `sample`."""
+        decided on. A reason that names neither input (fusion's "vehicle state not read"
+        before its first sample) holds for both. Each input is checked (and counted) at
+        `now_mono_ns` as by `sample`."""
         said = recorded_reason.split("; ") if recorded_reason else []
+        if said and not any(r.startswith(f"{i.name}:") for r in said
+                            for i in (self.motion, self.driver)):
+            said = [f"{i.name}: {recorded_reason}" for i in (self.motion, self.driver)]
         motion = self._as_recorded(self.motion, said, now_mono_ns)
         driver = self._as_recorded(self.driver, said, now_mono_ns)
         return VehicleSample(motion[0], driver[0], motion[1], driver[1])

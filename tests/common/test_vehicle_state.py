@@ -93,3 +93,7 @@ def test_a_re_run_takes_each_input_as_the_recorded_decision_judged_it():
     assert late.motion is not None and late.motion_check.fresh
     assert late.reason == "vehicle/driver: nothing received"
     assert state.sample(300 * MS).motion is None
+    # a verdict that names neither input holds for both
+    unread = state.sample_as("vehicle state not read", 50 * MS)
+    assert unread.motion is None and unread.driver is None
+    assert "vehicle state not read" in unread.motion_check.reason
