@@ -122,6 +122,10 @@ class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
     path: str = ""
     vehicle_state: str = ""
     override: str = ""
+    # ... and the path it judged by: the arc's curvature (1/m, left positive; 0: straight)
+    # and the range gate's far end this cycle (m), for views that draw it
+    path_curvature_per_m: float | None = None
+    range_gate_m: float | None = None
 
 
 class CommandAuth(msgspec.Struct, frozen=True):

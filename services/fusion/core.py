@@ -284,7 +284,8 @@ class FusionCore:
         return msgspec.structs.replace(
             targets, ego_speed_mps=motion.speed_mps if motion is not None else None,
             ego_yaw_rate_dps=motion.yaw_rate_dps if motion is not None else None,
-            path=rule.path.describe(), vehicle_state=rule.degraded)
+            path=rule.path.describe(), vehicle_state=rule.degraded,
+            path_curvature_per_m=rule.path.curvature_per_m, range_gate_m=rule.max_range)
 
     def _usable(self, feeds: tuple[FrameFeed, ...],
                 confirmed: list[RadarTrack]) -> tuple[FrameFeed, ...]:

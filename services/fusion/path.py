@@ -57,6 +57,16 @@ class PredictedPath:
         theta = math.atan2(vx, -sign * vy)   # swept from the radar, forward positive
         return PathPoint(theta * abs(r), sign * (abs(r) - rho))
 
+    def at(self, s_m: float, d_m: float) -> tuple[float, float]:
+        """The vehicle-frame (x, y) of arc length `s_m` and offset `d_m`: the inverse of
+        `point`."""
+        k = self.curvature_per_m
+        if abs(k) < STRAIGHT_CURVATURE:
+            return s_m, d_m + self.center_y_m
+        r = 1.0 / k
+        theta = s_m * k
+        return (r - d_m) * math.sin(theta), r - (r - d_m) * math.cos(theta) + self.center_y_m
+
     def velocity(self, x_m: float, y_m: float, vx_mps: float,
                  vy_mps: float) -> tuple[float, float]:
         """A velocity at (x, y) along the path's tangent and normal there (left

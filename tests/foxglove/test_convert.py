@@ -84,6 +84,23 @@ def test_images_scale_and_scenes_draw_the_corridor():
     assert ys == [-1.2, -0.9, 0.9, 1.2]
 
 
+def test_the_scene_draws_the_kinematic_rules_arc_to_its_range_gate():
+    from services.fusion.path import PredictedPath
+
+    bend = msgspec.structs.replace(targets(), path="path R 50 m left (yaw rate)",
+                                   path_curvature_per_m=0.02, range_gate_m=40.0)
+    corridor = decoded(Converter("ego").fusion_scene(bend)).entities[0]
+    assert corridor.id == "corridor" and corridor.metadata[0].value == bend.path
+    outer_left = corridor.lines[3]          # half-width + margin, left
+    end = outer_left.points[-1]
+    arc = PredictedPath(0.02, 1.2, 80.0)
+    assert (end.x, end.y) == pytest.approx(arc.at(40.0, 1.2), abs=1e-6)
+    assert end.y > 10.0                     # bent left, not straight ahead at y = 1.2
+    near = corridor.lines[4].points         # the near bound across the path
+    assert [c for q in near for c in (q.x, q.y)] == pytest.approx(
+        [*arc.at(0.5, -1.2), *arc.at(0.5, 1.2)], abs=1e-6)
+
+
 def test_the_plots_and_the_health_view():
     plot = threat_plot(targets())
     assert (plot.track_id, plot.decision_level, plot.threshold) == (7, 2, 0.025)

@@ -96,3 +96,14 @@ def test_predicted_path_width_is_half_width_plus_margin() -> None:
         pytest.approx(1.2), 60.0, 0.0)
     assert "straight" in path.describe()
     assert "R 50 m left" in PredictedPath(0.02, 1.2, 80.0, source="yaw rate").describe()
+
+
+@pytest.mark.parametrize("radius", [50.0, -50.0, 1e9])
+def test_at_places_arc_length_and_offset_back_in_the_vehicle_frame(radius: float) -> None:
+    path = PredictedPath(1.0 / radius, 1.2, 80.0, center_y_m=0.3)
+    for s, d in ((0.0, 0.0), (10.0, 1.2), (35.0, -0.9)):
+        x, y = path.at(s, d)
+        ex, ey = on_arc(radius, s, d)
+        assert (x, y) == pytest.approx((ex, ey + 0.3), abs=1e-6)
+        back = path.point(x, y)
+        assert (back.s_m, back.d_m) == pytest.approx((s, d), abs=1e-6)

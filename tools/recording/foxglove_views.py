@@ -13,7 +13,8 @@ Derived channels, all under ``/foxglove/<vehicle>/`` (`Topics`):
   fusion/<instance>/targets: each ROI on the frame it was checked in, coloured by state,
   labelled with range, TTC and the verifier's score;
 - fusion/<instance>/scene: foxglove.SceneUpdate, the confirmed tracks from above with
-  the corridor;
+  the path fusion judged by (the kinematic rule's arc to its range gate, or the paper's
+  straight corridor);
 - radar/<sensor>/scene: foxglove.SceneUpdate, every radar track, confirmed or not;
 - fusion/<instance>/command, fusion/<instance>/threat, brake/plot: JSON views for plots
   (`CommandPlot`, `ThreatPlot`: the cycle's most severe track, `BrakePlot`);
@@ -57,9 +58,11 @@ from common.messages import (
     VerifiedTarget,
     VerifiedTargets,
 )
+from services.fusion.path import PredictedPath
 from tools.recording.format import ChannelType
 
 RADAR_FRAME = "radar"          # the 3-D views' frame: x forward, y left, z up (radar origin)
+PATH_STEP_M = 1.0              # the drawn path's points along its arc
 DECISION_LEVEL = {Decision.NONE: 0, Decision.WARNING: 1, Decision.BRAKE: 2}
 BRAKE_LEVEL = {BrakeState.STANDBY: 0, BrakeState.ARMED: 1, BrakeState.BRAKING: 2,
                BrakeState.FAILSAFE: 3, BrakeState.FAULT: 4}
@@ -356,7 +359,8 @@ class Converter:
         """The confirmed tracks (at the position they were projected from), coloured by
         state and labelled, the corridor, and the decision's range."""
         ts = _stamp(targets.header.stamp_ns)
-        entities = [self._corridor(ts)]
+        entities = [self._path(ts, targets) if targets.path_curvature_per_m is not None
+                    else self._corridor(ts)]
         for t in targets.targets:
             if not (math.isfinite(t.x_m) and math.isfinite(t.y_m)):
                 continue
@@ -400,6 +404,34 @@ class Converter:
         return fg.SceneEntity(timestamp=ts, frame_id=RADAR_FRAME, id="corridor",
                               lines=lines,
                               metadata=[fg.KeyValuePair(key="enabled", value=str(c.enabled))])
+
+    def _path(self, ts: fg.Timestamp, targets: VerifiedTargets) -> fg.SceneEntity:
+        """The kinematic rule's path as fusion judged by it this cycle: its arc (the
+        recorded curvature), half-width and margin either side, from the rule's near bound
+        to its range gate."""
+        p = self.decision.path
+        path = PredictedPath(targets.path_curvature_per_m or 0.0, p.half_width_m + p.margin_m,
+                             p.length_m, self.decision.corridor.center_y_m)
+        near = self.decision.kinematic.range_min_m
+        far = targets.range_gate_m if targets.range_gate_m is not None else p.length_m
+        steps = max(2, math.ceil((far - near) / PATH_STEP_M) + 1)
+        along = [near + (far - near) * i / (steps - 1) for i in range(steps)]
+
+        def line(points: list[tuple[float, float]], width: float,
+                 colour: _RGBA) -> fg.LinePrimitive:
+            return fg.LinePrimitive(
+                type=fg.LinePrimitiveLineType.LineStrip, thickness=width,
+                points=[fg.Point3(x=x, y=y, z=0.0) for x, y in points], color=_colour(colour))
+
+        edge = path.half_width_m
+        lines = [line([path.at(s_m, side * offset) for s_m in along], 0.05, colour)
+                 for offset, colour in ((p.half_width_m, (1.0, 1.0, 1.0, 0.9)),
+                                        (edge, (1.0, 1.0, 1.0, 0.35)))
+                 for side in (-1, 1)]
+        lines += [line([path.at(s_m, -edge), path.at(s_m, edge)], 0.03, (0.6, 0.8, 1.0, 0.6))
+                  for s_m in (near, far)]
+        return fg.SceneEntity(timestamp=ts, frame_id=RADAR_FRAME, id="corridor", lines=lines,
+                              metadata=[fg.KeyValuePair(key="path", value=targets.path)])
 
     # -- health -------------------------------------------------------------------------
 
