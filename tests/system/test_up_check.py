@@ -183,3 +183,27 @@ def test_services_check_without_a_router(configs):
                            "--check"], capture_output=True, text=True, timeout=120, env=env)
     assert done.returncode == 0, done.stderr
     assert "fusion: configuration ok" in done.stdout
+
+
+def test_a_radar_that_passes_tracks_short_of_the_fusion_rules_reach_is_said(configs, capsys):
+    from tools.launch.check import reach_warnings
+    from tools.launch.table import load_table, resolve_launches
+
+    (configs / "radar.toml").write_text('[radar.prefilter]\nmax_range_m = 25.0\n')
+    (configs / "kinematic.toml").write_text(
+        f'[fusion]\ncalibration = "{EXAMPLE_CALIBRATION}"\n[fusion.decision]\n'
+        'rule = "kinematic"\n')
+    table = write_table(configs, service("radar", "radar", "radar.toml")
+                        + service("fusion", "fusion", "kinematic.toml")
+                        + service("paper", "fusion", "fusion.toml"))
+    launches = resolve_launches(*load_table(table), "test")
+    (said,) = reach_warnings(launches)       # the paper's rule decides within 25 m
+    assert said == ("fusion: its kinematic rule decides out to 80 m, but radar passes tracks "
+                    "to 25 m only (set [radar.prefilter] max_range_m = 80 in its config)")
+    up(["--check", "--table", table])
+    assert f"WARNING {said}" in capsys.readouterr().out
+    (configs / "radar.toml").write_text('[radar.prefilter]\nmax_range_m = 80.0\n')
+    assert reach_warnings(launches) == []
+    # the shipped single-host table's pair agrees
+    assert reach_warnings(resolve_launches(*load_table(DEPLOY / "single-host.toml"),
+                                           "test")) == []

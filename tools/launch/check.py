@@ -11,7 +11,11 @@ import os
 import subprocess
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 
+from common.config.fusion import FusionConfig
+from common.config.loader import ConfigError, load_config
+from common.config.radar import RadarConfig
 from common.systemd import NOTIFY_ENV
 from tools.launch.table import Launch
 
@@ -55,3 +59,39 @@ def check_all(launches: list[Launch]) -> list[CheckResult]:
     """Every launch checked, in parallel, results in table order."""
     with ThreadPoolExecutor(max_workers=max(1, min(4, len(launches)))) as pool:
         return list(pool.map(check_launch, launches))
+
+
+def _config_of(launch: Launch) -> Path | None:
+    argv = launch.argv
+    return Path(argv[argv.index("--config") + 1]) if "--config" in argv[:-1] else None
+
+
+def reach_warnings(launches: list[Launch]) -> list[str]:
+    """Where a fusion of the table decides farther ahead than a radar of the table passes
+    tracks (its prefilter's `max_range_m`): the rule never sees what lies between, so
+    its stages come late at speed. As the config files say (`--set` in a service's args
+    is not applied); a config that does not load is left to its own `--check`."""
+    ranges: list[tuple[str, float]] = []
+    for launch in launches:
+        path = _config_of(launch)
+        if launch.command == "radar" and path is not None:
+            try:
+                cfg = load_config(path, RadarConfig)
+            except ConfigError:
+                continue
+            ranges.append((launch.name, cfg.radar.prefilter.max_range_m))
+    out = []
+    for launch in launches:
+        path = _config_of(launch)
+        if launch.command != "fusion" or path is None:
+            continue
+        try:
+            decision = load_config(path, FusionConfig).fusion.decision
+        except ConfigError:
+            continue
+        far = decision.range_bounds_m[1]
+        out += [f"{launch.name}: its {decision.rule.value} rule decides out to {far:g} m, "
+                f"but {name} passes tracks to {reach:g} m only (set [radar.prefilter] "
+                f"max_range_m = {far:g} in its config)"
+                for name, reach in ranges if reach < far]
+    return out

@@ -23,7 +23,7 @@ from common.log import add_log_level, setup_logging
 from common.resources import SINGLE_HOST_TABLE
 from common.service import stop_event_on_signals
 from common.systemd import Watchdog
-from tools.launch.check import check_all
+from tools.launch.check import check_all, reach_warnings
 from tools.launch.supervisor import LinePrinter, Supervisor
 from tools.launch.table import Launch, load_table, resolve_launches
 
@@ -74,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals(grace_s=None)
     supervisor = Supervisor(launches, printer)
     supervisor.say(f"table {args.table}: {', '.join(launch.name for launch in launches)}")
+    for warning in reach_warnings(launches):
+        supervisor.say(f"WARNING {warning}")
     with held_cpu_latency(table.cpu_latency_us, supervisor.say):
         return supervisor.run(stop, Watchdog())
 
@@ -92,6 +94,8 @@ def check(launches: list[Launch]) -> int:
             mark = "WARNING"     # valid, but e.g. an insecure example key is accepted
         print(f"  {mark:<7} {result.name}: {result.detail}")
         failed += result.ok is False
+    for warning in reach_warnings(launches):
+        print(f"  WARNING {warning}")
     if failed:
         print(f"error: {failed} of {len(launches)} processes reject their configuration",
               file=sys.stderr)
