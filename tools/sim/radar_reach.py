@@ -1,21 +1,21 @@
 """The radar service's settings a fusion configuration needs: the defaults (the paper's
-prefilter, forward and 25 m), with the prefilter's range out to the farthest kinematic
-range gate (`[fusion.decision.kinematic] range_max_m`): tracks the radar drops are
+prefilter, forward and 25 m), with the prefilter's range out to the farthest a rule
+decides (`DecisionSettings.range_bounds_m`: the kinematic rule's `range_max_m`, 80 m
+shipped; the paper's 25 m): tracks the radar drops are
 tracks the rule never sees. For the simulated stacks (tools/sim/stack.py, the grid's
 lockstep loop); deploy/radar.toml sets the same range for deploy/fusion.toml."""
 
 import msgspec
 
-from common.config.fusion import FusionConfig, RuleName
+from common.config.fusion import FusionConfig
 from common.config.radar import RadarSettings
 
 
 def radar_for(*configs: FusionConfig | None) -> RadarSettings:
     """The radar service's settings for these fusion instances: the defaults, with the
-    prefilter's range out to the farthest kinematic range gate among them."""
+    prefilter's range out to the farthest any of their rules decides."""
     radar = RadarSettings()
-    reach = max((c.fusion.decision.kinematic.range_max_m for c in configs
-                 if c is not None and c.fusion.decision.rule is RuleName.KINEMATIC),
+    reach = max((c.fusion.decision.range_bounds_m[1] for c in configs if c is not None),
                 default=0.0)
     if reach <= radar.prefilter.max_range_m:
         return radar
