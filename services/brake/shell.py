@@ -232,7 +232,6 @@ class BrakeShell:
                                  trusted=",".join(sorted(validator.keys))))
 
     def _on_rx(self, items: list[bytes | BadLine]) -> None:
-        self._rt_serial.ensure()
         with self._lock:
             now = mono_ns()
             before = (self.core.state, self.core.command_state)
@@ -264,6 +263,8 @@ class BrakeShell:
         self._on_link(False, reason)
 
     def _on_link(self, up: bool, reason: str) -> None:
+        # the serial reader's first call, before any data (SerialLink: on_up precedes
+        # on_data on the same thread): it is real-time from here on
         self._rt_serial.ensure()
         with self._lock:
             before = (self.core.state, self.core.command_state)
