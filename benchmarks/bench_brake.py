@@ -2,7 +2,8 @@
 
     python -m benchmarks.bench_brake [--quick] [--out out/bench] [--count N] [--rate-hz R]
 
-Starts a Zenoh router and the brake service (`python -m services.brake`) as their own
+Starts a Zenoh router and the brake service
+(`python -m aeb_radar_camera.services.brake`) as their own
 processes; the SIMULATED actuator (tools/sim/actuator.py) runs in this process
 on a pty and timestamps every line it reads. This process publishes BrakeCommands at
 `--rate-hz` (BRAKE at 50% once armed), then measures, for each command:
@@ -34,18 +35,24 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import CommandSigner, new_key, write_key
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import (
+    BrakeCommand,
+    BrakeStatus,
+    Decision,
+    Header,
+    VerifierStatus,
+)
+from aeb_radar_camera.common.net import free_port, wait_listening
+from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.tools.sim.actuator import SimActuator
+from aeb_radar_camera.tools.sim.pty_pair import PtyPair
 from benchmarks.figures import Figure
 from benchmarks.processes import stop_processes
-from common.bus import Bus
-from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandSigner, new_key, write_key
-from common.config.base import ZenohMode, ZenohSettings
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-from common.messages import BrakeCommand, BrakeStatus, Decision, Header, VerifierStatus
-from common.net import free_port, wait_listening
-from services.brake.shell import TIMER_PERIOD_S
-from tools.sim.actuator import SimActuator
-from tools.sim.pty_pair import PtyPair
 
 WARMUP = 20
 KEY = new_key("primary")   # this run's command key, given to the brake in its config
@@ -187,7 +194,8 @@ def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
     sim, pair = SimActuator.on_pty(work / "actuator")
     relay_pty = PtyPair(work / "relay")
     try:
-        procs.append(subprocess.Popen([sys.executable, "-m", "common.router", "--listen",
+        procs.append(subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.common.router",
+                                       "--listen",
                                        endpoint], stdout=log, stderr=log))
         wait_listening(port, 60)
         config = work / "brake.toml"
@@ -196,7 +204,8 @@ def measure(count: int, rate_hz: float, work: Path) -> list[Row]:
                           f'command_keys = ["{work / "primary.key"}"]\n[brake.serial]\n'
                           f'port = "{work / "actuator"}"\n')
         sim.start()
-        procs.append(subprocess.Popen([sys.executable, "-m", "services.brake", "--config",
+        procs.append(subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.services.brake",
+                                       "--config",
                                        str(config), "--connect", endpoint],
                                       stdout=log, stderr=log))
         settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))

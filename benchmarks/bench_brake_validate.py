@@ -15,12 +15,12 @@ Prints p50 / p99 in microseconds.
 import argparse
 import time
 
-from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandSigner, mac_problem, new_key
-from common.config.brake import AgeClock
-from common.keys import FUSION_BRAKE_CMD
-from common.messages import BrakeCommand, Decision, Header, VerifierStatus, decode
-from services.brake.commands import Accepted, CommandValidator
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import CommandSigner, mac_problem, new_key
+from aeb_radar_camera.common.config.brake import AgeClock
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import BrakeCommand, Decision, Header, VerifierStatus, decode
+from aeb_radar_camera.services.brake.commands import Accepted, CommandValidator
 
 PERIOD_NS = 20_000_000
 

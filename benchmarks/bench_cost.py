@@ -15,12 +15,12 @@ import threading
 import time
 from pathlib import Path
 
+from aeb_radar_camera.tools.machine import machine_info
+from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 from benchmarks.figures import Figure
 from benchmarks.proc_sampler import ProcSampler, Usage
 from benchmarks.processes import stop_processes
-from tools.machine import machine_info
-from tools.sim.scenario import find_scenario, load_scenario
-from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 
 # The bars: radar under 5% of a core, fusion under 15%, brake under 2%, each under 150 MB.
 CPU_TARGET_PCT = {"radar": 5.0, "fusion": 15.0, "brake": 2.0}

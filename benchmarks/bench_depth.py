@@ -26,20 +26,20 @@ from typing import Any
 
 import numpy as np
 
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.common.depth_image import CODECS, encode_depth, to_units
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.messages import DepthFrame, Header, encode
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.frames import decode_depth_frame
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector
+from aeb_radar_camera.services.fusion.verifiers import Observation, create
+from aeb_radar_camera.tools.eval.depth import box_scene_depth, car_box
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from benchmarks.bench_gate import stats, timed
 from benchmarks.figures import Figure, section_main
-from common.calibration import Calibration
-from common.depth_error import D435Noise
-from common.depth_image import CODECS, encode_depth, to_units
-from common.imaging import decode_gray, encode_jpeg
-from common.messages import DepthFrame, Header, encode
-from common.resources import EXAMPLE_CALIBRATION
-from services.fusion.frames import decode_depth_frame
-from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.verifiers import Observation, create
-from tools.eval.depth import box_scene_depth, car_box
-from tools.messages import ObjectKind
-from tools.sim.scenes import Obstacle, Scene, render
 
 RESOLUTIONS = {"848x480": 1, "424x240": 2}
 _BLOCK = 10

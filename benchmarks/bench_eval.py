@@ -27,11 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import Figure, section_main
-from common.calibration import Calibration
-from common.imaging import decode_gray, encode_jpeg
-from common.keys import CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
-from common.messages import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.keys import CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
+from aeb_radar_camera.common.messages import (
     CameraInfo,
     CompressedFrame,
     Header,
@@ -40,13 +39,14 @@ from common.messages import (
     RadarTracks,
     decode,
 )
-from tools.eval.recording import RecordingSettings
-from tools.eval.runner import Task, execute, run_task
-from tools.eval.scoring import default_specs
-from tools.messages import ObjectKind
-from tools.recording.reader import Recording
-from tools.recording.writer import RecordingWriter
-from tools.sim.scenes import Obstacle, Scene, render
+from aeb_radar_camera.tools.eval.recording import RecordingSettings
+from aeb_radar_camera.tools.eval.runner import Task, execute, run_task
+from aeb_radar_camera.tools.eval.scoring import default_specs
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.recording.reader import Recording
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
+from benchmarks.figures import Figure, section_main
 
 CALIBRATION = "deploy/calibration/d435_848x480.toml"
 PAPER_FRAMES = 131_603

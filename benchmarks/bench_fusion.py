@@ -47,18 +47,16 @@ from typing import Any
 import cv2
 import numpy as np
 
-from benchmarks.figures import Figure
-from benchmarks.processes import stop_processes
-from common.bus import Bus
-from common.calibration import Calibration, CalibrationFile
-from common.clock import mono_ns, wall_ns
-from common.config.base import ZenohMode, ZenohSettings
-from common.config.fusion import FusionConfig, FusionSettings
-from common.config.loader import load_config, parse_config
-from common.depth_image import encode_depth, to_units
-from common.imaging import decode_gray, encode_jpeg
-from common.keys import CAMERA_JPEG, RADAR_TRACKS
-from common.messages import (
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.calibration import Calibration, CalibrationFile
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.config.fusion import FusionConfig, FusionSettings
+from aeb_radar_camera.common.config.loader import load_config, parse_config
+from aeb_radar_camera.common.depth_image import encode_depth, to_units
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.keys import CAMERA_JPEG, RADAR_TRACKS
+from aeb_radar_camera.common.messages import (
     CompressedFrame,
     Decision,
     DepthFrame,
@@ -68,13 +66,13 @@ from common.messages import (
     RadarTracks,
     encode,
 )
-from common.net import free_endpoint, wait_listening
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
-from services.fusion.core import FusionCore
-from services.fusion.frames import FrameDecoder
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.shell import FusionShell
-from services.fusion.verifiers import (
+from aeb_radar_camera.common.net import free_endpoint, wait_listening
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.core import FusionCore
+from aeb_radar_camera.services.fusion.frames import FrameDecoder
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.shell import FusionShell
+from aeb_radar_camera.services.fusion.verifiers import (
     GateResult,
     Observation,
     ParamValue,
@@ -82,9 +80,11 @@ from services.fusion.verifiers import (
     create,
     wants_depth,
 )
-from tools.eval.scoring import PAPER_GATE, parse_spec
-from tools.sim.rig import rig_calibration_toml
-from tools.sim.scenes import Obstacle, Scene, render
+from aeb_radar_camera.tools.eval.scoring import PAPER_GATE, parse_spec
+from aeb_radar_camera.tools.sim.rig import rig_calibration_toml
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
+from benchmarks.figures import Figure
+from benchmarks.processes import stop_processes
 
 CALIBRATION = str(EXAMPLE_CALIBRATION)
 COUNTS = (0, 1, 8, 64, 128)
@@ -516,7 +516,8 @@ def measure_cameras(seconds: float, counts: tuple[int, ...] = CAMERA_COUNTS
                     ) -> dict[str, Any]:
     """The cameras scale: each camera count, with and without traffic."""
     endpoint = free_endpoint()
-    router = subprocess.Popen([sys.executable, "-m", "common.router", "--listen", endpoint],
+    router = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.common.router", "--listen",
+                               endpoint],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     results: dict[str, Any] = {"one_decode_us": one_decode_us(), "counts": list(counts)}
     cameras = None

@@ -33,14 +33,14 @@ from typing import Any
 import cv2
 import numpy as np
 
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import decode_bgr, decode_gray, encode_jpeg
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import Observation, create
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, labelled_frames, render
 from benchmarks.figures import Figure, section_main
-from common.calibration import Calibration
-from common.imaging import decode_bgr, decode_gray, encode_jpeg
-from common.resources import EXAMPLE_CALIBRATION
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import Observation, create
-from tools.messages import ObjectKind
-from tools.sim.scenes import Obstacle, Scene, labelled_frames, render
 
 CALIBRATION = str(EXAMPLE_CALIBRATION)
 SIZES = {"roi 4.3% (134x130)": (134, 130), "roi 1.3% (75x70)": (75, 70),

@@ -49,6 +49,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.cpu_latency import CpuLatencyRefused, cpu_latency
+from aeb_radar_camera.common.keys import (
+    BRAKE_STATUS,
+    FUSION_BRAKE_CMD,
+    FUSION_TARGETS,
+    RADAR_TRACKS,
+)
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
+from aeb_radar_camera.common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
+from aeb_radar_camera.services.radar.ars408 import RadarFrame
+from aeb_radar_camera.tools.machine import machine_info
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
+from aeb_radar_camera.tools.sim.pty_pair import PtyPair
+from aeb_radar_camera.tools.sim.radar_feed import CycleSent, RadarFeed
+from aeb_radar_camera.tools.sim.scenario import RadarLook, find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 from benchmarks.bench_brake import LineTimes
 from benchmarks.figures import Figure
 from benchmarks.floor_relay import VEHICLE as FLOOR_VEHICLE
@@ -67,19 +85,6 @@ from benchmarks.latency_chain import (
     zenoh_ns,
 )
 from benchmarks.processes import stop_processes
-from common.bus import Bus
-from common.clock import mono_ns
-from common.cpu_latency import CpuLatencyRefused, cpu_latency
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
-from common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
-from common.realtime import GIL_SWITCH_INTERVAL_S, fifo_for, set_fifo
-from services.radar.ars408 import RadarFrame
-from tools.machine import machine_info
-from tools.sim.can_links import SlcanPtyLink
-from tools.sim.pty_pair import PtyPair
-from tools.sim.radar_feed import CycleSent, RadarFeed
-from tools.sim.scenario import RadarLook, find_scenario, load_scenario
-from tools.sim.session import SETTLE_TIMEOUT_S, ClosedLoop, closed_loop
 
 P99_TARGET_MS = 3.75          # 5% of a 75 ms radar cycle
 # Scenarios in turn until the measuring time is spent (threats brake, the others not).

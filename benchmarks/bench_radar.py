@@ -46,11 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.figures import Figure
-from common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
-from common.messages.radar import OutputMode, RadarStatus, RadarTracks
-from common.resources import ARS408_RECORDING
-from services.radar.ars408 import (
+from aeb_radar_camera.common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
+from aeb_radar_camera.common.messages.radar import OutputMode, RadarStatus, RadarTracks
+from aeb_radar_camera.common.resources import ARS408_RECORDING
+from aeb_radar_camera.services.radar.ars408 import (
     ClusterGeneral,
     ClusterQuality,
     ObjectExtended,
@@ -62,12 +61,13 @@ from services.radar.ars408 import (
     decode,
     object_cycle_frames,
 )
-from services.radar.ars408.table import MessageSpec
-from services.radar.assembly import CycleAssembler, ListRole
-from services.radar.core import RadarCore
-from services.radar.detections import decode_cycle
-from services.radar.shell import RadarShell
-from tools.machine import machine_info
+from aeb_radar_camera.services.radar.ars408.table import MessageSpec
+from aeb_radar_camera.services.radar.assembly import CycleAssembler, ListRole
+from aeb_radar_camera.services.radar.core import RadarCore
+from aeb_radar_camera.services.radar.detections import decode_cycle
+from aeb_radar_camera.services.radar.shell import RadarShell
+from aeb_radar_camera.tools.machine import machine_info
+from benchmarks.figures import Figure
 
 RECORDING = ARS408_RECORDING
 
@@ -257,7 +257,7 @@ def cantools_decoder() -> Callable[[MessageSpec, bytes], object] | None:
         import cantools
     except ImportError:
         return None
-    from services.radar.ars408.dbc import DBC_PATH
+    from aeb_radar_camera.services.radar.ars408.dbc import DBC_PATH
 
     db = cantools.database.load_file(str(DBC_PATH))
     assert isinstance(db, cantools.database.can.Database)

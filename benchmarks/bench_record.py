@@ -28,14 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.figures import Figure
-from benchmarks.proc_sampler import ProcSampler
-from benchmarks.processes import stop_processes
-from common.bus import Bus
-from common.clock import mono_ns, wall_ns
-from common.config.base import ZenohMode, ZenohSettings
-from common.imaging import encode_jpeg
-from common.keys import (
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_INFO,
     CAMERA_JPEG,
@@ -47,7 +44,7 @@ from common.keys import (
     RADAR_TRACKS,
     KeySpec,
 )
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     BrakeState,
     BrakeStatus,
@@ -69,8 +66,11 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
-from common.net import free_port
-from tools.machine import machine_info
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.tools.machine import machine_info
+from benchmarks.figures import Figure
+from benchmarks.proc_sampler import ProcSampler
+from benchmarks.processes import stop_processes
 
 RADAR_HZ = 13.5
 CAMERA_FPS = 30.0
@@ -216,8 +216,8 @@ class Counter:
 
 
 def measure(minutes: float, out_dir: Path) -> dict[str, Any]:
-    from tools.recording.reader import Recording
-    from tools.recording.recorder import RECORDER_STATUS
+    from aeb_radar_camera.tools.recording.reader import Recording
+    from aeb_radar_camera.tools.recording.recorder import RECORDER_STATUS
 
     work = out_dir / "record-bench"
     work.mkdir(parents=True, exist_ok=True)
@@ -227,7 +227,8 @@ def measure(minutes: float, out_dir: Path) -> dict[str, Any]:
         p.unlink(missing_ok=True)
     procs: list[subprocess.Popen[bytes]] = []
     try:
-        router = subprocess.Popen([sys.executable, "-m", "common.router", "--listen", endpoint],
+        router = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.common.router",
+                                   "--listen", endpoint],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         procs.append(router)
         settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,))
@@ -236,7 +237,8 @@ def measure(minutes: float, out_dir: Path) -> dict[str, Any]:
             up = threading.Event()
             bus.subscribe_health(lambda s, i, alive: up.set() if s == "record" and alive
                                  else None)
-            rec = subprocess.Popen([sys.executable, "-m", "tools.cli", "record", "-o", str(mcap),
+            rec = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.cli", "record",
+                                    "-o", str(mcap),
                                     "--connect", endpoint, "--summary-json", str(summary)],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
             procs.append(rec)

@@ -23,15 +23,15 @@ import time
 from pathlib import Path
 from typing import Any
 
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.imaging import decode_gray
+from aeb_radar_camera.common.messages import CompressedFrame, decode
+from aeb_radar_camera.tools.machine import machine_info
+from aeb_radar_camera.tools.recording.reader import Recording, decode_record
+from aeb_radar_camera.tools.recording.rerun_fusion import FusionRerun
 from benchmarks.figures import Figure
 from benchmarks.processes import stop_processes
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from common.imaging import decode_gray
-from common.messages import CompressedFrame, decode
-from tools.machine import machine_info
-from tools.recording.reader import Recording, decode_record
-from tools.recording.rerun_fusion import FusionRerun
 
 TARGET_RTF = 20.0
 FULL_SCENARIOS = ("stationary_car_30kph", "pedestrian_crossing_20kph")
@@ -42,8 +42,8 @@ KEPT = REPO / "tests" / "data" / "recording" / "pedestrian_standing_20kph.mcap"
 def record_demo(scenarios: tuple[str, ...], out_dir: Path) -> Path:
     """Run the scenarios in closed loop with `aeb record` beside the stack. Raises
     RuntimeError when the recorder does not come up."""
-    from tools.sim.scenario import find_scenario, load_scenario
-    from tools.sim.session import SETTLE_TIMEOUT_S, closed_loop
+    from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
+    from aeb_radar_camera.tools.sim.session import SETTLE_TIMEOUT_S, closed_loop
 
     path = out_dir / "rerun-bench.mcap"
     path.unlink(missing_ok=True)
@@ -51,7 +51,8 @@ def record_demo(scenarios: tuple[str, ...], out_dir: Path) -> Path:
         up = threading.Event()
         loop.bus.subscribe_health(lambda s, i, alive: up.set() if s == "record" and alive
                                   else None)
-        rec = subprocess.Popen([sys.executable, "-m", "tools.cli", "record", "-o", str(path),
+        rec = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.cli", "record", "-o",
+                                str(path),
                                 "--connect", loop.endpoint], stdout=subprocess.DEVNULL,
                                stderr=subprocess.DEVNULL)
         try:

@@ -19,15 +19,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from benchmarks.figures import Figure, section_main
-from common.calibration import Calibration
-from common.resources import EXAMPLE_CALIBRATION
-from tools.messages import Lighting, ObjectKind, RoadGeometry
-from tools.sim.families import case_of
-from tools.sim.radar_model import RadarModel
-from tools.sim.render import Renderer
-from tools.sim.road import Road, RoadView
-from tools.sim.scenario import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.messages import Lighting, ObjectKind, RoadGeometry
+from aeb_radar_camera.tools.sim.families import case_of
+from aeb_radar_camera.tools.sim.radar_model import RadarModel
+from aeb_radar_camera.tools.sim.render import Renderer
+from aeb_radar_camera.tools.sim.road import Road, RoadView
+from aeb_radar_camera.tools.sim.scenario import (
     CameraLook,
     EgoSpec,
     Scenario,
@@ -36,7 +35,8 @@ from tools.sim.scenario import (
     find_scenario,
     load_scenario,
 )
-from tools.sim.world import Body, World
+from aeb_radar_camera.tools.sim.world import Body, World
+from benchmarks.figures import Figure, section_main
 
 BODIES = [Body(0, ObjectKind.CAR, 30.0, 0.4, 0.0, 4.4, 1.8, 1.5, 0.0, 0.0),
           Body(1, ObjectKind.PEDESTRIAN, 16.0, -2.0, 90.0, 0.35, 0.55, 1.75, 0.0, 1.4)]

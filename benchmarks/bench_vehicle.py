@@ -21,12 +21,12 @@ import can
 import cantools
 from can.io.canutils import CanutilsLogReader
 
-from common.config.loader import load_config
-from common.config.vehicle import VehicleConfig
-from common.messages.radar import BusState
-from common.resources import DEPLOY
-from services.vehicle.core import VehicleCore
-from services.vehicle.dbc import load_dbc
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.config.vehicle import VehicleConfig
+from aeb_radar_camera.common.messages.radar import BusState
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.vehicle.core import VehicleCore
+from aeb_radar_camera.services.vehicle.dbc import load_dbc
 
 LOG = DEPLOY / "recordings" / "vehicle" / "candump-generic-car-drive.log"
 

@@ -28,13 +28,13 @@ from typing import Any
 import cv2
 import numpy as np
 
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import decode_gray
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector
+from aeb_radar_camera.services.fusion.verifiers import Observation, Verifier, create, hog
+from aeb_radar_camera.services.fusion.verifiers.appearance import HogLinearModel
 from benchmarks.bench_gate import CALIBRATION, scenes, stats, timed
 from benchmarks.figures import Figure, section_main
-from common.calibration import Calibration
-from common.imaging import decode_gray
-from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.verifiers import Observation, Verifier, create, hog
-from services.fusion.verifiers.appearance import HogLinearModel
 
 BASELINE = "edge_density"
 _BLOCK = 10

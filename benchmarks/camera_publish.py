@@ -17,19 +17,19 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.config.camera import CameraSettings, SyntheticSource
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.keys import CAMERA_JPEG
+from aeb_radar_camera.common.messages import CompressedFrame
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.camera.shell import CameraShell
+from aeb_radar_camera.tools.sim.moving_box import MovingBoxSource
 from benchmarks.processes import stop_processes
-from common.bus import Bus
-from common.calibration import Calibration
-from common.clock import wall_ns
-from common.config.base import ZenohMode, ZenohSettings
-from common.config.camera import CameraSettings, SyntheticSource
-from common.imaging import encode_jpeg
-from common.keys import CAMERA_JPEG
-from common.messages import CompressedFrame
-from common.net import free_port
-from common.resources import EXAMPLE_CALIBRATION
-from services.camera.shell import CameraShell
-from tools.sim.moving_box import MovingBoxSource
 
 CALIBRATION = EXAMPLE_CALIBRATION
 
@@ -145,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
 
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    router = subprocess.Popen([sys.executable, "-m", "common.router", "--listen", endpoint],
+    router = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.common.router", "--listen",
+                               endpoint],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     runs: dict[str, list[float]] = {}
     try:

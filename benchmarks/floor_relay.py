@@ -29,13 +29,13 @@ import sys
 import threading
 from collections.abc import Callable
 
-from common.bus import Bus
-from common.clock import mono_ns, wall_ns
-from common.config.base import ZenohMode, ZenohSettings
-from common.config.realtime import RealtimeSettings
-from common.keys import FUSION_BRAKE_CMD, RADAR_TRACKS
-from common.log import setup_logging
-from common.messages import (
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, RADAR_TRACKS
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     Decision,
     Header,
@@ -45,9 +45,9 @@ from common.messages import (
     VerifierStatus,
     encode,
 )
-from common.realtime import ThreadRealtime
-from common.service import stop_event_on_signals
-from services.brake.protocol import HostMode, command_line
+from aeb_radar_camera.common.realtime import ThreadRealtime
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.services.brake.protocol import HostMode, command_line
 
 VEHICLE = "floor"
 SENSOR = "front"

@@ -8,10 +8,10 @@ Ready when its liveliness token `health/bench/null` is up; stops on SIGTERM.
 import argparse
 import sys
 
-from common.bus import Bus
-from common.config.base import ZenohMode, ZenohSettings
-from common.service import stop_event_on_signals
-from tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
 
 
 def main(argv: list[str] | None = None) -> int:

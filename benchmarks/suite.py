@@ -25,10 +25,10 @@ import time
 import traceback
 from pathlib import Path
 
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.tools.machine import machine_info
 from benchmarks.figures import Figure
 from benchmarks.report import plot, print_table, write_json
-from common.log import add_log_level, setup_logging
-from tools.machine import machine_info
 
 SECTIONS: dict[str, str] = {
     "gate": "benchmarks.bench_gate",

@@ -18,13 +18,13 @@ from typing import Any, Generic, TypeVar
 import msgspec
 import zenoh
 
-from common.clock import mono_ns
-from common.config.base import ZenohMode, ZenohSettings
-from common.counters import ReasonCounter
-from common.keys import HEALTH, Congestion, KeySpec, Priority
-from common.log import RateLimitedLog, kv
-from common.messages import DecodeError, decode, encode
-from common.messages.schema import zenoh_encoding
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.keys import HEALTH, Congestion, KeySpec, Priority
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages import DecodeError, decode, encode
+from aeb_radar_camera.common.messages.schema import zenoh_encoding
 
 T = TypeVar("T", bound=msgspec.Struct)
 

@@ -19,7 +19,7 @@ import cv2
 import msgspec
 import numpy as np
 
-from common.config.loader import load_config, parse_config
+from aeb_radar_camera.common.config.loader import load_config, parse_config
 
 # Ground frame axes (x fwd, y left, z up) expressed in the optical frame (x right, y down, z fwd).
 GROUND_TO_OPTICAL = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])

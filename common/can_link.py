@@ -19,13 +19,13 @@ from typing import Protocol
 
 import can
 
-from common.can_port import CanPort, describe, open_port
-from common.clock import NS_PER_S, mono_ns, wall_ns
-from common.config.can import CanSettings, ReplaySettings
-from common.counters import ReasonCounter
-from common.log import RateLimitedLog, kv
-from common.messages.radar import BusState
-from common.systemd import Watchdog
+from aeb_radar_camera.common.can_port import CanPort, describe, open_port
+from aeb_radar_camera.common.clock import NS_PER_S, mono_ns, wall_ns
+from aeb_radar_camera.common.config.can import CanSettings, ReplaySettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages.radar import BusState
+from aeb_radar_camera.common.systemd import Watchdog
 
 # Timeouts, status and bus state are looked at every 10 ms while frames flow; an idle
 # bus wakes the loop at least every 50 ms for them. Public: a re-run

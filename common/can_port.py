@@ -15,10 +15,10 @@ from typing import Protocol
 import can
 from can.io.canutils import CanutilsLogReader
 
-from common.config.can import REPLAY, CanSettings, Pace, ReplaySettings
-from common.counters import ReasonCounter
-from common.log import RateLimitedLog
-from common.slcan_bulk import BulkSlcanBus
+from aeb_radar_camera.common.config.can import REPLAY, CanSettings, Pace, ReplaySettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.log import RateLimitedLog
+from aeb_radar_camera.common.slcan_bulk import BulkSlcanBus
 
 SLCAN = "slcan"
 _LOOP_GAP_S = 0.075   # time inserted between the end of a log and its restart (one radar cycle)

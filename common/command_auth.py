@@ -40,7 +40,7 @@ from pathlib import Path
 
 import msgspec
 
-from common.messages import BrakeCommand, CommandAuth, encode
+from aeb_radar_camera.common.messages import BrakeCommand, CommandAuth, encode
 
 MAC_LEN = 32
 SECRET_LEN = 32   # BLAKE2b takes keys of up to 64 bytes

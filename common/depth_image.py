@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import zstandard
 
-from common.messages.camera import DEPTH_CODECS as CODECS
+from aeb_radar_camera.common.messages.camera import DEPTH_CODECS as CODECS
 
 DEPTH_UNITS_M = 0.001
 MAX_UNITS = 65535

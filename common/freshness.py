@@ -7,7 +7,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
-from common.keys import KeySpec
+from aeb_radar_camera.common.keys import KeySpec
 
 
 @dataclass(frozen=True)

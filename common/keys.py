@@ -11,7 +11,7 @@ from typing import Any, Generic, TypeVar
 
 import msgspec
 
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     BrakeStatus,
     CameraInfo,

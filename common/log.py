@@ -8,7 +8,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from common.config.base import LogLevel
+from aeb_radar_camera.common.config.base import LogLevel
 
 _FORMAT = "%(asctime)s.%(msecs)03d %(levelname)s %(name)s %(message)s"
 LOG_LEVELS = tuple(level.value for level in LogLevel)

@@ -40,8 +40,8 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from common.config.realtime import RealtimeSettings
-from common.log import kv
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.log import kv
 
 ZENOH_IO_PREFIXES = ("rx-", "tx-")
 GIL_SWITCH_INTERVAL_S = 0.0005

@@ -20,13 +20,13 @@ import time
 
 import zenoh
 
-from common import systemd
-from common.bus import BusError, open_session, zenoh_config
-from common.config.base import ZenohMode, ZenohSettings
-from common.config.realtime import RealtimeSettings
-from common.log import add_log_level, kv, setup_logging
-from common.realtime import ThreadRealtime
-from common.service import stop_event_on_signals
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import BusError, open_session, zenoh_config
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.log import add_log_level, kv, setup_logging
+from aeb_radar_camera.common.realtime import ThreadRealtime
+from aeb_radar_camera.common.service import stop_event_on_signals
 
 # What a bind fails with when the address or port is not available *yet*.
 WAITABLE = {errno.EADDRINUSE: "address already in use (by another process, or one going "

@@ -10,11 +10,11 @@ import threading
 from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar
 
-from common.bus import BusError, zenoh_config
-from common.config.base import ServiceConfig
-from common.config.loader import load_config_or_exit
-from common.config.overrides import Override, add_set_argument
-from common.log import add_log_level
+from aeb_radar_camera.common.bus import BusError, zenoh_config
+from aeb_radar_camera.common.config.base import ServiceConfig
+from aeb_radar_camera.common.config.loader import load_config_or_exit
+from aeb_radar_camera.common.config.overrides import Override, add_set_argument
+from aeb_radar_camera.common.log import add_log_level
 
 C = TypeVar("C", bound=ServiceConfig)
 

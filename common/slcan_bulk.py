@@ -26,9 +26,9 @@ from typing import Any
 import can
 from can.interfaces.slcan import slcanBus
 
-from common.counters import ReasonCounter
-from common.log import RateLimitedLog
-from common.serial_read import PortGone, read_available
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.log import RateLimitedLog
+from aeb_radar_camera.common.serial_read import PortGone, read_available
 
 # 'D' + 8-digit ID + DLC + 64 data bytes (CAN FD), the longest line an adapter sends
 MAX_LINE = 1 + 8 + 1 + 128

@@ -13,10 +13,10 @@ import enum
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
-from common.counters import ReasonCounter
-from common.keys import EGO_MOTION, VEHICLE_DRIVER, KeySpec
-from common.messages.header import Header
-from common.messages.vehicle import DriverInputs, EgoMotion
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.keys import EGO_MOTION, VEHICLE_DRIVER, KeySpec
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.vehicle import DriverInputs, EgoMotion
 
 
 class Stamped(Protocol):

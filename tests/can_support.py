@@ -13,11 +13,11 @@ from contextlib import contextmanager
 
 import can
 
-from common.config.radar import RadarSettings
-from common.resources import ARS408_RECORDING
-from services.radar.ars408 import RadarFrame, classify
-from services.radar.core import RadarCore, TrackedCycle
-from services.radar.ports import radar_frame
+from aeb_radar_camera.common.config.radar import RadarSettings
+from aeb_radar_camera.common.resources import ARS408_RECORDING
+from aeb_radar_camera.services.radar.ars408 import RadarFrame, classify
+from aeb_radar_camera.services.radar.core import RadarCore, TrackedCycle
+from aeb_radar_camera.services.radar.ports import radar_frame
 
 RECORDING = ARS408_RECORDING
 RECORDING_CYCLES = 515

@@ -14,10 +14,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-from common.bus import Bus
-from common.config.base import ZenohMode, ZenohSettings
-from common.net import free_port, port_open
-from tools.arrivals import Arrivals
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.net import free_port, port_open
+from aeb_radar_camera.tools.arrivals import Arrivals
 
 REPO = Path(__file__).resolve().parent.parent
 T = TypeVar("T")
@@ -118,7 +118,8 @@ def router_process(log_dir: Path, port: int | None = None,
     port = port or free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     proc = ServiceProcess(f"router-{port}", python_module(
-        "common.router", "--listen", endpoint, "--realtime-priority", str(realtime_priority)),
+        "aeb_radar_camera.common.router", "--listen", endpoint, "--realtime-priority",
+        str(realtime_priority)),
         log_dir)
     try:
         wait_for(lambda: port_open(port) or not proc.alive(), START_TIMEOUT_S, 0.05,

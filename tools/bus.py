@@ -17,9 +17,9 @@ import threading
 import time
 from collections.abc import Callable
 
-from common.bus import Bus, BusError
-from common.config.base import ZenohMode, ZenohSettings
-from common.log import add_log_level
+from aeb_radar_camera.common.bus import Bus, BusError
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.log import add_log_level
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 _LOOPBACK = ("127.", "localhost", "[::1]")

@@ -27,8 +27,8 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from common.log import add_log_level, setup_logging
-from common.resources import ARS408_DBC
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.resources import ARS408_DBC
 
 WIDE_HEAD = ["time_s", "channel", "can_id", "message"]
 LONG_HEAD = [*WIDE_HEAD, "signal", "value", "unit"]

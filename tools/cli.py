@@ -11,10 +11,14 @@ import importlib.util
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
 
-from tools.commands import COMMAND_EXTRA, COMMANDS, OPTIONAL_MODULES
+from aeb_radar_camera.tools.commands import COMMAND_EXTRA, COMMANDS, OPTIONAL_MODULES
 
 DISTRIBUTION = "aeb-radar-camera"
+# The checkout that holds this file, when it is run from one (an editable install): the
+# benchmarks live there, beside the package's folders, and are not installed.
+CHECKOUT = Path(__file__).resolve().parents[1]
 
 
 def version() -> str:
@@ -40,6 +44,15 @@ def module_doc(module: str) -> str:
     return (ast.get_docstring(tree) or "").strip()
 
 
+def import_command(module: str) -> ModuleType:
+    """The command's module. The benchmarks (`aeb bench`) are found in the checkout this
+    package is run from. Raises ModuleNotFoundError as import_module does."""
+    in_checkout = (CHECKOUT / "benchmarks" / "__init__.py").is_file()
+    if module.split(".")[0] == "benchmarks" and in_checkout and str(CHECKOUT) not in sys.path:
+        sys.path.append(str(CHECKOUT))
+    return importlib.import_module(module)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if not args or args[0] in ("-h", "--help"):
@@ -53,8 +66,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
         return 2
     try:
-        module = importlib.import_module(COMMANDS[name][0])
+        module = import_command(COMMANDS[name][0])
     except ModuleNotFoundError as exc:
+        if exc.name == "benchmarks":
+            print(f"error: aeb {name} runs the benchmarks of a checkout of the repository, "
+                  "which are not installed: from a clone, python -m benchmarks",
+                  file=sys.stderr)
+            return 2
         missing = (exc.name or "").split(".")[0]
         if missing not in OPTIONAL_MODULES:
             raise

@@ -26,27 +26,27 @@ from typing import IO, Any
 
 import numpy as np
 
-from common.bus import Bus, BusError
-from common.config.loader import ConfigError
-from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.log import add_log_level, setup_logging
-from common.service import stop_event_on_signals
-from tools.ab.compare import Comparator, render
-from tools.ab.feeder import Feeder
-from tools.sim.latency import chain_latencies_ns
-from tools.sim.plot import plot_timeline
-from tools.sim.radar_feed import RadarFeed
-from tools.sim.runner import RunResult
-from tools.sim.scenario import (
+from aeb_radar_camera.common.bus import Bus, BusError
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.ab.compare import Comparator, render
+from aeb_radar_camera.tools.ab.feeder import Feeder
+from aeb_radar_camera.tools.sim.latency import chain_latencies_ns
+from aeb_radar_camera.tools.sim.plot import plot_timeline
+from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+from aeb_radar_camera.tools.sim.runner import RunResult
+from aeb_radar_camera.tools.sim.scenario import (
     DEMO_SCENARIOS,
     Scenario,
     all_scenarios,
     load_scenario,
     pick_scenarios,
 )
-from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
-from tools.sim.stack import FUSION_CONFIG
-from tools.sim.verdict import SUMMARY_HEADER, Sample, summary_line
+from aeb_radar_camera.tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
+from aeb_radar_camera.tools.sim.stack import FUSION_CONFIG
+from aeb_radar_camera.tools.sim.verdict import SUMMARY_HEADER, Sample, summary_line
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -17,9 +17,9 @@ import shutil
 import sys
 from pathlib import Path
 
-from common.command_auth import KeyFileError, load_key, new_key, write_key
-from common.log import add_log_level, setup_logging
-from common.resources import DEPLOY
+from aeb_radar_camera.common.command_auth import KeyFileError, load_key, new_key, write_key
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.resources import DEPLOY
 
 # What the shipped units name, and what they become in a copy
 UNIT_AEB = "/opt/aeb/.venv/bin/aeb"

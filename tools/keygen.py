@@ -15,8 +15,8 @@ import re
 import sys
 from pathlib import Path
 
-from common.command_auth import new_key, write_key
-from common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.command_auth import new_key, write_key
+from aeb_radar_camera.common.log import add_log_level, setup_logging
 
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 

@@ -4,8 +4,8 @@ product's registry leaves it out; `common.bus.Bus` takes any `KeySpec`)."""
 
 from typing import Any
 
-from common.keys import REGISTRY, Congestion, KeySpec, Priority, QoS
-from tools.messages import SimWorld
+from aeb_radar_camera.common.keys import REGISTRY, Congestion, KeySpec, Priority, QoS
+from aeb_radar_camera.tools.messages import SimWorld
 
 SIM_WORLD: KeySpec[SimWorld] = KeySpec(
     "sim_world", "sim/world", SimWorld,

@@ -11,7 +11,7 @@ import enum
 
 import msgspec
 
-from common.messages.header import Header
+from aeb_radar_camera.common.messages.header import Header
 
 
 class ObjectKind(enum.Enum):

@@ -20,10 +20,10 @@ from typing import Any
 
 import msgspec
 
-from common.log import add_log_level, setup_logging
-from common.messages import SCHEMA_VERSION
-from common.messages.schema import json_schema, schema_name
-from tools.keys import MESSAGE_KEYS, SIM_WORLD
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.messages import SCHEMA_VERSION
+from aeb_radar_camera.common.messages.schema import json_schema, schema_name
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS, SIM_WORLD
 
 
 def document() -> dict[str, Any]:

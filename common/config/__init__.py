@@ -1,7 +1,7 @@
 """Service configuration: TOML files validated at start (see `loader`)."""
 
-from common.config.base import LogSettings, ServiceConfig, ZenohMode, ZenohSettings
-from common.config.loader import ConfigError, load_config, load_config_or_exit
+from aeb_radar_camera.common.config.base import LogSettings, ServiceConfig, ZenohMode, ZenohSettings
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, load_config_or_exit
 
 __all__ = [
     "ConfigError",

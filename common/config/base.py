@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 import msgspec
 
-from common.config.paths import ConfigPath
+from aeb_radar_camera.common.config.paths import ConfigPath
 
 _VEHICLE = re.compile(r"^[A-Za-z0-9_\-]+$")
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|unixsock-stream|ws)/.+")

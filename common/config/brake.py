@@ -6,11 +6,11 @@ from typing import Annotated
 
 import msgspec
 
-from common.config.base import ServiceConfig
-from common.config.paths import ConfigPath
-from common.config.realtime import RealtimeSettings
-from common.keys import FUSION_BRAKE_CMD
-from common.messages.brake import FailsafePolicy
+from aeb_radar_camera.common.config.base import ServiceConfig
+from aeb_radar_camera.common.config.paths import ConfigPath
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages.brake import FailsafePolicy
 
 # Timing settings stay below a minute: longer ones are typos, and timers convert them to
 # integer nanoseconds

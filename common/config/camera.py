@@ -11,9 +11,9 @@ from typing import Annotated, Any
 
 import msgspec
 
-from common.config.base import ServiceConfig
-from common.config.paths import ConfigPath
-from common.messages.camera import DEPTH_CODECS
+from aeb_radar_camera.common.config.base import ServiceConfig
+from aeb_radar_camera.common.config.paths import ConfigPath
+from aeb_radar_camera.common.messages.camera import DEPTH_CODECS
 
 Fps = Annotated[float, msgspec.Meta(ge=0, le=1000)]
 _CAMERA_NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -84,7 +84,8 @@ class SyntheticSource(msgspec.Struct, frozen=True, forbid_unknown_fields=True, t
     the moving-box demo scene, a SIMULATION (tools/sim/moving_box.py).
     """
 
-    factory: Annotated[str, msgspec.Meta(pattern=_FACTORY)] = "tools.sim.moving_box:make_source"
+    factory: Annotated[str, msgspec.Meta(pattern=_FACTORY)] = (
+        "aeb_radar_camera.tools.sim.moving_box:make_source")
     fps: Fps = 0.0
     options: dict[str, Any] = msgspec.field(default_factory=dict)
 

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 import msgspec
 
-from common.config.paths import ConfigPath
+from aeb_radar_camera.common.config.paths import ConfigPath
 
 PositiveFloat = Annotated[float, msgspec.Meta(gt=0)]
 

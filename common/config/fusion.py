@@ -10,11 +10,11 @@ from typing import Annotated
 
 import msgspec
 
-from common.config.base import ServiceConfig
-from common.config.paths import ConfigPath, path_keys
-from common.config.realtime import RealtimeSettings
-from common.keys import EGO_MOTION, RADAR_TRACKS
-from common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.common.config.base import ServiceConfig
+from aeb_radar_camera.common.config.paths import ConfigPath, path_keys
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.keys import EGO_MOTION, RADAR_TRACKS
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
 _DEFAULT_CAMERA = "front"

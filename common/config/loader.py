@@ -11,8 +11,8 @@ from typing import Any, TypeVar
 
 import msgspec
 
-from common.config.overrides import Override, OverrideError, apply_overrides
-from common.config.paths import resolve_paths
+from aeb_radar_camera.common.config.overrides import Override, OverrideError, apply_overrides
+from aeb_radar_camera.common.config.paths import resolve_paths
 
 T = TypeVar("T", bound=msgspec.Struct)
 

@@ -18,7 +18,7 @@ from typing import Any
 import msgspec
 import msgspec.inspect as mi
 
-from common.config.paths import PATH_KEYS_MARK, PATH_MARK, resolve_path
+from aeb_radar_camera.common.config.paths import PATH_KEYS_MARK, PATH_MARK, resolve_path
 
 
 class OverrideError(ValueError):

@@ -11,10 +11,10 @@ from typing import Annotated
 
 import msgspec
 
-from common.config.base import ServiceConfig
-from common.config.can import REPLAY, CanSettings, ReplaySettings
-from common.config.can import Pace as Pace  # the radar's users import it from here
-from common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.config.base import ServiceConfig
+from aeb_radar_camera.common.config.can import REPLAY, CanSettings, ReplaySettings
+from aeb_radar_camera.common.config.can import Pace as Pace  # the radar's users import it from here
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
 

@@ -13,10 +13,10 @@ from typing import Annotated
 
 import msgspec
 
-from common.config.base import ServiceConfig
-from common.config.can import REPLAY, CanSettings, ReplaySettings
-from common.config.paths import ConfigPath
-from common.keys import VEHICLE_PERIOD_S
+from aeb_radar_camera.common.config.base import ServiceConfig
+from aeb_radar_camera.common.config.can import REPLAY, CanSettings, ReplaySettings
+from aeb_radar_camera.common.config.paths import ConfigPath
+from aeb_radar_camera.common.keys import VEHICLE_PERIOD_S
 
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
 

@@ -1,9 +1,9 @@
 """Every message type on the bus. Defined here and nowhere else."""
 
-from common.messages.brake import BrakeState, BrakeStatus, FailsafePolicy
-from common.messages.camera import CameraInfo, CompressedFrame, DepthFrame
-from common.messages.codec import DecodeError, decode, encode
-from common.messages.fusion import (
+from aeb_radar_camera.common.messages.brake import BrakeState, BrakeStatus, FailsafePolicy
+from aeb_radar_camera.common.messages.camera import CameraInfo, CompressedFrame, DepthFrame
+from aeb_radar_camera.common.messages.codec import DecodeError, decode, encode
+from aeb_radar_camera.common.messages.fusion import (
     BrakeCommand,
     CommandAuth,
     Decision,
@@ -12,8 +12,8 @@ from common.messages.fusion import (
     VerifiedTargets,
     VerifierStatus,
 )
-from common.messages.header import SCHEMA_VERSION, Header
-from common.messages.radar import (
+from aeb_radar_camera.common.messages.header import SCHEMA_VERSION, Header
+from aeb_radar_camera.common.messages.radar import (
     BusState,
     CanFrame,
     OutputMode,
@@ -23,7 +23,13 @@ from common.messages.radar import (
     RadarTracks,
     RawCanFrames,
 )
-from common.messages.vehicle import DriverInputs, EgoMotion, Gear, SignalHealth, VehicleStatus
+from aeb_radar_camera.common.messages.vehicle import (
+    DriverInputs,
+    EgoMotion,
+    Gear,
+    SignalHealth,
+    VehicleStatus,
+)
 
 __all__ = [
     "SCHEMA_VERSION",

@@ -4,7 +4,7 @@ import enum
 
 import msgspec
 
-from common.messages.header import Header
+from aeb_radar_camera.common.messages.header import Header
 
 
 class BrakeState(enum.Enum):

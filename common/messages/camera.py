@@ -2,7 +2,7 @@
 
 import msgspec
 
-from common.messages.header import Header
+from aeb_radar_camera.common.messages.header import Header
 
 # DepthFrame.codec values (common/depth_image.py implements them).
 DEPTH_CODECS = ("zstd", "png")

@@ -4,7 +4,7 @@ from typing import Any, TypeVar
 
 import msgspec
 
-from common.messages.header import SCHEMA_VERSION
+from aeb_radar_camera.common.messages.header import SCHEMA_VERSION
 
 T = TypeVar("T", bound=msgspec.Struct)
 

@@ -5,7 +5,7 @@ from typing import TYPE_CHECKING
 
 import msgspec
 
-from common.messages.header import Header
+from aeb_radar_camera.common.messages.header import Header
 
 if TYPE_CHECKING:
     import can

@@ -10,8 +10,8 @@ import enum
 
 import msgspec
 
-from common.messages.header import Header
-from common.messages.radar import BusState
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.radar import BusState
 
 
 class EgoMotion(msgspec.Struct, frozen=True):

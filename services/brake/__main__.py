@@ -1,5 +1,5 @@
 import sys
 
-from services.brake.main import main
+from aeb_radar_camera.services.brake.main import main
 
 sys.exit(main())

@@ -7,9 +7,9 @@ from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from common.command_auth import CommandKey, mac_problem
-from common.config.brake import AgeClock
-from common.messages import BrakeCommand, Decision, DecodeError, decode
+from aeb_radar_camera.common.command_auth import CommandKey, mac_problem
+from aeb_radar_camera.common.config.brake import AgeClock
+from aeb_radar_camera.common.messages import BrakeCommand, Decision, DecodeError, decode
 
 JUMP_SLACK = 16   # sequence numbers an authenticated command may skip beyond the rate bound
 # Accepted commands remembered (sequence number -> MAC, level): a command at or behind the

@@ -17,12 +17,12 @@ from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from common.command_auth import CommandKey
-from common.config.brake import BrakeSettings
-from common.counters import saturated
-from common.messages import BrakeCommand, BrakeState, Decision, FailsafePolicy
-from services.brake.commands import Accepted, CommandValidator, Rejection
-from services.brake.protocol import (
+from aeb_radar_camera.common.command_auth import CommandKey
+from aeb_radar_camera.common.config.brake import BrakeSettings
+from aeb_radar_camera.common.counters import saturated
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeState, Decision, FailsafePolicy
+from aeb_radar_camera.services.brake.commands import Accepted, CommandValidator, Rejection
+from aeb_radar_camera.services.brake.protocol import (
     SEQ_MODULO,
     Ack,
     ActuatorState,

@@ -4,20 +4,20 @@ import sys
 import threading
 from collections.abc import Mapping
 
-from common import systemd
-from common.bus import Bus, BusError
-from common.command_auth import CommandKey, KeyFileError, load_keyring
-from common.config.brake import BrakeConfig
-from common.log import kv, setup_logging
-from common.service import (
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import Bus, BusError
+from aeb_radar_camera.common.command_auth import CommandKey, KeyFileError, load_keyring
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.log import kv, setup_logging
+from aeb_radar_camera.common.service import (
     config_checked,
     load_service_config,
     service_argparser,
     stop_event_on_signals,
 )
-from common.systemd import Watchdog
-from services.brake.serial_link import simulated_port
-from services.brake.shell import SOURCE, BrakeShell
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.brake.serial_link import simulated_port
+from aeb_radar_camera.services.brake.shell import SOURCE, BrakeShell
 
 SHORTCUTS = {"--port": ("brake.serial.port", "actuator serial port")}
 

@@ -12,10 +12,10 @@ from collections.abc import Callable
 
 import serial
 
-from common.config.brake import SerialSettings
-from common.log import RateLimitedLog, kv
-from common.serial_read import read_available
-from services.brake.protocol import BadLine, LineReader
+from aeb_radar_camera.common.config.brake import SerialSettings
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.serial_read import read_available
+from aeb_radar_camera.services.brake.protocol import BadLine, LineReader
 
 READ_TIMEOUT_S = 0.05   # how often the reader looks at the stop flag and write failures
 WRITE_TIMEOUT_S = 0.02  # a stuck port blocks the command path at most this long

@@ -30,22 +30,22 @@ from collections.abc import Callable, Mapping
 
 import zenoh
 
-from common import systemd
-from common.bus import Bus, TypedPublisher
-from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandKey, load_keyring
-from common.config.brake import AgeClock, BrakeConfig
-from common.config.realtime import RealtimeSettings
-from common.counters import saturated
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-from common.log import RateLimitedLog, kv
-from common.messages import BrakeState, BrakeStatus, Header
-from common.realtime import ThreadRealtime, apply_process
-from common.systemd import Watchdog
-from services.brake.commands import Rejection
-from services.brake.core import BrakeCore, Outgoing
-from services.brake.protocol import SEQ_MODULO, BadLine, Command, Query, encode
-from services.brake.serial_link import SerialLink
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import Bus, TypedPublisher
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import CommandKey, load_keyring
+from aeb_radar_camera.common.config.brake import AgeClock, BrakeConfig
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.counters import saturated
+from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages import BrakeState, BrakeStatus, Header
+from aeb_radar_camera.common.realtime import ThreadRealtime, apply_process
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.brake.commands import Rejection
+from aeb_radar_camera.services.brake.core import BrakeCore, Outgoing
+from aeb_radar_camera.services.brake.protocol import SEQ_MODULO, BadLine, Command, Query, encode
+from aeb_radar_camera.services.brake.serial_link import SerialLink
 
 SERVICE = "brake"
 INSTANCE = "main"

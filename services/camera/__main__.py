@@ -1,5 +1,5 @@
 import sys
 
-from services.camera.main import main
+from aeb_radar_camera.services.camera.main import main
 
 sys.exit(main())

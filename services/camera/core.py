@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.counters import ReasonCounter
-from common.imaging import jpeg_crc32
-from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
-from services.camera.source import Frame
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.imaging import jpeg_crc32
+from aeb_radar_camera.common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
+from aeb_radar_camera.services.camera.source import Frame
 
 NS_PER_S = 1_000_000_000
 

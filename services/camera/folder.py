@@ -15,10 +15,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common.clock import wall_ns
-from common.imaging import ImageDecodeError, decode_bgr
-from common.log import RateLimitedLog
-from services.camera.source import EndOfStream, Frame, FrameSource, Pacer, SourceError, as_bgr
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.imaging import ImageDecodeError, decode_bgr
+from aeb_radar_camera.common.log import RateLimitedLog
+from aeb_radar_camera.services.camera.source import (
+    EndOfStream,
+    Frame,
+    FrameSource,
+    Pacer,
+    SourceError,
+    as_bgr,
+)
 
 _log = logging.getLogger("camera.folder")
 _DIGITS = re.compile(r"(\d+)")

@@ -2,21 +2,21 @@
 
 import sys
 
-from common.bus import Bus, BusError
-from common.calibration import Calibration
-from common.config.camera import CameraConfig
-from common.config.loader import ConfigError
-from common.log import kv, setup_logging
-from common.service import (
+from aeb_radar_camera.common.bus import Bus, BusError
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.camera import CameraConfig
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.log import kv, setup_logging
+from aeb_radar_camera.common.service import (
     config_checked,
     load_service_config,
     service_argparser,
     stop_event_on_signals,
 )
-from common.systemd import Watchdog
-from services.camera.registry import build_source, check_source
-from services.camera.shell import EXIT_CONFIG, CameraShell
-from services.camera.source import SourceConfigError
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.camera.registry import build_source, check_source
+from aeb_radar_camera.services.camera.shell import EXIT_CONFIG, CameraShell
+from aeb_radar_camera.services.camera.source import SourceConfigError
 
 
 def main(argv: list[str] | None = None) -> int:

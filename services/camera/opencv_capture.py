@@ -14,8 +14,15 @@ from pathlib import Path
 
 import cv2
 
-from common.clock import wall_ns
-from services.camera.source import EndOfStream, Frame, FrameSource, Pacer, SourceError, as_bgr
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.services.camera.source import (
+    EndOfStream,
+    Frame,
+    FrameSource,
+    Pacer,
+    SourceError,
+    as_bgr,
+)
 
 BACKENDS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG,
             "gstreamer": cv2.CAP_GSTREAMER}

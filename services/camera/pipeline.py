@@ -21,14 +21,19 @@ from collections.abc import Callable
 import numpy as np
 import zenoh
 
-from common.clock import NS_PER_MS, mono_ns
-from common.config.camera import DepthSettings
-from common.depth_image import encode_depth
-from common.imaging import encode_jpeg
-from common.log import RateLimitedLog, kv
-from common.messages import CompressedFrame, DepthFrame
-from services.camera.core import Backoff, CameraCore, Health, Offer
-from services.camera.source import EndOfStream, Frame, FrameSource, SourceConfigError
+from aeb_radar_camera.common.clock import NS_PER_MS, mono_ns
+from aeb_radar_camera.common.config.camera import DepthSettings
+from aeb_radar_camera.common.depth_image import encode_depth
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages import CompressedFrame, DepthFrame
+from aeb_radar_camera.services.camera.core import Backoff, CameraCore, Health, Offer
+from aeb_radar_camera.services.camera.source import (
+    EndOfStream,
+    Frame,
+    FrameSource,
+    SourceConfigError,
+)
 
 _log = logging.getLogger("camera")
 

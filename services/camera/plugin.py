@@ -6,7 +6,7 @@ Config::
 
     [camera.source]
     kind = "synthetic"
-    factory = "tools.sim.camera_source:make_source"   # "package.module:callable"
+    factory = "aeb_radar_camera.tools.sim.camera_source:make_source"   # "package.module:callable"
     fps = 30                                           # 0: the camera's fps
     options = { stale_after_s = 1.0 }                  # passed through unchanged
 
@@ -27,11 +27,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from common.calibration import Calibration
-from services.camera.source import FrameSource, SourceConfigError
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.services.camera.source import FrameSource, SourceConfigError
 
 if TYPE_CHECKING:
-    from common.bus import Bus
+    from aeb_radar_camera.common.bus import Bus
 
 
 @dataclass(frozen=True)

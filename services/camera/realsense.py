@@ -22,8 +22,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from common.clock import wall_ns
-from services.camera.source import (
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.services.camera.source import (
     EndOfStream,
     Frame,
     FrameSource,

@@ -7,18 +7,18 @@ import threading
 
 import zenoh
 
-from common import systemd
-from common.bus import Bus
-from common.calibration import Calibration
-from common.clock import mono_ns, wall_ns
-from common.config.camera import CameraSettings
-from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG
-from common.log import kv
-from common.messages import CameraInfo, Header
-from common.systemd import Watchdog
-from services.camera.core import Backoff, CameraCore, Health, camera_info
-from services.camera.pipeline import FramePipeline
-from services.camera.source import FrameSource
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.config.camera import CameraSettings
+from aeb_radar_camera.common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG
+from aeb_radar_camera.common.log import kv
+from aeb_radar_camera.common.messages import CameraInfo, Header
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.camera.core import Backoff, CameraCore, Health, camera_info
+from aeb_radar_camera.services.camera.pipeline import FramePipeline
+from aeb_radar_camera.services.camera.source import FrameSource
 
 _log = logging.getLogger("camera")
 

@@ -1,5 +1,5 @@
 import sys
 
-from services.fusion.main import main
+from aeb_radar_camera.services.fusion.main import main
 
 sys.exit(main())

@@ -8,8 +8,8 @@ with its file and warns, naming what differs; it does not switch calibrations by
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.messages import CameraInfo
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import CameraInfo
 
 _TOL = 1e-6
 

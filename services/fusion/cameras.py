@@ -24,12 +24,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.messages import RadarTrack, Verification
-from common.messages.fusion import CameraCheck
-from services.fusion.frames import DecodedFrame, FrameFeed, select_frame, unavailable_reason
-from services.fusion.roi import ColumnProjector, Roi
-from services.fusion.verifiers import GateResult, Observation
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import RadarTrack, Verification
+from aeb_radar_camera.common.messages.fusion import CameraCheck
+from aeb_radar_camera.services.fusion.frames import (
+    DecodedFrame,
+    FrameFeed,
+    select_frame,
+    unavailable_reason,
+)
+from aeb_radar_camera.services.fusion.roi import ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation
 
 Gate = Callable[[Observation], GateResult]
 

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field, replace
 
 import msgspec
 
-from common.config.fusion import FusionSettings, GateScope, RuleName
-from common.messages import (
+from aeb_radar_camera.common.config.fusion import FusionSettings, GateScope, RuleName
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     Decision,
     Header,
@@ -34,10 +34,10 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
-from common.messages.vehicle import DriverInputs, EgoMotion
-from common.vehicle_state import VehicleSample, VehicleState
-from services.fusion.cameras import Camera, CameraView, camera_views, check_track
-from services.fusion.decision import (
+from aeb_radar_camera.common.messages.vehicle import DriverInputs, EgoMotion
+from aeb_radar_camera.common.vehicle_state import VehicleSample, VehicleState
+from aeb_radar_camera.services.fusion.cameras import Camera, CameraView, camera_views, check_track
+from aeb_radar_camera.services.fusion.decision import (
     BrakeHold,
     CommandStage,
     DecisionRule,
@@ -47,8 +47,8 @@ from services.fusion.decision import (
     decide,
     severity,
 )
-from services.fusion.evidence import EVIDENCE_KEY, LLR_KEY, TrackEvidence
-from services.fusion.frames import (
+from aeb_radar_camera.services.fusion.evidence import EVIDENCE_KEY, LLR_KEY, TrackEvidence
+from aeb_radar_camera.services.fusion.frames import (
     EXPECTED_CHANGE_SPAN,
     FROZEN_REASON,
     FrameFeed,
@@ -56,8 +56,8 @@ from services.fusion.frames import (
     frozen,
     unchanged_for_ns,
 )
-from services.fusion.roi import ColumnProjector
-from services.fusion.verifiers import Verifier
+from aeb_radar_camera.services.fusion.roi import ColumnProjector
+from aeb_radar_camera.services.fusion.verifiers import Verifier
 
 _NO_ROI: tuple[int, ...] = ()
 

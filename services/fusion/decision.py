@@ -19,10 +19,15 @@ from dataclasses import dataclass, replace
 
 import msgspec
 
-from common.config.fusion import DecisionSettings, UnverifiablePolicy
-from common.messages import Decision, RadarTrack, Verification
-from common.vehicle_state import VehicleSample
-from services.fusion.path import PathPoint, PredictedPath, predicted_path, straight_path
+from aeb_radar_camera.common.config.fusion import DecisionSettings, UnverifiablePolicy
+from aeb_radar_camera.common.messages import Decision, RadarTrack, Verification
+from aeb_radar_camera.common.vehicle_state import VehicleSample
+from aeb_radar_camera.services.fusion.path import (
+    PathPoint,
+    PredictedPath,
+    predicted_path,
+    straight_path,
+)
 
 
 def severity(d: Decision) -> int:

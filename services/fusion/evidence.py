@@ -10,7 +10,7 @@ thin bicycle veto it.
 
 import math
 
-from common.config.fusion import EvidenceSettings
+from aeb_radar_camera.common.config.fusion import EvidenceSettings
 
 LLR_KEY = "llr"                 # a verifier's per-frame value, in its GateResult.detail
 EVIDENCE_KEY = "evidence_llr"   # the track's sum after this frame, in gate_detail

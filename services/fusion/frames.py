@@ -22,12 +22,18 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from common.clock import mono_ns
-from common.depth_image import DepthDecodeError, decode_depth, to_metres
-from common.imaging import ImageCorruptError, ImageDecodeError, decode_gray
-from common.log import RateLimitedLog
-from common.messages import CompressedFrame, DecodeError, DepthFrame, RadarTrack, decode
-from services.fusion.roi import ColumnProjector
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.depth_image import DepthDecodeError, decode_depth, to_metres
+from aeb_radar_camera.common.imaging import ImageCorruptError, ImageDecodeError, decode_gray
+from aeb_radar_camera.common.log import RateLimitedLog
+from aeb_radar_camera.common.messages import (
+    CompressedFrame,
+    DecodeError,
+    DepthFrame,
+    RadarTrack,
+    decode,
+)
+from aeb_radar_camera.services.fusion.roi import ColumnProjector
 
 # Decoded frames kept per camera: a cycle uses the one nearest its stamp, which within the
 # skew bound is one of the last few at 30 fps.

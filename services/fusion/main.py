@@ -11,25 +11,25 @@ Exit codes: 0 after SIGINT/SIGTERM, 2 for an invalid configuration or calibratio
 import logging
 import sys
 
-from common.bus import Bus, BusError
-from common.calibration import Calibration
-from common.command_auth import CommandSigner, KeyFileError, load_signing_key
-from common.config.fusion import FusionConfig, FusionSettings
-from common.config.loader import ConfigError
-from common.log import kv, setup_logging
-from common.realtime import apply_process
-from common.service import (
+from aeb_radar_camera.common.bus import Bus, BusError
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.command_auth import CommandSigner, KeyFileError, load_signing_key
+from aeb_radar_camera.common.config.fusion import FusionConfig, FusionSettings
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.log import kv, setup_logging
+from aeb_radar_camera.common.realtime import apply_process
+from aeb_radar_camera.common.service import (
     config_checked,
     load_service_config,
     service_argparser,
     stop_event_on_signals,
 )
-from common.systemd import Watchdog
-from services.fusion.core import FusionCore
-from services.fusion.frames import FrameDecoder
-from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.shell import FusionShell
-from services.fusion.verifiers import VerifierConfigError, create
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.fusion.core import FusionCore
+from aeb_radar_camera.services.fusion.frames import FrameDecoder
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector
+from aeb_radar_camera.services.fusion.shell import FusionShell
+from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError, create
 
 SHORTCUTS = {"--instance": ("fusion.instance", "instance name"),
              "--calibration": ("fusion.calibration", "calibration TOML of the one camera")}

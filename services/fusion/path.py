@@ -17,7 +17,7 @@ inside the margin.
 import math
 from dataclasses import dataclass
 
-from common.config.fusion import PathSettings
+from aeb_radar_camera.common.config.fusion import PathSettings
 
 # Below this |curvature| (1/m, a 10 km radius) the arc is computed as a straight line:
 # the circle's centre would be too far away for the arithmetic.

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from common.calibration import Calibration
+from aeb_radar_camera.common.calibration import Calibration
 
 # Samples along the column: with distortion the projected column is a curve whose extreme
 # pixel can lie between its end points.

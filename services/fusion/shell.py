@@ -14,14 +14,14 @@ from typing import Any
 import msgspec
 import zenoh
 
-from common import systemd
-from common.bus import Bus
-from common.calibration import Calibration
-from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandSigner
-from common.config.fusion import FusionSettings, RuleName
-from common.counters import ReasonCounter
-from common.keys import (
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import CommandSigner
+from aeb_radar_camera.common.config.fusion import FusionSettings, RuleName
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.keys import (
     CAMERA_DEPTH,
     CAMERA_INFO,
     CAMERA_JPEG,
@@ -31,8 +31,8 @@ from common.keys import (
     RADAR_TRACKS,
     VEHICLE_DRIVER,
 )
-from common.log import RateLimitedLog, kv
-from common.messages import (
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages import (
     CameraInfo,
     Decision,
     DecodeError,
@@ -42,12 +42,12 @@ from common.messages import (
     VerifierStatus,
     decode,
 )
-from common.realtime import ThreadRealtime
-from common.systemd import Watchdog
-from services.fusion.camera_check import calibration_differences
-from services.fusion.core import CycleResult, DecidedCycle, FusionCore
-from services.fusion.frames import FROZEN_REASON, FrameDecoder
-from services.fusion.verifiers import wants_depth
+from aeb_radar_camera.common.realtime import ThreadRealtime
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.fusion.camera_check import calibration_differences
+from aeb_radar_camera.services.fusion.core import CycleResult, DecidedCycle, FusionCore
+from aeb_radar_camera.services.fusion.frames import FROZEN_REASON, FrameDecoder
+from aeb_radar_camera.services.fusion.verifiers import wants_depth
 
 RADAR_RING = 4     # radar samples Zenoh keeps for the radar thread; the oldest dropped
 

@@ -1,5 +1,5 @@
 import sys
 
-from services.radar.main import main
+from aeb_radar_camera.services.radar.main import main
 
 sys.exit(main())

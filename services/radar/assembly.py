@@ -15,9 +15,9 @@ Whether quality / extended frames are sent is fixed by config or learned from th
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from common.config.radar import CycleSettings, Expect
-from common.counters import ReasonCounter
-from common.messages.radar import OutputMode
+from aeb_radar_camera.common.config.radar import CycleSettings, Expect
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.messages.radar import OutputMode
 
 
 class ListRole:

@@ -8,9 +8,9 @@ the fields that differ. A later 0x201 that differs again makes the radar not rea
 
 import enum
 
-from common.config.radar import OutputTypeCfg, RadarWriteSettings
-from services.radar.ars408.codec import RadarFrame, encode
-from services.radar.ars408.records import RadarConfigFrame, RadarStateFrame
+from aeb_radar_camera.common.config.radar import OutputTypeCfg, RadarWriteSettings
+from aeb_radar_camera.services.radar.ars408.codec import RadarFrame, encode
+from aeb_radar_camera.services.radar.ars408.records import RadarConfigFrame, RadarStateFrame
 
 OUTPUT_TYPE_CODE = {OutputTypeCfg.OBJECTS: 1, OutputTypeCfg.CLUSTERS: 2}
 OUTPUT_TYPE_NAME = {0: "none", 1: "objects", 2: "clusters"}

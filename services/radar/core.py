@@ -14,10 +14,10 @@ from collections import deque
 from dataclasses import dataclass
 from statistics import median
 
-from common.config.radar import RadarSettings, SensorSettings
-from common.counters import ReasonCounter
-from common.messages.header import Header
-from common.messages.radar import (
+from aeb_radar_camera.common.config.radar import RadarSettings, SensorSettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.radar import (
     BUS_NOT_READY,
     BusState,
     OutputMode,
@@ -25,17 +25,17 @@ from common.messages.radar import (
     RadarStatus,
     RadarTrack,
 )
-from services.radar.ars408.codec import RadarFrame, RadarFrameError, decode
-from services.radar.ars408.records import (
+from aeb_radar_camera.services.radar.ars408.codec import RadarFrame, RadarFrameError, decode
+from aeb_radar_camera.services.radar.ars408.records import (
     ClusterListStatus,
     ObjectListStatus,
     RadarStateFrame,
     Version,
 )
-from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
-from services.radar.assembly import CycleAssembler, ListRole, RawCycle
-from services.radar.configure import ConfigWriter
-from services.radar.detections import (
+from aeb_radar_camera.services.radar.ars408.table import BY_KIND, Kind, MessageSpec
+from aeb_radar_camera.services.radar.assembly import CycleAssembler, ListRole, RawCycle
+from aeb_radar_camera.services.radar.configure import ConfigWriter
+from aeb_radar_camera.services.radar.detections import (
     GeneralFrames,
     attach_extras,
     attach_list,
@@ -43,7 +43,7 @@ from services.radar.detections import (
     merge,
     prefilter,
 )
-from services.radar.tracker import KalmanTracker
+from aeb_radar_camera.services.radar.tracker import KalmanTracker
 
 # List messages by base ID: output mode, list role, the message's DLC.
 _LIST_ROLES: dict[int, tuple[OutputMode, int, int]] = {

@@ -13,12 +13,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from common.config.radar import MergeSettings, PrefilterSettings
-from common.messages.radar import OutputMode
-from services.radar.ars408.codec import decode_columns
-from services.radar.ars408.table import BY_KIND, Kind, MessageSpec
-from services.radar.assembly import ListRole, RawCycle
-from services.radar.neighbours import pairs_within_self
+from aeb_radar_camera.common.config.radar import MergeSettings, PrefilterSettings
+from aeb_radar_camera.common.messages.radar import OutputMode
+from aeb_radar_camera.services.radar.ars408.codec import decode_columns
+from aeb_radar_camera.services.radar.ars408.table import BY_KIND, Kind, MessageSpec
+from aeb_radar_camera.services.radar.assembly import ListRole, RawCycle
+from aeb_radar_camera.services.radar.neighbours import pairs_within_self
 
 F = npt.NDArray[np.float64]
 I = npt.NDArray[np.int64]  # noqa: E741 (a column type, not a loop index)

@@ -5,11 +5,11 @@ The ARS408 uses them to classify objects as stationary or moving (DynProp); rela
 positions and velocities do not depend on them.
 """
 
-from common.config.radar import EgoMotionSettings
-from common.counters import ReasonCounter
-from common.messages.vehicle import EgoMotion
-from services.radar.ars408.codec import EncodeError, RadarFrame
-from services.radar.ars408.transmissions import ego_motion_frames
+from aeb_radar_camera.common.config.radar import EgoMotionSettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.messages.vehicle import EgoMotion
+from aeb_radar_camera.services.radar.ars408.codec import EncodeError, RadarFrame
+from aeb_radar_camera.services.radar.ars408.transmissions import ego_motion_frames
 
 
 class EgoMotionForwarder:

@@ -8,22 +8,22 @@ import sys
 
 import zenoh
 
-from common import systemd
-from common.bus import Bus, BusError, TypedPublisher
-from common.config.radar import RadarConfig
-from common.keys import EGO_MOTION, RADAR_CAN, RADAR_STATUS, RADAR_TRACKS
-from common.log import kv, setup_logging
-from common.messages.radar import RadarStatus, RadarTracks
-from common.realtime import ThreadRealtime, apply_process
-from common.service import (
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import Bus, BusError, TypedPublisher
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.keys import EGO_MOTION, RADAR_CAN, RADAR_STATUS, RADAR_TRACKS
+from aeb_radar_camera.common.log import kv, setup_logging
+from aeb_radar_camera.common.messages.radar import RadarStatus, RadarTracks
+from aeb_radar_camera.common.realtime import ThreadRealtime, apply_process
+from aeb_radar_camera.common.service import (
     config_checked,
     load_service_config,
     service_argparser,
     stop_event_on_signals,
 )
-from common.systemd import Watchdog
-from services.radar.ports import ConfigurationError, check_settings
-from services.radar.shell import RadarShell
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.radar.ports import ConfigurationError, check_settings
+from aeb_radar_camera.services.radar.shell import RadarShell
 
 
 class ZenohRadarOutput:

@@ -4,11 +4,17 @@ radar's table name in errors and logs."""
 
 import can
 
-from common.can_port import REPLAY, CanPort, ConfigurationError, ReplayPort, describe
-from common.can_port import check_settings as check_port_settings
-from common.can_port import open_port as open_service_port
-from common.config.can import CanSettings, Pace, ReplaySettings
-from services.radar.ars408.codec import RadarFrame
+from aeb_radar_camera.common.can_port import (
+    REPLAY,
+    CanPort,
+    ConfigurationError,
+    ReplayPort,
+    describe,
+)
+from aeb_radar_camera.common.can_port import check_settings as check_port_settings
+from aeb_radar_camera.common.can_port import open_port as open_service_port
+from aeb_radar_camera.common.config.can import CanSettings, Pace, ReplaySettings
+from aeb_radar_camera.services.radar.ars408.codec import RadarFrame
 
 SERVICE = "radar"
 

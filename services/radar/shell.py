@@ -17,13 +17,13 @@ from typing import Protocol
 
 import can
 
-from common.can_link import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, CanLink
-from common.clock import NS_PER_S, mono_ns, wall_ns
-from common.config.radar import RadarSettings
-from common.counters import ReasonCounter
-from common.log import RateLimitedLog, kv
-from common.messages.header import Header
-from common.messages.radar import (
+from aeb_radar_camera.common.can_link import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, CanLink
+from aeb_radar_camera.common.clock import NS_PER_S, mono_ns, wall_ns
+from aeb_radar_camera.common.config.radar import RadarSettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.radar import (
     BusState,
     CanFrame,
     RadarStatus,
@@ -31,13 +31,13 @@ from common.messages.radar import (
     RawCanFrames,
     can_frame,
 )
-from common.messages.vehicle import EgoMotion
-from common.systemd import Watchdog
-from services.radar.ars408.codec import RadarFrame
-from services.radar.ars408.table import classify
-from services.radar.core import RadarCore, TrackedCycle
-from services.radar.ego import EgoMotionForwarder
-from services.radar.ports import SERVICE, CanPort, radar_message
+from aeb_radar_camera.common.messages.vehicle import EgoMotion
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.radar.ars408.codec import RadarFrame
+from aeb_radar_camera.services.radar.ars408.table import classify
+from aeb_radar_camera.services.radar.core import RadarCore, TrackedCycle
+from aeb_radar_camera.services.radar.ego import EgoMotionForwarder
+from aeb_radar_camera.services.radar.ports import SERVICE, CanPort, radar_message
 
 _log = logging.getLogger("radar")
 

@@ -52,10 +52,19 @@ from itertools import starmap
 import numpy as np
 import numpy.typing as npt
 
-from common.config.radar import TrackerSettings
-from common.messages.radar import RadarTrack
-from services.radar.detections import OBJ_CLASS, RADAR_ID, RCS, VX, VY, Detections, X, Y
-from services.radar.neighbours import candidates_in_boxes
+from aeb_radar_camera.common.config.radar import TrackerSettings
+from aeb_radar_camera.common.messages.radar import RadarTrack
+from aeb_radar_camera.services.radar.detections import (
+    OBJ_CLASS,
+    RADAR_ID,
+    RCS,
+    VX,
+    VY,
+    Detections,
+    X,
+    Y,
+)
+from aeb_radar_camera.services.radar.neighbours import candidates_in_boxes
 
 F = npt.NDArray[np.float64]
 I = npt.NDArray[np.int64]  # noqa: E741

@@ -1,5 +1,5 @@
 import sys
 
-from services.vehicle.main import main
+from aeb_radar_camera.services.vehicle.main import main
 
 sys.exit(main())

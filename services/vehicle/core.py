@@ -10,18 +10,18 @@ from typing import Any
 
 import cantools.database
 
-from common.config.vehicle import GatewaySettings
-from common.counters import ReasonCounter
-from common.messages.header import Header
-from common.messages.radar import BUS_NOT_READY, BusState
-from common.messages.vehicle import (
+from aeb_radar_camera.common.config.vehicle import GatewaySettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.radar import BUS_NOT_READY, BusState
+from aeb_radar_camera.common.messages.vehicle import (
     DriverInputs,
     EgoMotion,
     Gear,
     SignalHealth,
     VehicleStatus,
 )
-from services.vehicle.mapping import (
+from aeb_radar_camera.services.vehicle.mapping import (
     DRIVER,
     MOTION,
     Database,

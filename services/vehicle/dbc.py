@@ -2,7 +2,7 @@
 
 import cantools.database
 
-from services.vehicle.mapping import Database, MappingError
+from aeb_radar_camera.services.vehicle.mapping import Database, MappingError
 
 
 def load_dbc(path: str) -> Database:

@@ -10,24 +10,24 @@ import sys
 
 import zenoh
 
-from common import systemd
-from common.bus import Bus, BusError, TypedPublisher
-from common.can_port import ConfigurationError, check_settings
-from common.config.vehicle import GatewaySettings, VehicleConfig
-from common.keys import EGO_MOTION, VEHICLE_DRIVER, VEHICLE_STATUS
-from common.log import kv, setup_logging
-from common.messages.vehicle import DriverInputs, EgoMotion, VehicleStatus
-from common.service import (
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.common.bus import Bus, BusError, TypedPublisher
+from aeb_radar_camera.common.can_port import ConfigurationError, check_settings
+from aeb_radar_camera.common.config.vehicle import GatewaySettings, VehicleConfig
+from aeb_radar_camera.common.keys import EGO_MOTION, VEHICLE_DRIVER, VEHICLE_STATUS
+from aeb_radar_camera.common.log import kv, setup_logging
+from aeb_radar_camera.common.messages.vehicle import DriverInputs, EgoMotion, VehicleStatus
+from aeb_radar_camera.common.service import (
     config_checked,
     load_service_config,
     service_argparser,
     stop_event_on_signals,
 )
-from common.systemd import Watchdog
-from services.vehicle.core import VehicleCore
-from services.vehicle.dbc import load_dbc
-from services.vehicle.mapping import MappingError
-from services.vehicle.shell import SERVICE, VehicleShell
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.vehicle.core import VehicleCore
+from aeb_radar_camera.services.vehicle.dbc import load_dbc
+from aeb_radar_camera.services.vehicle.mapping import MappingError
+from aeb_radar_camera.services.vehicle.shell import SERVICE, VehicleShell
 
 TABLE = "gateway"
 

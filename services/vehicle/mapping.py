@@ -9,14 +9,14 @@ from typing import Any
 
 import cantools.database
 
-from common.config.vehicle import (
+from aeb_radar_camera.common.config.vehicle import (
     FlagMap,
     GatewaySettings,
     GearMap,
     ValueMap,
     signal_names,
 )
-from common.messages.vehicle import Gear
+from aeb_radar_camera.common.messages.vehicle import Gear
 
 Database = cantools.database.can.Database
 DbcMessage = cantools.database.can.Message

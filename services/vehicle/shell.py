@@ -17,16 +17,16 @@ from typing import Protocol
 
 import can
 
-from common.can_link import CanLink
-from common.can_port import CanPort
-from common.clock import NS_PER_S, mono_ns, wall_ns
-from common.config.vehicle import GatewaySettings
-from common.counters import ReasonCounter
-from common.log import RateLimitedLog, kv
-from common.messages.header import Header
-from common.messages.vehicle import DriverInputs, EgoMotion, VehicleStatus
-from common.systemd import Watchdog
-from services.vehicle.core import VehicleCore
+from aeb_radar_camera.common.can_link import CanLink
+from aeb_radar_camera.common.can_port import CanPort
+from aeb_radar_camera.common.clock import NS_PER_S, mono_ns, wall_ns
+from aeb_radar_camera.common.config.vehicle import GatewaySettings
+from aeb_radar_camera.common.counters import ReasonCounter
+from aeb_radar_camera.common.log import RateLimitedLog, kv
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.vehicle import DriverInputs, EgoMotion, VehicleStatus
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.services.vehicle.core import VehicleCore
 
 SERVICE = "vehicle"
 TICK_NS = 1_000_000

@@ -7,16 +7,16 @@ import sys
 
 import pytest
 
+from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, object_cycle_frames
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
+from aeb_radar_camera.tools.sim.pty_pair import PtyPair
+from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+from aeb_radar_camera.tools.sim.scenario import RadarLook
 from benchmarks import bench_latency
 from benchmarks.bench_brake import LineTimes
 from benchmarks.floor_relay import FRAMES_PER_OBJECT
 from benchmarks.latency_chain import floor_chains
-from services.radar.ars408 import ObjectGeneral, object_cycle_frames
 from tests.support import wait_for
-from tools.sim.can_links import SlcanPtyLink
-from tools.sim.pty_pair import PtyPair
-from tools.sim.radar_feed import RadarFeed
-from tools.sim.scenario import RadarLook
 
 pytestmark = pytest.mark.slow
 

@@ -2,6 +2,8 @@
 the floor relays' stamps into the same seven stages; knowing when a cycle's last frame
 is in without decoding it."""
 
+from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, object_cycle_frames
+from aeb_radar_camera.tools.sim.can_links import slcan_line
 from benchmarks.floor_relay import CycleEnd, command_size, pad, tracks_size
 from benchmarks.latency_chain import (
     STAGES,
@@ -15,8 +17,6 @@ from benchmarks.latency_chain import (
     summarize,
     zenoh_ns,
 )
-from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-from tools.sim.can_links import slcan_line
 
 US = 1_000
 

@@ -3,9 +3,9 @@ key (a fixed secret: for tests only)."""
 
 from pathlib import Path
 
-from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandKey, CommandSigner, write_key
-from common.messages import BrakeCommand, Decision, Header, VerifierStatus, encode
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import CommandKey, CommandSigner, write_key
+from aeb_radar_camera.common.messages import BrakeCommand, Decision, Header, VerifierStatus, encode
 
 TEST_KEY = CommandKey("primary-test", "primary", bytes(range(32)))
 SIGNER = CommandSigner(TEST_KEY, session=1)

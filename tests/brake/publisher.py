@@ -12,12 +12,12 @@ import time
 
 import msgspec
 
-from common.bus import Bus
-from common.command_auth import CommandSigner, load_key
-from common.config.realtime import RealtimeSettings
-from common.keys import FUSION_BRAKE_CMD
-from common.realtime import apply_process
-from common.service import stop_event_on_signals
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.command_auth import CommandSigner, load_key
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.realtime import apply_process
+from aeb_radar_camera.common.service import stop_event_on_signals
 from tests.brake.helpers import command
 from tests.support import client_settings
 

@@ -10,12 +10,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from common.bus import Bus
-from common.command_auth import CommandSigner
-from common.config.base import ZenohMode, ZenohSettings
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-from common.messages import BrakeCommand, BrakeState, BrakeStatus
-from services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.command_auth import CommandSigner
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeState, BrakeStatus
+from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.tools.arrivals import Arrivals
+from aeb_radar_camera.tools.sim.actuator import SimActuator
+from aeb_radar_camera.tools.sim.pty_pair import PtyPair
 from tests.brake.helpers import TEST_KEY, write_test_key
 from tests.brake.secure import SecureProfile, secure_router
 from tests.support import (
@@ -25,9 +28,6 @@ from tests.support import (
     python_module,
     router_process,
 )
-from tools.arrivals import Arrivals
-from tools.sim.actuator import SimActuator
-from tools.sim.pty_pair import PtyPair
 
 LIVE = (BrakeState.ARMED, BrakeState.BRAKING)
 
@@ -161,7 +161,8 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
         sim, pair = SimActuator.on_pty(link, seed=7)
         stack.callback(pair.remove)
         stack.enter_context(sim)
-        proc = ServiceProcess("brake", python_module("services.brake", "--config", str(config),
+        proc = ServiceProcess("brake", python_module("aeb_radar_camera.services.brake", "--config",
+                                                     str(config),
                                                       "--connect", endpoint), log_dir)
         stack.callback(proc.stop)
         bus = stack.enter_context(Bus.open(ZenohSettings(

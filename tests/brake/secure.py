@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.resources import DEPLOY
+from aeb_radar_camera.common.resources import DEPLOY
 from tests.support import (
     START_TIMEOUT_S,
     ServiceProcess,
@@ -51,7 +51,7 @@ def secure_router(log_dir: Path) -> Iterator[SecureProfile]:
     for path in SECURE.glob("*.json5"):
         (log_dir / path.name).write_text(_localised(path.read_text(), certs, endpoint))
     proc = ServiceProcess(f"router-{port}", python_module(
-        "common.router", "--config-file", str(log_dir / "router.json5")), log_dir)
+        "aeb_radar_camera.common.router", "--config-file", str(log_dir / "router.json5")), log_dir)
     try:
         wait_for(lambda: port_open(port) or not proc.alive(), START_TIMEOUT_S, 0.05,
                  "secure router port")

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.command_auth import CommandKey, CommandSigner, mac_problem, new_key
-from common.messages import BrakeCommand, BrakeState, decode, encode
+from aeb_radar_camera.common.command_auth import CommandKey, CommandSigner, mac_problem, new_key
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeState, decode, encode
 from tests.brake.helpers import SIGNER, TEST_KEY, command, keyring
 from tests.brake.test_core import KEY, MS, T0, WALL0, Rig
 
@@ -195,8 +195,8 @@ def test_stale_radar_data_restarts_the_evidence():
 
 
 def test_the_core_refuses_every_command_without_keys():
-    from common.config.brake import BrakeSettings
-    from services.brake.core import BrakeCore
+    from aeb_radar_camera.common.config.brake import BrakeSettings
+    from aeb_radar_camera.services.brake.core import BrakeCore
 
     core = BrakeCore(BrakeSettings(), KEY, T0, {})
     core.on_command(SIGNER.sign(command(0, pub_mono_ns=T0)), KEY, T0, WALL0)

@@ -5,8 +5,8 @@ import sys
 
 import msgspec
 
-from common.config.brake import BrakeConfig
-from common.config.loader import load_config, parse_config
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.loader import load_config, parse_config
 from tests.support import REPO
 
 
@@ -26,7 +26,8 @@ def test_shipped_example_is_valid_and_documents_the_defaults():
 def test_an_invalid_field_stops_the_service_at_start_naming_it(tmp_path):
     bad = tmp_path / "brake.toml"
     bad.write_text("[brake.actuator]\nheartbeat_ms = 200.0\nttl_ms = 250\n")
-    res = subprocess.run([sys.executable, "-m", "services.brake", "--config", str(bad)],
+    res = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.brake", "--config",
+                          str(bad)],
                          cwd=REPO, capture_output=True, text=True, timeout=60)
     assert res.returncode == 2
     assert "ttl_ms must be at least two heartbeats" in res.stderr

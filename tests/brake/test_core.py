@@ -5,14 +5,14 @@ import math
 
 import pytest
 
-from common.command_auth import CommandSigner
-from common.config.brake import BrakeConfig
-from common.config.loader import parse_config
-from common.keys import FUSION_BRAKE_CMD
-from common.messages import BrakeState, Decision
-from services.brake.commands import RECENT
-from services.brake.core import BrakeCore, Outgoing
-from services.brake.protocol import (
+from aeb_radar_camera.common.command_auth import CommandSigner
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.loader import parse_config
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import BrakeState, Decision
+from aeb_radar_camera.services.brake.commands import RECENT
+from aeb_radar_camera.services.brake.core import BrakeCore, Outgoing
+from aeb_radar_camera.services.brake.protocol import (
     Ack,
     ActuatorState,
     BadLine,
@@ -125,7 +125,7 @@ class Rig:
 
 
 def encode_line(frame: Command | Ack | Fault | Nak | Query | Report) -> bytes:
-    from services.brake.protocol import encode as encode_frame
+    from aeb_radar_camera.services.brake.protocol import encode as encode_frame
 
     return encode_frame(frame)[:-1]
 

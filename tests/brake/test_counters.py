@@ -6,10 +6,10 @@ import logging
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.config.brake import BrakeConfig
-from common.counters import MAX_COUNT
-from common.messages import BrakeStatus, decode, encode
-from services.brake.shell import BrakeShell
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.counters import MAX_COUNT
+from aeb_radar_camera.common.messages import BrakeStatus, decode, encode
+from aeb_radar_camera.services.brake.shell import BrakeShell
 from tests.brake.helpers import keyring
 from tests.brake.test_core import Rig
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from common.messages import BrakeState, BrakeStatus
-from services.brake.protocol import HostMode
+from aeb_radar_camera.common.messages import BrakeState, BrakeStatus
+from aeb_radar_camera.services.brake.protocol import HostMode
 from tests.brake.rig import BrakeRig, brake_rig
 from tests.support import ServiceProcess
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from common.messages import BrakeState, BrakeStatus
+from aeb_radar_camera.common.messages import BrakeState, BrakeStatus
 from tests.brake.rig import BrakeRig, brake_rig
 from tests.brake.secure import OPENSSL
 from tests.support import ServiceProcess, python_module, wait_for
@@ -28,7 +28,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BrakeRig]:
 
 def intruder(rig: BrakeRig, *args: str, name: str = "intruder") -> ServiceProcess:
     return ServiceProcess(name, python_module(
-        "tools.faults.intruder", "--connect", rig.endpoint, *args), rig.log_dir)
+        "aeb_radar_camera.tools.faults.intruder", "--connect", rig.endpoint, *args), rig.log_dir)
 
 
 def finished(proc: ServiceProcess, timeout_s: float = 60.0) -> dict[str, int]:
@@ -89,7 +89,7 @@ def test_an_intruder_is_refused_counted_and_the_real_fusion_stays_in_command(rig
 def test_a_brake_without_command_keys_refuses_to_start(tmp_path: Path):
     (tmp_path / "brake.toml").write_text('[brake.serial]\nport = "/dev/null"\n')
     proc = ServiceProcess("brake-nokeys", python_module(
-        "services.brake", "--config", str(tmp_path / "brake.toml")), tmp_path)
+        "aeb_radar_camera.services.brake", "--config", str(tmp_path / "brake.toml")), tmp_path)
     wait_for(lambda: not proc.alive(), 30, what="the brake to exit")
     assert proc.proc.returncode == 2
     assert "brake.command_keys is empty" in proc.output()

@@ -5,7 +5,7 @@ import random
 
 import pytest
 
-from services.brake.protocol import (
+from aeb_radar_camera.services.brake.protocol import (
     MAX_LINE,
     Ack,
     ActuatorState,

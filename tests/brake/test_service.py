@@ -10,10 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from common.keys import FUSION_BRAKE_CMD
-from common.messages import BrakeState, encode
-from services.brake.commands import RECENT
-from services.brake.protocol import HostMode
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import BrakeState, encode
+from aeb_radar_camera.services.brake.commands import RECENT
+from aeb_radar_camera.services.brake.protocol import HostMode
+from aeb_radar_camera.tools.sim.actuator import SimActuator
 from tests.brake.helpers import command, write_test_key
 from tests.brake.rig import BrakeRig, Stream, brake_rig
 from tests.support import (
@@ -25,7 +26,6 @@ from tests.support import (
     router_process,
     wait_for,
 )
-from tools.sim.actuator import SimActuator
 
 pytestmark = pytest.mark.slow
 
@@ -202,7 +202,7 @@ def test_silence_from_the_start_is_failsafe_even_without_a_router(tmp_path: Path
     (tmp_path / "brake.toml").write_text(
         f'[brake]\ncommand_keys = ["{write_test_key(tmp_path)}"]\n'
         f'[brake.serial]\nport = "{link}"\n')
-    proc = ServiceProcess("brake", python_module("services.brake", "--config",
+    proc = ServiceProcess("brake", python_module("aeb_radar_camera.services.brake", "--config",
                                                  str(tmp_path / "brake.toml"),
                                                  "--connect", endpoint), tmp_path)
     try:

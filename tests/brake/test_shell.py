@@ -5,14 +5,14 @@ from pathlib import Path
 
 import pytest
 
-from common.config.brake import BrakeConfig, BrakeSettings, SerialSettings
-from common.messages import BrakeState
-from services.brake.core import Outgoing
-from services.brake.protocol import SEQ_MODULO, Command, HostMode, decode, encode
-from services.brake.shell import BrakeShell, LineAhead, next_frame
+from aeb_radar_camera.common.config.brake import BrakeConfig, BrakeSettings, SerialSettings
+from aeb_radar_camera.common.messages import BrakeState
+from aeb_radar_camera.services.brake.core import Outgoing
+from aeb_radar_camera.services.brake.protocol import SEQ_MODULO, Command, HostMode, decode, encode
+from aeb_radar_camera.services.brake.shell import BrakeShell, LineAhead, next_frame
+from aeb_radar_camera.tools.sim.actuator import SimActuator
 from tests.brake.helpers import keyring
 from tests.support import wait_for
-from tools.sim.actuator import SimActuator
 
 
 def test_a_failing_timer_tick_is_counted_and_the_deadline_still_holds(
@@ -48,7 +48,7 @@ def test_a_failing_timer_tick_is_counted_and_the_deadline_still_holds(
 
 
 def test_a_line_built_ahead_is_written_only_for_its_own_frame(monkeypatch: pytest.MonkeyPatch):
-    import services.brake.shell as shell_module
+    import aeb_radar_camera.services.brake.shell as shell_module
 
     built: list[Command] = []
 

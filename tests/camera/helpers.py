@@ -4,10 +4,10 @@ from pathlib import Path
 
 import cv2
 
-from common.calibration import Calibration
-from common.imaging import encode_jpeg
-from common.resources import EXAMPLE_CALIBRATION
-from tools.sim.moving_box import MovingBoxSource
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.sim.moving_box import MovingBoxSource
 
 CALIBRATION = str(EXAMPLE_CALIBRATION)
 WIDTH, HEIGHT = 848, 480

@@ -3,9 +3,9 @@ simulator's): a camera that stalls and fails, to exercise health and reopening."
 
 import time
 
-from services.camera.plugin import PluginContext
-from services.camera.source import Frame, SourceError
-from tools.sim.moving_box import MovingBoxSource
+from aeb_radar_camera.services.camera.plugin import PluginContext
+from aeb_radar_camera.services.camera.source import Frame, SourceError
+from aeb_radar_camera.tools.sim.moving_box import MovingBoxSource
 
 
 class StallingSource(MovingBoxSource):

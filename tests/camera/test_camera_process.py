@@ -6,9 +6,9 @@ import signal
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.imaging import decode_gray
-from common.keys import CAMERA_INFO, CAMERA_JPEG
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import decode_gray
+from aeb_radar_camera.common.keys import CAMERA_INFO, CAMERA_JPEG
 from tests.camera.helpers import CALIBRATION, folder_config, write_folder
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
 
@@ -24,7 +24,8 @@ def test_camera_process_publishes_frames_and_answers_info_queries(router, tmp_pa
         bus.subscribe(CAMERA_JPEG, frames, camera="front")
         infos = Collector()
         bus.subscribe(CAMERA_INFO, infos, camera="front")
-        cam = ServiceProcess("camera", python_module("services.camera", "-c", str(cfg)),
+        cam = ServiceProcess("camera", python_module("aeb_radar_camera.services.camera", "-c",
+                                                     str(cfg)),
                              tmp_path)
         try:
             watch.wait_alive("camera", "front")
@@ -91,7 +92,8 @@ options = {{ frames_per_open = 5, stall_s = 1.0 }}
         bus.subscribe(CAMERA_INFO, infos, camera="sim")
         frames = Collector()
         bus.subscribe(CAMERA_JPEG, frames, camera="sim")
-        cam = ServiceProcess("camera-sim", python_module("services.camera", "-c", str(cfg)),
+        cam = ServiceProcess("camera-sim", python_module("aeb_radar_camera.services.camera", "-c",
+                                                         str(cfg)),
                              tmp_path)
         try:
             watch.wait_alive("camera", "sim")

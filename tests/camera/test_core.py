@@ -5,9 +5,9 @@ import zlib
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.messages import CameraInfo, Header, decode, encode
-from services.camera.core import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import CameraInfo, Header, decode, encode
+from aeb_radar_camera.services.camera.core import (
     Backoff,
     CameraCore,
     Health,
@@ -15,7 +15,7 @@ from services.camera.core import (
     RateGate,
     camera_info,
 )
-from services.camera.source import Frame
+from aeb_radar_camera.services.camera.source import Frame
 from tests.camera.helpers import CALIBRATION
 
 MS = 1_000_000

@@ -6,10 +6,15 @@ import sys
 
 import pytest
 
-from common.config.camera import CameraConfig, FolderSource, RealSenseSource, SyntheticSource
-from common.config.loader import load_config
-from services.camera.main import main
-from services.camera.registry import check_source
+from aeb_radar_camera.common.config.camera import (
+    CameraConfig,
+    FolderSource,
+    RealSenseSource,
+    SyntheticSource,
+)
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.services.camera.main import main
+from aeb_radar_camera.services.camera.registry import check_source
 from tests.camera.helpers import CALIBRATION
 
 
@@ -40,7 +45,8 @@ def run_main(tmp_path, body: str, capsys) -> tuple[int, str]:
         (f'[camera]\ncalibration = "{CALIBRATION}"\n[camera.source]\nkind = "webcam"\n',
          "$.camera.source.kind"),
         (f'[camera]\ncalibration = "{CALIBRATION}"\n[camera.source]\nkind = "synthetic"\n'
-         'factory = "tools.nothing_here:make"\n', "cannot import module 'tools.nothing_here'"),
+         'factory = "aeb_radar_camera.tools.nothing_here:make"\n',
+         "cannot import module 'aeb_radar_camera.tools.nothing_here'"),
     ],
 )
 def test_bad_configuration_exits_2_naming_the_problem(tmp_path, capsys, body, says):

@@ -8,11 +8,11 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from common.imaging import decode_gray
-from common.messages import CompressedFrame
-from services.camera.core import Backoff, CameraCore, Health
-from services.camera.pipeline import FramePipeline
-from services.camera.source import (
+from aeb_radar_camera.common.imaging import decode_gray
+from aeb_radar_camera.common.messages import CompressedFrame
+from aeb_radar_camera.services.camera.core import Backoff, CameraCore, Health
+from aeb_radar_camera.services.camera.pipeline import FramePipeline
+from aeb_radar_camera.services.camera.source import (
     EndOfStream,
     Frame,
     FrameSource,
@@ -220,8 +220,8 @@ def depth_of(i: int, h: int = H, w: int = W) -> np.ndarray:
 
 
 def test_depth_goes_out_beside_its_frame_decimated_lossless_and_a_bad_one_is_counted():
-    from common.config.camera import DepthSettings
-    from common.depth_image import decode_depth
+    from aeb_radar_camera.common.config.camera import DepthSettings
+    from aeb_radar_camera.common.depth_image import decode_depth
 
     src = ScriptedSource()
     frames: list[CompressedFrame] = []

@@ -14,8 +14,8 @@ rs = pytest.importorskip(
     reason="optional extra not installed (pip install 'aeb-radar-camera[realsense]'); "
            "test_sources.py covers the wrapper with a stand-in")
 
-from services.camera.realsense import RealSenseSource  # noqa: E402
-from services.camera.source import EndOfStream, Frame  # noqa: E402
+from aeb_radar_camera.services.camera.realsense import RealSenseSource  # noqa: E402
+from aeb_radar_camera.services.camera.source import EndOfStream, Frame  # noqa: E402
 
 W, H, FPS, N = 848, 480, 30, 8
 

@@ -2,11 +2,11 @@
 
 import threading
 
-from common.calibration import Calibration
-from common.config.camera import CameraSettings, FolderSource
-from services.camera.folder import FolderSource as FolderFrames
-from services.camera.shell import CameraShell
-from services.camera.source import Frame, FrameSource, SourceConfigError
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.camera import CameraSettings, FolderSource
+from aeb_radar_camera.services.camera.folder import FolderSource as FolderFrames
+from aeb_radar_camera.services.camera.shell import CameraShell
+from aeb_radar_camera.services.camera.source import Frame, FrameSource, SourceConfigError
 from tests.camera.helpers import CALIBRATION, write_folder
 from tests.support import open_bus
 
@@ -65,7 +65,7 @@ class DepthFrames(FrameSource):
     def read(self) -> Frame:
         import numpy as np
 
-        from services.camera.source import EndOfStream
+        from aeb_radar_camera.services.camera.source import EndOfStream
 
         if self.i >= self.n:
             raise EndOfStream("done")
@@ -78,8 +78,8 @@ class DepthFrames(FrameSource):
 def test_a_source_with_depth_gets_it_published_beside_each_frame(router):
     import numpy as np
 
-    from common.depth_image import decode_depth
-    from common.keys import CAMERA_DEPTH, CAMERA_JPEG
+    from aeb_radar_camera.common.depth_image import decode_depth
+    from aeb_radar_camera.common.keys import CAMERA_DEPTH, CAMERA_JPEG
     from tests.support import Collector, wait_for
 
     cal = Calibration.load(CALIBRATION)

@@ -8,15 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.config.camera import CameraConfig
-from common.config.loader import parse_config
-from services.camera.folder import FolderSource, natural_key
-from services.camera.opencv_capture import OpenCVSource
-from services.camera.plugin import PluginContext, load_factory
-from services.camera.realsense import RealSenseSource, import_pyrealsense2
-from services.camera.registry import build_source
-from services.camera.source import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.camera import CameraConfig
+from aeb_radar_camera.common.config.loader import parse_config
+from aeb_radar_camera.services.camera.folder import FolderSource, natural_key
+from aeb_radar_camera.services.camera.opencv_capture import OpenCVSource
+from aeb_radar_camera.services.camera.plugin import PluginContext, load_factory
+from aeb_radar_camera.services.camera.realsense import RealSenseSource, import_pyrealsense2
+from aeb_radar_camera.services.camera.registry import build_source
+from aeb_radar_camera.services.camera.source import (
     EndOfStream,
     Frame,
     FrameSource,
@@ -24,8 +24,8 @@ from services.camera.source import (
     SourceConfigError,
     SourceError,
 )
+from aeb_radar_camera.tools.sim.moving_box import MovingBoxSource
 from tests.camera.helpers import CALIBRATION, write_folder
-from tools.sim.moving_box import MovingBoxSource
 
 
 class FakeTime:
@@ -253,7 +253,7 @@ def test_bad_plugin_is_a_clear_config_error(factory, says):
 
 
 def test_factory_path_format_is_checked_at_config_load_and_by_the_loader():
-    from common.config.loader import ConfigError
+    from aeb_radar_camera.common.config.loader import ConfigError
 
     with pytest.raises(ConfigError, match=r"\$\.camera\.source\.factory"):
         camera_config({"kind": "synthetic", "factory": "no_colon_here"})

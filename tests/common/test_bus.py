@@ -2,12 +2,12 @@ import threading
 
 import pytest
 
-from common.bus import Bus, BusError, zenoh_config
-from common.config.base import ZenohSettings
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-from common.messages import Decision, VerifierStatus, decode, encode
-from common.messages.fusion import BrakeCommand
-from common.messages.header import Header
+from aeb_radar_camera.common.bus import Bus, BusError, zenoh_config
+from aeb_radar_camera.common.config.base import ZenohSettings
+from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import Decision, VerifierStatus, decode, encode
+from aeb_radar_camera.common.messages.fusion import BrakeCommand
+from aeb_radar_camera.common.messages.header import Header
 from tests.support import Collector, HealthWatch, open_bus, wait_for
 
 
@@ -40,8 +40,8 @@ def test_bad_override_and_missing_file_are_bus_errors():
 def test_a_port_already_taken_is_a_bus_error():
     import socket
 
-    from common.bus import open_session
-    from common.config.base import ZenohMode
+    from aeb_radar_camera.common.bus import open_session
+    from aeb_radar_camera.common.config.base import ZenohMode
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
@@ -148,8 +148,8 @@ def test_client_started_before_its_router_connects_when_it_appears(tmp_path):
 
 def test_queryable_answers_typed_queries_and_failures_are_counted(router):
     """Bus.declare_queryable / Bus.query (added for CameraInfo)."""
-    from common.keys import CAMERA_INFO
-    from common.messages import CameraInfo
+    from aeb_radar_camera.common.keys import CAMERA_INFO
+    from aeb_radar_camera.common.messages import CameraInfo
 
     def info(camera: str) -> CameraInfo:
         return CameraInfo(
@@ -230,7 +230,7 @@ def test_put_bytes_publishes_the_payload_unchanged(router):
 def test_every_sample_carries_its_message_encoding(router):
     """What `z_sub`, a bridge or a recorder sees: msgpack with the message type as schema,
     on published samples and on query replies alike."""
-    from common.keys import CAMERA_INFO
+    from aeb_radar_camera.common.keys import CAMERA_INFO
     from tests.messages_support import example
 
     with open_bus(router, source="pub") as pub_bus, open_bus(router, source="sub") as sub_bus:

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from common.calibration import Calibration, Pose, pose_to_rt
-from common.config.loader import ConfigError
+from aeb_radar_camera.common.calibration import Calibration, Pose, pose_to_rt
+from aeb_radar_camera.common.config.loader import ConfigError
 
 REPO_CAL = "deploy/calibration/d435_848x480.toml"
 

@@ -3,7 +3,13 @@
 import can
 import pytest
 
-from common.messages.radar import CAN_ERROR, CAN_EXTENDED, CAN_REMOTE, can_frame, can_message
+from aeb_radar_camera.common.messages.radar import (
+    CAN_ERROR,
+    CAN_EXTENDED,
+    CAN_REMOTE,
+    can_frame,
+    can_message,
+)
 
 
 @pytest.mark.parametrize("extended, remote, error", [

@@ -3,8 +3,8 @@ import sys
 
 import pytest
 
-from common.config import ConfigError, ServiceConfig, ZenohMode, load_config
-from common.config.loader import parse_config
+from aeb_radar_camera.common.config import ConfigError, ServiceConfig, ZenohMode, load_config
+from aeb_radar_camera.common.config.loader import parse_config
 
 
 def write(tmp_path, text):
@@ -52,7 +52,8 @@ def test_missing_file_is_a_config_error(tmp_path):
 
 
 def test_router_with_bad_endpoint_exits_non_zero():
-    proc = subprocess.run([sys.executable, "-m", "common.router", "--listen", "nonsense"],
+    proc = subprocess.run([sys.executable, "-m", "aeb_radar_camera.common.router", "--listen",
+                           "nonsense"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert "error:" in proc.stderr

@@ -13,15 +13,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from common.config.brake import BrakeConfig
-from common.config.camera import CameraConfig
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config, parse_config
-from common.config.radar import RadarConfig
-from common.resources import DEPLOY
-from services.brake.core import BrakeCore
-from services.fusion.main import build_core
-from services.fusion.verifiers import VerifierConfigError
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.camera import CameraConfig
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.brake.core import BrakeCore
+from aeb_radar_camera.services.fusion.main import build_core
+from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError
 from tests.support import REPO
 
 # each type's shipped example (paths in it resolved): every field there, and the arrays
@@ -133,7 +133,8 @@ def test_contradictory_brake_timings_are_rejected(brake, named):
 def test_an_inf_in_the_file_exits_2_naming_the_field(tmp_path, service, text, named):
     path = tmp_path / f"{service}.toml"
     path.write_text(text)
-    res = subprocess.run([sys.executable, "-m", f"services.{service}", "--config", str(path),
+    res = subprocess.run([sys.executable, "-m", f"aeb_radar_camera.services.{service}", "--config",
+                          str(path),
                           "--check"], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert res.returncode == 2, res.stderr
     assert named in res.stderr and "Traceback" not in res.stderr

@@ -7,12 +7,17 @@ from pathlib import Path
 
 import pytest
 
-from common.calibration import Calibration
-from common.config.camera import CameraConfig, FolderSource, OpenCVSource, RealSenseSource
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config, parse_config
-from common.config.radar import RadarConfig
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.camera import (
+    CameraConfig,
+    FolderSource,
+    OpenCVSource,
+    RealSenseSource,
+)
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION
 
 
 @pytest.fixture
@@ -87,7 +92,7 @@ def test_fusions_default_calibration_is_the_shipped_example_from_anywhere(elsewh
 
 
 def test_a_relocated_copy_of_a_config_keeps_pointing_at_the_same_files(tmp_path):
-    from common.config.loader import relocated_text
+    from aeb_radar_camera.common.config.loader import relocated_text
 
     original = load_config(DEPLOY / "fusion.toml", FusionConfig)
     (tmp_path / "fusion.toml").write_text(relocated_text(DEPLOY / "fusion.toml", FusionConfig))
@@ -125,7 +130,7 @@ def test_the_fusion_service_exits_2_on_a_nul_byte_in_its_weights_path(tmp_path):
         '[fusion.verifier]\nname = "combined"\n'
         'params = { weights = "verifiers/w\\u0000.json", appearance = "hog_linear" }\n')
     for argv in (["--check"], []):
-        run = subprocess.run([sys.executable, "-m", "services.fusion.main", "-c",
+        run = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.fusion.main", "-c",
                               str(tmp_path / "fusion.toml"), *argv],
                              capture_output=True, text=True, timeout=120)
         assert run.returncode == 2, run.stderr

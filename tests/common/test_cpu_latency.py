@@ -5,7 +5,7 @@ import struct
 
 import pytest
 
-from common.cpu_latency import DEVICE, CpuLatencyRefused, cpu_latency
+from aeb_radar_camera.common.cpu_latency import DEVICE, CpuLatencyRefused, cpu_latency
 
 
 def _current_request_us() -> int:

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from common.depth_image import (
+from aeb_radar_camera.common.depth_image import (
     CODECS,
     DepthDecodeError,
     decode_depth,
@@ -11,9 +11,9 @@ from common.depth_image import (
     to_metres,
     to_units,
 )
-from common.keys import CAMERA_DEPTH, CAMERA_JPEG, REGISTRY
-from common.messages import DepthFrame, Header, decode, encode
-from common.messages.schema import zenoh_encoding
+from aeb_radar_camera.common.keys import CAMERA_DEPTH, CAMERA_JPEG, REGISTRY
+from aeb_radar_camera.common.messages import DepthFrame, Header, decode, encode
+from aeb_radar_camera.common.messages.schema import zenoh_encoding
 
 
 def depth_units(h: int = 48, w: int = 64) -> np.ndarray:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-import common
-from common.keys import REGISTRY, KeySpec
-from tools.keys import KEYS
+import aeb_radar_camera.common as common
+from aeb_radar_camera.common.keys import REGISTRY, KeySpec
+from aeb_radar_camera.tools.keys import KEYS
 
 ARCHITECTURE = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
 COMMON = Path(common.__file__).resolve().parent

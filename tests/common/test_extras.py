@@ -7,9 +7,9 @@ import tomllib
 
 import pytest
 
+from aeb_radar_camera.tools.commands import COMMANDS
 from tests.extras_support import run_without
 from tests.support import REPO
-from tools.commands import COMMANDS
 
 PYPROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())
 # distribution -> the module it provides
@@ -50,28 +50,36 @@ def test_the_blocker_blocks():
 
 @pytest.mark.parametrize("command", ["brake", "router", "up", "sim-actuator"])
 def test_the_base_install_runs(command):
-    r = run_without(OPTIONAL, "import sys\nfrom tools.cli import main\n"
+    r = run_without(OPTIONAL, "import sys\nfrom aeb_radar_camera.tools.cli import main\n"
                               f"sys.exit(main([{command!r}, '--help']))")
     assert r.returncode == 0, r.stderr
     assert "usage: aeb" in r.stdout
 
 
 @pytest.mark.parametrize(("extra", "modules"), [
-    ("radar", ["services.radar.main"]),
-    ("camera", ["services.camera.main", "tools.sim.moving_box"]),
-    ("fusion", ["services.fusion.main", "tools.calib.check"]),
-    ("monitor", ["tools.monitor.main"]),
-    ("vehicle", ["services.vehicle.main"]),
-    ("demo", ["tools.demo", "benchmarks.suite", "tools.sim.camera_source"]),
-    ("dbc", ["tools.can_export", "cantools", "can"]),
+    ("radar", ["aeb_radar_camera.services.radar.main"]),
+    ("camera", ["aeb_radar_camera.services.camera.main", "aeb_radar_camera.tools.sim.moving_box"]),
+    ("fusion", ["aeb_radar_camera.services.fusion.main", "aeb_radar_camera.tools.calib.check"]),
+    ("monitor", ["aeb_radar_camera.tools.monitor.main"]),
+    ("vehicle", ["aeb_radar_camera.services.vehicle.main"]),
+    ("demo", ["aeb_radar_camera.tools.demo", "benchmarks.suite",
+              "aeb_radar_camera.tools.sim.camera_source"]),
+    ("dbc", ["aeb_radar_camera.tools.can_export", "cantools", "can"]),
     # what the recording commands import once their arguments are read
-    ("record", ["tools.recording.record", "tools.recording.recorder",
-                "tools.recording.foxglove_views", "tools.recording.reader",
-                "tools.recording.writer", "tools.recording.rerun_fusion",
-                "tools.recording.rerun_radar", "tools.recording.evidence_frames",
-                "tools.recording.replay", "tools.foxglove.bridge", "tools.ab.main"]),
-    ("eval", ["tools.eval.cli", "tools.eval.train_verifier", "tools.eval.frames",
-              "tools.eval.sampling", "tools.eval.labelweb", "distributed"]),
+    ("record", ["aeb_radar_camera.tools.recording.record",
+                "aeb_radar_camera.tools.recording.recorder",
+                "aeb_radar_camera.tools.recording.foxglove_views",
+                "aeb_radar_camera.tools.recording.reader",
+                "aeb_radar_camera.tools.recording.writer",
+                "aeb_radar_camera.tools.recording.rerun_fusion",
+                "aeb_radar_camera.tools.recording.rerun_radar",
+                "aeb_radar_camera.tools.recording.evidence_frames",
+                "aeb_radar_camera.tools.recording.replay",
+                "aeb_radar_camera.tools.foxglove.bridge", "aeb_radar_camera.tools.ab.main"]),
+    ("eval", ["aeb_radar_camera.tools.eval.cli", "aeb_radar_camera.tools.eval.train_verifier",
+              "aeb_radar_camera.tools.eval.frames",
+              "aeb_radar_camera.tools.eval.sampling", "aeb_radar_camera.tools.eval.labelweb",
+              "distributed"]),
 ])
 def test_each_roles_extra_is_enough_for_its_commands(extra, modules):
     imports = "\n".join(f"import {m}" for m in modules)
@@ -80,7 +88,7 @@ def test_each_roles_extra_is_enough_for_its_commands(extra, modules):
 
 
 def test_a_missing_extra_is_named_not_a_traceback():
-    r = run_without({"can"}, "import sys\nfrom tools.cli import main\n"
+    r = run_without({"can"}, "import sys\nfrom aeb_radar_camera.tools.cli import main\n"
                              "sys.exit(main(['radar', '--config', 'deploy/radar.toml']))")
     assert r.returncode == 2
     assert "pip install 'aeb-radar-camera[radar]'" in r.stderr
@@ -95,8 +103,8 @@ DESCRIBED_ONLY = {"radar", "camera", "fusion", "vehicle", "calib-check", "demo",
 def test_every_commands_help_works_without_any_extra():
     code = (
         "import contextlib, io, json, sys\n"
-        "from tools.cli import main\n"
-        "from tools.commands import COMMANDS\n"
+        "from aeb_radar_camera.tools.cli import main\n"
+        "from aeb_radar_camera.tools.commands import COMMANDS\n"
         "out = {}\n"
         "for name in COMMANDS:\n"
         "    buf = io.StringIO()\n"
@@ -128,7 +136,7 @@ def test_every_commands_help_works_without_any_extra():
 ])
 def test_eval_and_train_verifier_list_their_options_without_the_eval_extra(argv, wanted):
     # Described and with every option, not only "needs the package".
-    r = run_without(OPTIONAL, "import sys\nfrom tools.cli import main\n"
+    r = run_without(OPTIONAL, "import sys\nfrom aeb_radar_camera.tools.cli import main\n"
                               f"sys.exit(main({argv!r}))")
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith(f"usage: aeb {argv[0]}") and "pip install" not in r.stdout

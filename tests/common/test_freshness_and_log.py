@@ -4,9 +4,9 @@ import sys
 
 import pytest
 
-from common.freshness import Freshness, FreshnessTracker
-from common.keys import RADAR_TRACKS
-from common.log import RateLimitedLog, kv, setup_logging
+from aeb_radar_camera.common.freshness import Freshness, FreshnessTracker
+from aeb_radar_camera.common.keys import RADAR_TRACKS
+from aeb_radar_camera.common.log import RateLimitedLog, kv, setup_logging
 
 S = 1_000_000_000
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from common.imaging import ImageDecodeError, decode_gray, encode_jpeg
+from aeb_radar_camera.common.imaging import ImageDecodeError, decode_gray, encode_jpeg
 
 
 def frame() -> bytes:

@@ -1,6 +1,6 @@
 import pytest
 
-from common.keys import FUSION_BRAKE_CMD, HEALTH, RADAR_TRACKS, REGISTRY
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, HEALTH, RADAR_TRACKS, REGISTRY
 
 
 def test_keys_live_under_the_vehicle_prefix():

@@ -1,7 +1,7 @@
 import msgspec
 import pytest
 
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     Decision,
     DecodeError,
@@ -12,7 +12,7 @@ from common.messages import (
     decode,
     encode,
 )
-from common.messages.radar import OutputMode
+from aeb_radar_camera.common.messages.radar import OutputMode
 from tests.messages_support import example
 
 
@@ -61,7 +61,7 @@ def test_other_schema_version_is_rejected():
 
 def struct_types() -> list[type[msgspec.Struct]]:
     """Every message struct defined in common/messages/, nested ones included."""
-    import common.messages as package
+    import aeb_radar_camera.common.messages as package
 
     found = {c for name in dir(package)
              if isinstance(c := getattr(package, name), type) and issubclass(c, msgspec.Struct)}

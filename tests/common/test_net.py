@@ -1,7 +1,7 @@
 import re
 import socket
 
-from common.net import free_endpoint, free_port
+from aeb_radar_camera.common.net import free_endpoint, free_port
 
 
 def test_a_free_port_can_be_bound_on_loopback():

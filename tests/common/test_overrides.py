@@ -10,15 +10,15 @@ from pathlib import Path
 
 import pytest
 
-from common.config import ConfigError, load_config
-from common.config.brake import BrakeConfig
-from common.config.camera import CameraConfig, OpenCVSource
-from common.config.fusion import FusionConfig
-from common.config.overrides import OverrideError, parse_set
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
-from common.service import load_service_config, service_argparser
-from services.brake.main import SHORTCUTS as BRAKE_SHORTCUTS
-from services.fusion.main import SHORTCUTS as FUSION_SHORTCUTS
+from aeb_radar_camera.common.config import ConfigError, load_config
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.camera import CameraConfig, OpenCVSource
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.overrides import OverrideError, parse_set
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from aeb_radar_camera.common.service import load_service_config, service_argparser
+from aeb_radar_camera.services.brake.main import SHORTCUTS as BRAKE_SHORTCUTS
+from aeb_radar_camera.services.fusion.main import SHORTCUTS as FUSION_SHORTCUTS
 
 
 def fusion(tmp_path: Path, *sets: str, text: str = "[fusion]\ninstance = 'a'\n") -> FusionConfig:
@@ -108,7 +108,7 @@ def test_the_options_that_stand_for_a_setting(tmp_path):
 
 @pytest.mark.parametrize("service", ["radar", "camera", "fusion", "brake"])
 def test_every_service_refuses_an_unknown_setting_at_check(service):
-    proc = subprocess.run([sys.executable, "-m", f"services.{service}", "--check",
+    proc = subprocess.run([sys.executable, "-m", f"aeb_radar_camera.services.{service}", "--check",
                            "--set", f"{service}.no_such_key=1"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
@@ -117,7 +117,7 @@ def test_every_service_refuses_an_unknown_setting_at_check(service):
 
 
 def test_check_takes_a_valid_override_as_a_start_would():
-    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
+    proc = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.fusion", "-c",
                            str(DEPLOY / "fusion.toml"), "--check", "--set",
                            "fusion.verifier.params.confirm_llr=2.0"],
                           capture_output=True, text=True, timeout=120)
@@ -126,7 +126,7 @@ def test_check_takes_a_valid_override_as_a_start_would():
 
 
 def test_check_refuses_a_parameter_the_verifier_does_not_have():
-    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
+    proc = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.fusion", "-c",
                            str(DEPLOY / "fusion.toml"), "--check", "--set",
                            "fusion.verifier.params.tau=0.03"],
                           capture_output=True, text=True, timeout=120)

@@ -3,8 +3,8 @@ at any higher rate, and off rate below it; a fixed-rate key is off rate both way
 
 import pytest
 
-from common.freshness import Freshness
-from common.keys import BRAKE_STATUS, RADAR_STATUS, RADAR_TRACKS
+from aeb_radar_camera.common.freshness import Freshness
+from aeb_radar_camera.common.keys import BRAKE_STATUS, RADAR_STATUS, RADAR_TRACKS
 
 S = 1_000_000_000
 

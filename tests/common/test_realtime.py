@@ -12,10 +12,10 @@ from collections.abc import Iterator
 
 import pytest
 
-from common import realtime
-from common.config.realtime import RealtimeSettings
-from common.keys import BRAKE_STATUS
-from common.realtime import ThreadRealtime, apply_process, zenoh_io_threads
+from aeb_radar_camera.common import realtime
+from aeb_radar_camera.common.config.realtime import RealtimeSettings
+from aeb_radar_camera.common.keys import BRAKE_STATUS
+from aeb_radar_camera.common.realtime import ThreadRealtime, apply_process, zenoh_io_threads
 from tests.support import ServiceProcess, free_port, open_bus, port_open, python_module, wait_for
 
 LOG = logging.getLogger("test.realtime")
@@ -165,7 +165,8 @@ def test_other_threads_go_one_below_and_real_time_ones_keep_their_priority(resto
 def test_router_flag_makes_every_router_thread_fifo(tmp_path):
     port = free_port()
     proc = ServiceProcess("router", python_module(
-        "common.router", "--listen", f"tcp/127.0.0.1:{port}", "--realtime-priority", "4"),
+        "aeb_radar_camera.common.router", "--listen", f"tcp/127.0.0.1:{port}",
+        "--realtime-priority", "4"),
         tmp_path)
     try:
         wait_for(lambda: port_open(port), 60, 0.05, "router port")

@@ -13,10 +13,10 @@ from contextlib import contextmanager
 
 import pytest
 
-from common.bus import zenoh_message
-from common.net import free_port
-from common.resources import DEPLOY
-from common.router import bind_failure, probe
+from aeb_radar_camera.common.bus import zenoh_message
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.common.router import bind_failure, probe
 from tests.support import (
     REPO,
     START_TIMEOUT_S,
@@ -72,7 +72,7 @@ def waiting_router(tmp_path, argv: list[str]) -> ServiceProcess:
 def test_a_port_still_held_is_waited_for_then_served(tmp_path):
     with held_port() as (port, holder):
         router = waiting_router(tmp_path, python_module(
-            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"))
+            "aeb_radar_camera.tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"))
         try:
             log = router.output()
             assert f"endpoint=tcp/127.0.0.1:{port}" in log and "already in use" in log
@@ -92,7 +92,7 @@ def test_a_port_still_held_is_waited_for_then_served(tmp_path):
 def test_a_router_stopped_while_it_waits_exits_cleanly(tmp_path):
     with held_port() as (port, _):
         router = waiting_router(tmp_path, python_module(
-            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"))
+            "aeb_radar_camera.tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"))
         try:
             router.signal(signal.SIGINT)
             assert router.proc.wait(30) == 0, router.output()
@@ -104,7 +104,7 @@ def test_check_says_what_it_saw_of_each_address_not_just_ok():
     with held_port() as (port, _):
         free = free_port()
         done = subprocess.run(python_module(
-            "tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--listen",
+            "aeb_radar_camera.tools.cli", "router", "--listen", f"tcp/127.0.0.1:{port}", "--listen",
             f"tcp/127.0.0.1:{free}", "--check"), capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert f"tcp/127.0.0.1:{port} not available now: Address already in use" in done.stdout
@@ -139,7 +139,7 @@ def test_ecu_as_router_waits_for_its_vehicle_network_address(tmp_path):
     # namespace of its own) whose address comes up after the router started
     with namespace() as ns:
         router = waiting_router(tmp_path, ["ip", "netns", "exec", ns, *python_module(
-            "tools.cli", "router", "--config-file",
+            "aeb_radar_camera.tools.cli", "router", "--config-file",
             str(DEPLOY / "zenoh" / "ecu-a-router.json5"))])
         try:
             assert "endpoint=tcp/192.168.10.1:7447" in router.output()
@@ -148,7 +148,8 @@ def test_ecu_as_router_waits_for_its_vehicle_network_address(tmp_path):
                      START_TIMEOUT_S, 0.05, "the router to serve")
             assert router.alive(), router.output()
             reached = subprocess.run(["ip", "netns", "exec", ns, sys.executable, "-c",
-                                      "import sys; from common.net import port_open; "
+                                      "import sys; "
+                                      "from aeb_radar_camera.common.net import port_open; "
                                       "sys.exit(not port_open(7447, '192.168.10.1'))"],
                                      capture_output=True, text=True, timeout=60, cwd=REPO)
             assert reached.returncode == 0, reached.stderr

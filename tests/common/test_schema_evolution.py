@@ -5,7 +5,7 @@ a newer subscriber. Breaking changes bump the schema version, which is rejected.
 import msgspec
 import pytest
 
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     SCHEMA_VERSION,
     DecodeError,
     Header,
@@ -15,7 +15,7 @@ from common.messages import (
     decode,
     encode,
 )
-from common.messages.schema import zenoh_encoding
+from aeb_radar_camera.common.messages.schema import zenoh_encoding
 from tests.messages_support import example, message_types
 
 TYPES = message_types()

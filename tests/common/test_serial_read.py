@@ -7,7 +7,7 @@ import time
 import pytest
 import serial
 
-from common.serial_read import read_available
+from aeb_radar_camera.common.serial_read import read_available
 
 
 def test_reads_all_waiting_bytes_times_out_empty_and_fails_when_the_other_end_goes():

@@ -10,7 +10,7 @@ from tests.support import wait_for
 
 HANGS = """
 import sys, time
-from common.service import stop_event_on_signals
+from aeb_radar_camera.common.service import stop_event_on_signals
 stop = stop_event_on_signals(grace_s=float(sys.argv[1]))
 print("ready", flush=True)
 stop.wait()
@@ -18,7 +18,7 @@ time.sleep(600)      # a stop path that never finishes
 """
 
 CLEAN = """
-from common.service import stop_event_on_signals
+from aeb_radar_camera.common.service import stop_event_on_signals
 stop = stop_event_on_signals(grace_s=600.0)
 print("ready", flush=True)
 stop.wait()

@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from common import systemd
+from aeb_radar_camera.common import systemd
 from tests.notify_support import NotifyListener
 
 

@@ -4,9 +4,9 @@ count per gap; late, out-of-order and future stamps handled and counted."""
 
 import pytest
 
-from common.keys import EGO_MOTION, VEHICLE_DRIVER
-from common.messages import EgoMotion, Header
-from common.vehicle_state import StateFreshness, StateInput, VehicleState
+from aeb_radar_camera.common.keys import EGO_MOTION, VEHICLE_DRIVER
+from aeb_radar_camera.common.messages import EgoMotion, Header
+from aeb_radar_camera.common.vehicle_state import StateFreshness, StateInput, VehicleState
 
 MS = 1_000_000
 WALL = 1_700_000_000_000_000_000

@@ -15,18 +15,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common.calibration import Calibration
-from common.depth_image import encode_depth, to_units
-from common.imaging import encode_jpeg
-from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
-from common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_image import encode_depth, to_units
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS
+from aeb_radar_camera.common.messages import CameraInfo, CompressedFrame, DepthFrame, Header
+from aeb_radar_camera.tools.eval.depth import box_scene_depth
+from aeb_radar_camera.tools.keys import SIM_WORLD
+from aeb_radar_camera.tools.messages import ObjectKind, SimObject, SimWorld
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
+from aeb_radar_camera.tools.sim.scenario import DEFAULT_SIZE
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from tests.fusion.helpers import CAL, T0, cycle, track
-from tools.eval.depth import box_scene_depth
-from tools.keys import SIM_WORLD
-from tools.messages import ObjectKind, SimObject, SimWorld
-from tools.recording.writer import RecordingWriter
-from tools.sim.scenario import DEFAULT_SIZE
-from tools.sim.scenes import Obstacle, Scene, render
 
 MS = 1_000_000
 FRAME_NS = 33_333_333

@@ -6,8 +6,14 @@ from collections.abc import Mapping
 import numpy as np
 import pytest
 
-from services.fusion import verifiers
-from services.fusion.verifiers import GateResult, Observation, ParamValue
+from aeb_radar_camera.services.fusion import verifiers
+from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation, ParamValue
+from aeb_radar_camera.tools.eval.adapters import detect, frame_ids, kitti
+from aeb_radar_camera.tools.eval.adapters.paper_rois import scaled
+from aeb_radar_camera.tools.eval.dataset_rois import DatasetSettings, dataset_records
+from aeb_radar_camera.tools.eval.frames import load_gray
+from aeb_radar_camera.tools.eval.scoring import Scorer, VerifierSpec, default_specs
+from aeb_radar_camera.tools.sim.world import nearest_point
 from tests.eval.fixtures import (
     KITTI_BOXES,
     KITTI_P2,
@@ -19,12 +25,6 @@ from tests.eval.fixtures import (
     write_kitti,
     write_vod,
 )
-from tools.eval.adapters import detect, frame_ids, kitti
-from tools.eval.adapters.paper_rois import scaled
-from tools.eval.dataset_rois import DatasetSettings, dataset_records
-from tools.eval.frames import load_gray
-from tools.eval.scoring import Scorer, VerifierSpec, default_specs
-from tools.sim.world import nearest_point
 
 FOCAL = 449.0
 

@@ -5,10 +5,10 @@ import json
 
 import pytest
 
+from aeb_radar_camera.tools.cli import main as aeb
+from aeb_radar_camera.tools.eval.records import read_records
+from aeb_radar_camera.tools.eval.scoring import default_specs
 from tests.eval.fixtures import write_kitti, write_sim_recording
-from tools.cli import main as aeb
-from tools.eval.records import read_records
-from tools.eval.scoring import default_specs
 
 
 @pytest.fixture(scope="module")

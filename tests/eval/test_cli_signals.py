@@ -33,7 +33,7 @@ def alive(pid: int) -> bool:
 def test_a_signal_stops_the_run_and_its_workers(tmp_path, sig):
     split = write_kitti(tmp_path / "kitti", n_frames=8)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tools.cli", "eval", "rois", str(split), "--out",
+        [sys.executable, "-m", "aeb_radar_camera.tools.cli", "eval", "rois", str(split), "--out",
          str(tmp_path / "out"), "--jobs", "2", "--frames-per-task", "1"],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))

@@ -3,9 +3,9 @@ ROIs and scores as local processes."""
 
 import pytest
 
+from aeb_radar_camera.tools.cli import main as aeb
+from aeb_radar_camera.tools.eval.records import read_records
 from tests.eval.fixtures import write_kitti, write_sim_recording
-from tools.cli import main as aeb
-from tools.eval.records import read_records
 
 distributed = pytest.importorskip("distributed", reason="the eval extra (dask[distributed])")
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tools.eval.depth import D435Noise, project_depth
+from aeb_radar_camera.tools.eval.depth import D435Noise, project_depth
 
 K = np.array([[100.0, 0.0, 20.0], [0.0, 100.0, 10.0], [0.0, 0.0, 1.0]])
 

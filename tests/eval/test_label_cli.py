@@ -10,13 +10,13 @@ import threading
 
 import pytest
 
+from aeb_radar_camera.tools.commands import DEFAULT_PORTS, port_in_use
+from aeb_radar_camera.tools.eval.labelweb import LabelSession, make_server, pick_sample
+from aeb_radar_camera.tools.eval.recording import RecordingSettings, recording_records
+from aeb_radar_camera.tools.eval.records import read_records, write_records
+from aeb_radar_camera.tools.eval.scoring import Scorer, default_specs
 from tests.eval.fixtures import write_sim_recording
 from tests.support import REPO, python_module
-from tools.commands import DEFAULT_PORTS, port_in_use
-from tools.eval.labelweb import LabelSession, make_server, pick_sample
-from tools.eval.recording import RecordingSettings, recording_records
-from tools.eval.records import read_records, write_records
-from tools.eval.scoring import Scorer, default_specs
 
 
 @pytest.fixture
@@ -91,7 +91,8 @@ def test_label_on_a_port_in_use_is_exit_2_saying_so(rois_written_from_their_fold
         holder.listen()
         port = holder.getsockname()[1]
         done = subprocess.run(python_module(
-            "tools.cli", "label", str(rois_written_from_their_folder), "--include-truth",
+            "aeb_radar_camera.tools.cli", "label", str(rois_written_from_their_folder),
+            "--include-truth",
             "--labels", str(tmp_path / "labels.tsv"), "--port", str(port)),
             capture_output=True, text=True, timeout=120, cwd=REPO)
     assert done.returncode == 2, done.stderr

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 from websockets.sync.client import ClientConnection, connect
 
+from aeb_radar_camera.tools.eval.labels import read_labels
+from aeb_radar_camera.tools.eval.labelweb import LabelSession, make_server, pick_sample
+from aeb_radar_camera.tools.eval.recording import RecordingSettings, recording_records
+from aeb_radar_camera.tools.eval.scoring import Scorer, default_specs
 from tests.eval.fixtures import write_sim_recording
 from tests.support import wait_for
-from tools.eval.labels import read_labels
-from tools.eval.labelweb import LabelSession, make_server, pick_sample
-from tools.eval.recording import RecordingSettings, recording_records
-from tools.eval.scoring import Scorer, default_specs
 
 pytestmark = pytest.mark.slow
 

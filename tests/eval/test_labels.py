@@ -2,7 +2,7 @@
 
 import pytest
 
-from tools.eval.labels import (
+from aeb_radar_camera.tools.eval.labels import (
     Label,
     LabelFileError,
     LabelWriter,
@@ -10,9 +10,9 @@ from tools.eval.labels import (
     resolve,
     truth_labels,
 )
-from tools.eval.labelweb import LabelSession, pick_sample
-from tools.eval.records import FrameRef, RoiRecord
-from tools.eval.sampling import density_band, stratified, stratum_key
+from aeb_radar_camera.tools.eval.labelweb import LabelSession, pick_sample
+from aeb_radar_camera.tools.eval.records import FrameRef, RoiRecord
+from aeb_radar_camera.tools.eval.sampling import density_band, stratified, stratum_key
 
 
 def rec(i, density=0.03, lighting="day", truth=None, session="s1"):

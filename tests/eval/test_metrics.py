@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tools.eval import metrics
+from aeb_radar_camera.tools.eval import metrics
 
 
 def brute_auc(scores, labels):

@@ -3,8 +3,8 @@ tool prints the paper's Table III, Table IV and Table V with its figures."""
 
 import json
 
-from tools.eval import paper
-from tools.eval.cli import main
+from aeb_radar_camera.tools.eval import paper
+from aeb_radar_camera.tools.eval.cli import main
 
 # The paper's Table III (metric: deployed tau 0.025, Youden-optimal tau 0.080).
 TABLE_III = {

@@ -8,14 +8,20 @@ import msgspec
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.config.fusion import FusionConfig
-from common.config.loader import parse_config
-from common.imaging import decode_gray
-from common.keys import CAMERA_INFO
-from common.messages import CompressedFrame, decode
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import Observation, create
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import parse_config
+from aeb_radar_camera.common.imaging import decode_gray
+from aeb_radar_camera.common.keys import CAMERA_INFO
+from aeb_radar_camera.common.messages import CompressedFrame, decode
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import Observation, create
+from aeb_radar_camera.tools.eval import sim_truth
+from aeb_radar_camera.tools.eval.frames import frame_digest
+from aeb_radar_camera.tools.eval.recording import RecordingSettings, recording_records
+from aeb_radar_camera.tools.eval.scoring import Scorer, VerifierSpec, default_specs
+from aeb_radar_camera.tools.recording.reader import Recording, RecordingError
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
 from tests.eval.fixtures import (
     BOX_SPEED,
     GHOST_XY,
@@ -25,12 +31,6 @@ from tests.eval.fixtures import (
     write_sim_recording,
 )
 from tests.fusion.helpers import CAL
-from tools.eval import sim_truth
-from tools.eval.frames import frame_digest
-from tools.eval.recording import RecordingSettings, recording_records
-from tools.eval.scoring import Scorer, VerifierSpec, default_specs
-from tools.recording.reader import Recording, RecordingError
-from tools.recording.writer import RecordingWriter
 
 MAX_SKEW_NS = 100_000_000
 

@@ -6,10 +6,15 @@ and what is left out and why."""
 import msgspec
 import pytest
 
-from tools.eval import tables
-from tools.eval.options import PAPER_SWEEP
-from tools.eval.records import FrameRef, RoiRecord, Score
-from tools.eval.report import ReportSettings, evaluate, evaluate_all, negative_category
+from aeb_radar_camera.tools.eval import tables
+from aeb_radar_camera.tools.eval.options import PAPER_SWEEP
+from aeb_radar_camera.tools.eval.records import FrameRef, RoiRecord, Score
+from aeb_radar_camera.tools.eval.report import (
+    ReportSettings,
+    evaluate,
+    evaluate_all,
+    negative_category,
+)
 
 
 def rec(i, score, kind, truth, in_view=False, cls="", lighting="day", range_m=10.0,

@@ -11,16 +11,16 @@ import cv2
 import numpy as np
 import pytest
 
-from services.fusion.roi import Roi
-from services.fusion.verifiers import Observation, create
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.verifiers import Observation, create
+from aeb_radar_camera.tools.eval import evaluate as eval_run
+from aeb_radar_camera.tools.eval import labels as labelfile
+from aeb_radar_camera.tools.eval.cli import main as eval_cli_main
+from aeb_radar_camera.tools.eval.frames import frame_digest, load_gray
+from aeb_radar_camera.tools.eval.records import FrameRef, RoiRecord, read_records, write_records
+from aeb_radar_camera.tools.eval.train_verifier import main
+from aeb_radar_camera.tools.eval.training import fold_of, tau_for_recall
 from tests.fusion.test_appearance import COLUMN, ROI, bars
-from tools.eval import evaluate as eval_run
-from tools.eval import labels as labelfile
-from tools.eval.cli import main as eval_cli_main
-from tools.eval.frames import frame_digest, load_gray
-from tools.eval.records import FrameRef, RoiRecord, read_records, write_records
-from tools.eval.train_verifier import main
-from tools.eval.training import fold_of, tau_for_recall
 
 
 def roi_set(tmp: Path, frames: int = 24, scenario=lambda i: "", session: str = "synthetic",

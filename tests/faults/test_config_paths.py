@@ -5,10 +5,10 @@ configuration error (exit 2)."""
 
 import pytest
 
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, parse_config
-from common.config.radar import RadarConfig
-from services.radar.ports import ConfigurationError, check_settings
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, parse_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.services.radar.ports import ConfigurationError, check_settings
 
 
 def test_a_nul_byte_in_a_config_path_is_a_config_error():

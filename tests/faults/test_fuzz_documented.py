@@ -10,7 +10,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 DOC = REPO / "docs" / "reliability.md"
-COMMAND = "python -m tools.faults.fuzz --scale 0.1 --seed 19"
+COMMAND = "python -m aeb_radar_camera.tools.faults.fuzz --scale 0.1 --seed 19"
 
 
 def documented(command: str) -> tuple[int, int]:
@@ -25,7 +25,8 @@ def documented(command: str) -> tuple[int, int]:
 def test_the_ci_scale_fuzz_run_finds_no_crash_and_the_documented_count(tmp_path):
     inputs, crashes = documented(COMMAND)
     argv = COMMAND.split()[3:]
-    run = subprocess.run([sys.executable, "-m", "tools.faults.fuzz", *argv, "--out",
+    run = subprocess.run([sys.executable, "-m", "aeb_radar_camera.tools.faults.fuzz", *argv,
+                          "--out",
                           str(tmp_path)], capture_output=True, text=True, timeout=280,
                          cwd=REPO)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]

@@ -8,12 +8,12 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
-from tools.faults.catalogue import Outcome
-from tools.faults.harness import Record, RunInfo
-from tools.faults.links import CanGate, RelayLink
-from tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
-from tools.faults.report import markdown, rows, write
-from tools.faults.robust import run_dir
+from aeb_radar_camera.tools.faults.catalogue import Outcome
+from aeb_radar_camera.tools.faults.harness import Record, RunInfo
+from aeb_radar_camera.tools.faults.links import CanGate, RelayLink
+from aeb_radar_camera.tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
+from aeb_radar_camera.tools.faults.report import markdown, rows, write
+from aeb_radar_camera.tools.faults.robust import run_dir
 
 
 class ListSink:
@@ -115,7 +115,7 @@ def test_table_counts_injections_bounds_and_losses(tmp_path):
 
 
 def test_tables_of_two_runs_combine_into_one(tmp_path):
-    from tools.faults.report import combine
+    from aeb_radar_camera.tools.faults.report import combine
     a, b = Record("SIGKILL radar", "FAILSAFE"), Record("frozen camera", "unavailable")
     a.outcomes, a.recover_s = [Outcome(True, 200.0, bound_ms=260.0)] * 3, [1.0] * 3
     b.skipped = "not in this run"

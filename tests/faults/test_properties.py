@@ -13,23 +13,23 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from common.command_auth import KeyFileError
-from common.config.brake import BrakeConfig
-from common.config.loader import ConfigError, parse_config
-from common.config.radar import EgoMotionSettings, RadarSettings
-from common.keys import FUSION_BRAKE_CMD
-from common.messages import EgoMotion, Header
-from common.messages.codec import DecodeError, decode
-from common.resources import DEPLOY
-from services.brake.core import BrakeCore
-from services.brake.protocol import BadLine, LineReader, ProtocolError
-from services.brake.protocol import decode as decode_line
-from services.radar.ars408.table import ID_TABLE, classify
-from services.radar.core import RadarCore
-from services.radar.ego import EgoMotionForwarder
-from tools.faults import fuzz
-from tools.faults.mutate import EXTREMES, mutate_bytes, mutate_tree
-from tools.faults.samples import example, message_types
+from aeb_radar_camera.common.command_auth import KeyFileError
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.loader import ConfigError, parse_config
+from aeb_radar_camera.common.config.radar import EgoMotionSettings, RadarSettings
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import EgoMotion, Header
+from aeb_radar_camera.common.messages.codec import DecodeError, decode
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.brake.core import BrakeCore
+from aeb_radar_camera.services.brake.protocol import BadLine, LineReader, ProtocolError
+from aeb_radar_camera.services.brake.protocol import decode as decode_line
+from aeb_radar_camera.services.radar.ars408.table import ID_TABLE, classify
+from aeb_radar_camera.services.radar.core import RadarCore
+from aeb_radar_camera.services.radar.ego import EgoMotionForwarder
+from aeb_radar_camera.tools.faults import fuzz
+from aeb_radar_camera.tools.faults.mutate import EXTREMES, mutate_bytes, mutate_tree
+from aeb_radar_camera.tools.faults.samples import example, message_types
 
 FAST = settings(max_examples=200, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow])
@@ -119,14 +119,14 @@ def test_mutated_brake_config_is_rejected_with_config_error_or_starts(seed):
 
 
 def _resolved(tree: dict) -> BrakeConfig:
-    from common.config.loader import resolve_paths
+    from aeb_radar_camera.common.config.loader import resolve_paths
     return resolve_paths(parse_config(tree, BrakeConfig, "brake.toml"), DEPLOY)
 
 
 @FAST
 @given(st.binary(max_size=120))
 def test_a_garbled_candump_line_never_escapes_the_replay_port(tmp_path_factory, junk):
-    from services.radar.ports import Pace, ReplayPort
+    from aeb_radar_camera.services.radar.ports import Pace, ReplayPort
     path: Path = tmp_path_factory.mktemp("candump") / "replay.log"
     good = fuzz.candump_seed()[:2]
     path.write_bytes(good[0].encode() + junk + b"\n" + good[1].encode())

@@ -8,8 +8,8 @@ import json
 
 import pytest
 
-from tools.faults import harness, report
-from tools.faults.registry import all_faults
+from aeb_radar_camera.tools.faults import harness, report
+from aeb_radar_camera.tools.faults.registry import all_faults
 
 pytestmark = pytest.mark.slow
 

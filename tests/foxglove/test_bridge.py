@@ -19,8 +19,8 @@ import pytest
 import websockets
 from websockets.typing import Subprotocol
 
-from common.imaging import decode_gray
-from common.net import free_port
+from aeb_radar_camera.common.imaging import decode_gray
+from aeb_radar_camera.common.net import free_port
 from tests.foxglove.protobuf import decode
 from tests.recording.publish import HEIGHT, WIDTH, StackPublisher
 from tests.support import START_TIMEOUT_S, HealthWatch, ServiceProcess, open_bus, python_module
@@ -68,7 +68,8 @@ async def receive(port: int, wanted: dict[str, int], timeout_s: float):
 def start_bridge(router, tmp_path, *extra):
     port = free_port()
     proc = ServiceProcess("foxglove", python_module(
-        "tools.cli", "foxglove", "--connect", router, "--port", str(port), *extra), tmp_path)
+        "aeb_radar_camera.tools.cli", "foxglove", "--connect", router, "--port", str(port),
+        *extra), tmp_path)
     return proc, port
 
 
@@ -141,7 +142,7 @@ def test_a_port_in_use_is_exit_2_saying_so_before_any_bus(tmp_path):
         holder.listen()
         port = holder.getsockname()[1]
         done = subprocess.run(python_module(
-            "tools.cli", "foxglove", "--port", str(port), "--connect",
+            "aeb_radar_camera.tools.cli", "foxglove", "--port", str(port), "--connect",
             f"tcp/127.0.0.1:{free_port()}"), capture_output=True, text=True, timeout=60)
     assert done.returncode == 2, done.stderr
     assert f"127.0.0.1:{port} is in use" in done.stderr and "--port" in done.stderr

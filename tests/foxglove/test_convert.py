@@ -8,20 +8,20 @@ import msgspec
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.messages import Decision, Verification
-from common.resources import EXAMPLE_CALIBRATION
-from tests.eval.fixtures import camera_info
-from tests.foxglove.protobuf import decode
-from tests.recording.publish import textured_jpeg
-from tests.system.messages import brake_status, target, verified_targets
-from tools.recording.foxglove_views import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import Decision, Verification
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.recording.foxglove_views import (
     Converter,
     encode_derived,
     frame_stamp_ns,
     state_colour,
     threat_plot,
 )
+from tests.eval.fixtures import camera_info
+from tests.foxglove.protobuf import decode
+from tests.recording.publish import textured_jpeg
+from tests.system.messages import brake_status, target, verified_targets
 
 STAMP = 1_800_000_000_000_000_000
 
@@ -65,14 +65,14 @@ def test_annotations_go_to_each_camera_stamped_with_the_frame_checked():
 
 
 def test_images_scale_and_scenes_draw_the_corridor():
-    from common.messages import CompressedFrame
+    from aeb_radar_camera.common.messages import CompressedFrame
     from tests.system.messages import header
 
     frame = CompressedFrame(header=header(3, "camera/front", STAMP), camera="front", width=848,
                             height=480, jpeg=textured_jpeg())
     same = decoded(Converter("ego").image(frame))
     assert same.data == frame.jpeg and same.format == "jpeg"
-    from common.imaging import decode_gray
+    from aeb_radar_camera.common.imaging import decode_gray
 
     small = decoded(Converter("ego", scale=0.25).image(frame))
     assert decode_gray(small.data).shape == (120, 212)
@@ -85,7 +85,7 @@ def test_images_scale_and_scenes_draw_the_corridor():
 
 
 def test_the_scene_draws_the_kinematic_rules_arc_to_its_range_gate():
-    from services.fusion.path import PredictedPath
+    from aeb_radar_camera.services.fusion.path import PredictedPath
 
     bend = msgspec.structs.replace(targets(), path="path R 50 m left (yaw rate)",
                                    path_curvature_per_m=0.02, range_gate_m=40.0)

@@ -6,15 +6,22 @@ from typing import Any
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.config.fusion import FusionConfig, FusionSettings
-from common.config.loader import parse_config
-from common.messages import Decision, Header, OutputMode, RadarTrack, RadarTracks, VerifiedTarget
-from common.resources import EXAMPLE_CALIBRATION
-from services.fusion.core import FusionCore
-from services.fusion.frames import DecodedFrame, FrameFeed
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import GateResult, Observation, ParamValue, create
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.fusion import FusionConfig, FusionSettings
+from aeb_radar_camera.common.config.loader import parse_config
+from aeb_radar_camera.common.messages import (
+    Decision,
+    Header,
+    OutputMode,
+    RadarTrack,
+    RadarTracks,
+    VerifiedTarget,
+)
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.core import FusionCore
+from aeb_radar_camera.services.fusion.frames import DecodedFrame, FrameFeed
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation, ParamValue, create
 
 CALIBRATION = str(EXAMPLE_CALIBRATION)
 T0 = 1_800_000_000_000_000_000      # a wall-clock instant (ns)

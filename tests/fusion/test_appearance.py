@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from services.fusion.roi import Roi
-from services.fusion.verifiers import (
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.verifiers import (
     _REGISTRY,
     GateResult,
     Observation,
@@ -21,17 +21,17 @@ from services.fusion.verifiers import (
     create,
     hog,
 )
-from services.fusion.verifiers.appearance import (
+from aeb_radar_camera.services.fusion.verifiers.appearance import (
     HOG_LINEAR_FORMAT,
     HogLinearModel,
     hog_linear_features,
     people_detector,
     window_around,
 )
+from aeb_radar_camera.tools.eval.scoring import default_specs
+from aeb_radar_camera.tools.eval.train_verifier import fit_logistic
 from tests.fusion.helpers import CAL
 from tests.fusion.test_depth_check import WIDE, observe, render_depth
-from tools.eval.scoring import default_specs
-from tools.eval.train_verifier import fit_logistic
 
 REFERENCE = Path(__file__).parent.parent / "data" / "hog_reference.json"
 
@@ -236,9 +236,9 @@ def test_combined_refuses_bad_params():
 def test_in_fusion_the_combined_verifier_gets_depth_when_the_camera_has_it(monkeypatch):
     import logging
 
-    from common.messages import VerifierStatus
-    from services.fusion.frames import FrameDecoder
-    from services.fusion.shell import FusionShell
+    from aeb_radar_camera.common.messages import VerifierStatus
+    from aeb_radar_camera.services.fusion.frames import FrameDecoder
+    from aeb_radar_camera.services.fusion.shell import FusionShell
     from tests.fusion.helpers import feed, make_core, run, track
     from tests.fusion.test_depth_check import car
     from tests.fusion.test_depth_fusion import SubscribingBus, with_depth
@@ -267,7 +267,7 @@ def test_in_fusion_the_combined_verifier_gets_depth_when_the_camera_has_it(monke
 
 
 def test_combined_prepares_its_depth_cue_for_each_camera(monkeypatch):
-    import services.fusion.verifiers.depth as depth_check
+    import aeb_radar_camera.services.fusion.verifiers.depth as depth_check
 
     monkeypatch.setitem(_REGISTRY, "hog_linear", fake_look)
     seen = []

@@ -4,13 +4,13 @@ import cv2
 import numpy as np
 import pytest
 
-from common.imaging import decode_gray, encode_jpeg
-from common.messages import encode
-from services.fusion.roi import Roi
-from services.fusion.verifiers import create
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.messages import encode
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.verifiers import create
+from aeb_radar_camera.tools.calib import check as calib_check
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, observe, track
-from tools.calib import check as calib_check
-from tools.sim.scenes import Obstacle, Scene, render
 
 
 @pytest.fixture(scope="module")

@@ -10,19 +10,20 @@ from typing import Any
 import numpy as np
 import pytest
 
-from common.calibration import Calibration, CalibrationFile
-from common.clock import wall_ns
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config, parse_config
-from common.messages import Decision, Verification, VerifierStatus, encode
-from common.resources import EXAMPLE_CALIBRATION
-from services.fusion.cameras import Camera, CameraView, camera_views, check_track
-from services.fusion.core import FusionCore
-from services.fusion.frames import FrameDecoder
-from services.fusion.main import build_core
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.shell import FusionShell
-from services.fusion.verifiers import GateResult, Observation
+from aeb_radar_camera.common.calibration import Calibration, CalibrationFile
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.messages import Decision, Verification, VerifierStatus, encode
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.cameras import Camera, CameraView, camera_views, check_track
+from aeb_radar_camera.services.fusion.core import FusionCore
+from aeb_radar_camera.services.fusion.frames import FrameDecoder
+from aeb_radar_camera.services.fusion.main import build_core
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.shell import FusionShell
+from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation
+from aeb_radar_camera.tools.sim.rig import rig_calibration_toml
 from tests.fusion.helpers import (
     CAL,
     MS,
@@ -36,7 +37,6 @@ from tests.fusion.helpers import (
 )
 from tests.fusion.test_frames import compressed
 from tests.fusion.test_shell import FakeBus
-from tools.sim.rig import rig_calibration_toml
 
 ROI = Roi(10, 10, 40, 40)
 
@@ -264,7 +264,7 @@ def test_a_multi_camera_config_builds_with_each_calibration(tmp_path):
 
 
 def test_calibration_override_is_refused_for_several_cameras(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c",
+    proc = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.fusion", "-c",
                            str(multicam_config(tmp_path)), "--calibration", "x.toml"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "with --calibration x.toml" in proc.stderr

@@ -3,9 +3,9 @@ policy, hold, gate scope), on the pure core."""
 
 import pytest
 
-from common.messages import Decision, Verification, VerifierStatus
-from services.fusion.frames import FrameDecoder
-from services.fusion.verifiers import GateResult
+from aeb_radar_camera.common.messages import Decision, Verification, VerifierStatus
+from aeb_radar_camera.services.fusion.frames import FrameDecoder
+from aeb_radar_camera.services.fusion.verifiers import GateResult
 from tests.fusion.helpers import (
     MS,
     T0,

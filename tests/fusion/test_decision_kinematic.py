@@ -7,11 +7,18 @@ from typing import Any
 
 import pytest
 
-from common.config.fusion import FusionConfig, RuleName
-from common.config.loader import load_config
-from common.messages import Decision, DriverInputs, EgoMotion, Gear, Header, RadarTrack
-from services.fusion.core import CycleResult, FusionCore
-from services.fusion.decision import (
+from aeb_radar_camera.common.config.fusion import FusionConfig, RuleName
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.messages import (
+    Decision,
+    DriverInputs,
+    EgoMotion,
+    Gear,
+    Header,
+    RadarTrack,
+)
+from aeb_radar_camera.services.fusion.core import CycleResult, FusionCore
+from aeb_radar_camera.services.fusion.decision import (
     LeadAcceleration,
     required_decel,
     time_to_collision,

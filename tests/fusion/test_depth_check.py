@@ -5,13 +5,13 @@ fails; missing depth is not applicable."""
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.depth_error import D435Noise
-from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.verifiers import Observation, VerifierConfigError, create
-from services.fusion.verifiers.depth import DepthConsistency, DepthParams
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector
+from aeb_radar_camera.services.fusion.verifiers import Observation, VerifierConfigError, create
+from aeb_radar_camera.services.fusion.verifiers.depth import DepthConsistency, DepthParams
+from aeb_radar_camera.tools.eval.depth import Box, box_scene_depth, car_box
 from tests.fusion.helpers import CAL
-from tools.eval.depth import Box, box_scene_depth, car_box
 
 PAPER = ColumnProjector(CAL, ColumnGeometry())                 # the one-pixel column
 WIDE = ColumnProjector(CAL, ColumnGeometry(half_width_m=0.54))  # the evaluation's
@@ -119,7 +119,7 @@ def test_known_limit_a_wall_or_rail_at_the_range_passes_like_an_obstacle():
 
 
 def test_ray_maps_are_shared_by_calibrations_that_differ_only_in_t_and_undistort():
-    from services.fusion.verifiers import depth as depth_check
+    from aeb_radar_camera.services.fusion.verifiers import depth as depth_check
 
     raised = Calibration.from_matrices(CAL.width, CAL.height, CAL.k, CAL.dist, CAL.r,
                                        CAL.t + np.array([0.0, 0.3, 0.0]))

@@ -7,9 +7,15 @@ import logging
 import numpy as np
 import pytest
 
-from common.depth_image import encode_depth, to_metres, to_units
-from common.messages import DepthFrame, Header, Verification, VerifierStatus, encode
-from services.fusion.frames import FrameDecoder, FrameError, decode_depth_frame
+from aeb_radar_camera.common.depth_image import encode_depth, to_metres, to_units
+from aeb_radar_camera.common.messages import (
+    DepthFrame,
+    Header,
+    Verification,
+    VerifierStatus,
+    encode,
+)
+from aeb_radar_camera.services.fusion.frames import FrameDecoder, FrameError, decode_depth_frame
 from tests.fusion.helpers import CAL, T0, feed, frame, make_core, run, track
 from tests.fusion.test_depth_check import car, render_depth
 from tests.fusion.test_frames import compressed
@@ -143,7 +149,7 @@ class SubscribingBus:
 @pytest.mark.parametrize(("verifier", "subscribed"), [("depth", True),
                                                       ("edge_density", False)])
 def test_the_shell_subscribes_to_depth_only_for_a_verifier_that_needs_it(verifier, subscribed):
-    from services.fusion.shell import FusionShell
+    from aeb_radar_camera.services.fusion.shell import FusionShell
 
     bus = SubscribingBus()
     core = make_core(verifier={"name": verifier})

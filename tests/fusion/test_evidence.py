@@ -3,9 +3,9 @@ so that one bad frame neither brakes nor vetoes; published per cycle in gate_det
 
 import pytest
 
-from common.config.loader import ConfigError
-from common.messages import Decision, Verification
-from services.fusion.verifiers import GateResult, Observation, ParamValue
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.messages import Decision, Verification
+from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation, ParamValue
 from tests.fusion.helpers import MS, T0, make_core, run, settings, track
 
 CYCLE_NS = 74 * MS
@@ -94,7 +94,7 @@ def test_evidence_settings_are_validated():
 
 
 def test_a_track_out_of_view_keeps_its_evidence_and_a_new_id_near_it_takes_it_over():
-    from services.fusion.evidence import TrackEvidence
+    from aeb_radar_camera.services.fusion.evidence import TrackEvidence
     ev = TrackEvidence(settings().evidence)
     for i in range(3):
         ev.add(4, 1.5, T0 + i * CYCLE_NS, (5.0, -4.0))

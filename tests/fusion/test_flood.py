@@ -12,11 +12,11 @@ from typing import Any
 
 import pytest
 
-from common.clock import wall_ns
-from common.keys import FUSION_BRAKE_CMD, RADAR_TRACKS
-from common.messages import encode
-from services.fusion.frames import FrameDecoder
-from services.fusion.shell import FusionShell, RadarGate
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, RADAR_TRACKS
+from aeb_radar_camera.common.messages import encode
+from aeb_radar_camera.services.fusion.frames import FrameDecoder
+from aeb_radar_camera.services.fusion.shell import FusionShell, RadarGate
 from tests.fusion.helpers import CALIBRATION, FixedVerifier, cycle, make_core, track
 from tests.support import (
     Collector,
@@ -92,7 +92,7 @@ def test_a_track_flood_gets_one_command_per_cycle_interval(router, tmp_path: Pat
     with open_bus(router) as bus:
         commands = Collector()
         bus.subscribe(FUSION_BRAKE_CMD, commands, instance="flood")
-        fusion = ServiceProcess("fusion", python_module("services.fusion", "-c",
+        fusion = ServiceProcess("fusion", python_module("aeb_radar_camera.services.fusion", "-c",
                                                         str(config)), tmp_path)
         try:
             HealthWatch(bus).wait_alive("fusion", "flood", 120)

@@ -7,9 +7,15 @@ import random
 import numpy as np
 import pytest
 
-from common.imaging import ImageCorruptError, decode_bgr, decode_gray, encode_jpeg, jpeg_crc32
-from common.messages import CompressedFrame, Header, decode, encode
-from services.fusion.frames import FrameDecoder, FrameError, decode_frame
+from aeb_radar_camera.common.imaging import (
+    ImageCorruptError,
+    decode_bgr,
+    decode_gray,
+    encode_jpeg,
+    jpeg_crc32,
+)
+from aeb_radar_camera.common.messages import CompressedFrame, Header, decode, encode
+from aeb_radar_camera.services.fusion.frames import FrameDecoder, FrameError, decode_frame
 from tests.fusion.helpers import T0
 
 W, H = 320, 240

@@ -6,9 +6,9 @@ import threading
 import numpy as np
 import pytest
 
-from common.imaging import decode_gray, encode_jpeg
-from common.messages import CompressedFrame, Header, encode
-from services.fusion.frames import (
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.messages import CompressedFrame, Header, encode
+from aeb_radar_camera.services.fusion.frames import (
     QUEUE_SIZE,
     RING_SIZE,
     DecodedFrame,
@@ -124,7 +124,7 @@ def test_without_alignment_the_newest_frame_is_used_if_within_the_skew():
 
 
 def test_a_decoder_bug_is_counted_and_the_next_frames_still_decode(monkeypatch):
-    from services.fusion import frames
+    from aeb_radar_camera.services.fusion import frames
 
     dec = decoder()
     real = frames.decode_frame

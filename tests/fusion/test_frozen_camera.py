@@ -8,10 +8,16 @@ import logging
 import numpy as np
 import pytest
 
-from common.clock import wall_ns
-from common.imaging import encode_jpeg, jpeg_crc32
-from common.messages import CompressedFrame, Decision, Header, VerifierStatus, encode
-from services.fusion.frames import (
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.imaging import encode_jpeg, jpeg_crc32
+from aeb_radar_camera.common.messages import (
+    CompressedFrame,
+    Decision,
+    Header,
+    VerifierStatus,
+    encode,
+)
+from aeb_radar_camera.services.fusion.frames import (
     EXPECTED_CHANGE_MIN_PX,
     FROZEN_REASON,
     FrameDecoder,
@@ -19,11 +25,11 @@ from services.fusion.frames import (
     expected_change_px,
     same_picture,
 )
-from services.fusion.roi import ColumnProjector
-from services.fusion.shell import FusionShell
+from aeb_radar_camera.services.fusion.roi import ColumnProjector
+from aeb_radar_camera.services.fusion.shell import FusionShell
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from tests.fusion.helpers import CAL, MS, T0, FixedVerifier, cycle, make_core, track
 from tests.fusion.test_shell import FakeBus
-from tools.sim.scenes import Obstacle, Scene, render
 
 W, H = 848, 480
 FRAME_NS = 33 * MS

@@ -10,10 +10,10 @@ import threading
 
 import numpy as np
 
-from common.clock import wall_ns
-from common.imaging import encode_jpeg, jpeg_crc32
-from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.messages import (
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.imaging import encode_jpeg, jpeg_crc32
+from aeb_radar_camera.common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     CompressedFrame,
     Decision,
@@ -21,11 +21,11 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
-from services.fusion.frames import FROZEN_REASON
+from aeb_radar_camera.services.fusion.frames import FROZEN_REASON
+from aeb_radar_camera.tools.sim.scenes import Scene, render
 from tests.fusion.helpers import CAL, CALIBRATION, track
 from tests.fusion.test_fusion_processes import INSTANCE, Radar
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
-from tools.sim.scenes import Scene, render
 
 SIGMA = 2.0
 
@@ -77,7 +77,8 @@ radar_max_age_s = 1.0
         bus.subscribe(FUSION_BRAKE_CMD, commands, instance=INSTANCE)
         bus.subscribe(FUSION_TARGETS, targets, instance=INSTANCE)
         camera = NoisyStillCamera(bus, empty_road)
-        fusion = ServiceProcess("fusion", python_module("services.fusion", "-c", str(cfg)),
+        fusion = ServiceProcess("fusion", python_module("aeb_radar_camera.services.fusion", "-c",
+                                                        str(cfg)),
                                 tmp_path)
         try:
             watch.wait_alive("fusion", INSTANCE)

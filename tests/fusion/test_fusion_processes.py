@@ -13,10 +13,10 @@ import cv2
 import numpy as np
 import pytest
 
-from common.clock import wall_ns
-from common.imaging import decode_gray, encode_jpeg
-from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
-from common.messages import (
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     CompressedFrame,
     Decision,
@@ -25,12 +25,12 @@ from common.messages import (
     VerifiedTargets,
     VerifierStatus,
 )
-from services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.tools.sim.rig import rig_calibration_toml
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from tests.camera.helpers import folder_config
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
-from tools.sim.rig import rig_calibration_toml
-from tools.sim.scenes import Obstacle, Scene, render
 
 pytestmark = pytest.mark.slow
 
@@ -118,9 +118,9 @@ def test_camera_and_fusion_processes_verify_decide_and_survive_a_corrupt_frame(r
         bus.subscribe(FUSION_BRAKE_CMD, commands, instance=INSTANCE)
         bus.subscribe(FUSION_TARGETS, targets, instance=INSTANCE)
         bus.subscribe(CAMERA_JPEG, frames, camera="front")
-        camera = ServiceProcess("camera", python_module("services.camera", "-c",
+        camera = ServiceProcess("camera", python_module("aeb_radar_camera.services.camera", "-c",
                                                         str(camera_cfg)), tmp_path)
-        fusion = ServiceProcess("fusion", python_module("services.fusion", "-c",
+        fusion = ServiceProcess("fusion", python_module("aeb_radar_camera.services.fusion", "-c",
                                                         str(fusion_cfg)), tmp_path)
         try:
             watch.wait_alive("camera", "front")
@@ -267,7 +267,8 @@ enabled = false
         bus.subscribe(FUSION_BRAKE_CMD, commands, instance=INSTANCE)
         bus.subscribe(FUSION_TARGETS, targets, instance=INSTANCE)
         cameras = Cameras(bus, {n: render(rig_cal(n), scene) for n in names})
-        fusion = ServiceProcess("fusion", python_module("services.fusion", "-c", str(cfg)),
+        fusion = ServiceProcess("fusion", python_module("aeb_radar_camera.services.fusion", "-c",
+                                                        str(cfg)),
                                 tmp_path)
         try:
             watch.wait_alive("fusion", INSTANCE)

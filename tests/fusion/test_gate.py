@@ -7,19 +7,19 @@ import cv2
 import numpy as np
 import pytest
 
-from common.imaging import decode_gray, encode_jpeg
-from services.fusion import verifiers
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import VerifierConfigError, create
-from services.fusion.verifiers.edge import (
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.services.fusion import verifiers
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError, create
+from aeb_radar_camera.services.fusion.verifiers.edge import (
     AdaptiveEdgeDensity,
     EdgeDensity,
     EdgeDensityParams,
 )
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.render import Light
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from tests.fusion.helpers import CAL, T0, feed, frame, make_core, observe, run, track
-from tools.messages import ObjectKind
-from tools.sim.render import Light
-from tools.sim.scenes import Obstacle, Scene, render
 
 PROJECTOR = ColumnProjector(CAL, ColumnGeometry())
 ONCOMING = (Light(60, 1.8, 0.7, 0.1), Light(60, 3.4, 0.7, 0.1))

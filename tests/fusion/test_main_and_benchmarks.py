@@ -6,10 +6,10 @@ import sys
 
 import pytest
 
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.services.fusion.main import build_core
 from benchmarks import bench_fusion, bench_gate
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from services.fusion.main import build_core
 
 
 @pytest.mark.parametrize(("toml", "named"), [
@@ -22,14 +22,16 @@ from services.fusion.main import build_core
 def test_bad_configuration_exits_2_naming_the_problem(tmp_path, toml, named):
     cfg = tmp_path / "fusion.toml"
     cfg.write_text(toml)
-    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c", str(cfg)],
+    proc = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.fusion", "-c",
+                           str(cfg)],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert named in proc.stderr
 
 
 def test_another_instances_key_exits_2_naming_both_instances():
-    proc = subprocess.run([sys.executable, "-m", "services.fusion", "-c", "deploy/fusion.toml",
+    proc = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.fusion", "-c",
+                           "deploy/fusion.toml",
                            "--instance", "shadow", "--check"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2

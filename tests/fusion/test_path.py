@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from common.config.fusion import PathSettings
-from services.fusion.path import PredictedPath, curvature, predicted_path
+from aeb_radar_camera.common.config.fusion import PathSettings
+from aeb_radar_camera.services.fusion.path import PredictedPath, curvature, predicted_path
 
 
 def on_arc(radius_m: float, s_m: float, d_m: float = 0.0) -> tuple[float, float]:

@@ -10,11 +10,11 @@ import random
 
 import pytest
 
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from common.messages import Decision, RadarTrack, Verification
-from services.fusion.decision import LateralMotion, corridor_window
-from services.fusion.verifiers import GateResult
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.messages import Decision, RadarTrack, Verification
+from aeb_radar_camera.services.fusion.decision import LateralMotion, corridor_window
+from aeb_radar_camera.services.fusion.verifiers import GateResult
 from tests.fusion.helpers import (
     MS,
     T0,

@@ -4,9 +4,9 @@ of the example calibration at 8 and 25 m; a track predicted to the frame's time.
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.messages import Verification
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import Verification
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
 from tests.fusion.helpers import CAL, MS, T0, feed, frame, make_core, run, track
 
 FRAME_PIXELS = 848 * 480

@@ -8,10 +8,15 @@ import sys
 import numpy as np
 import pytest
 
-from common.depth_error import D435Noise
-from services.fusion.verifiers import GateResult, Observation, VerifierConfigError, create
-from services.fusion.verifiers.base import ParamValue
-from services.fusion.verifiers.recall_first import RecallFirst, RecallFirstParams
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.verifiers import (
+    GateResult,
+    Observation,
+    VerifierConfigError,
+    create,
+)
+from aeb_radar_camera.services.fusion.verifiers.base import ParamValue
+from aeb_radar_camera.services.fusion.verifiers.recall_first import RecallFirst, RecallFirstParams
 from tests.fusion.helpers import CAL
 from tests.fusion.test_depth_check import WIDE, observe, render_depth
 
@@ -122,16 +127,16 @@ def test_bad_params_are_refused():
 
 
 def test_the_name_table_imports_a_verifier_only_when_it_is_asked_for():
-    code = ("import sys; import services.fusion.verifiers as v; "
+    code = ("import sys; import aeb_radar_camera.services.fusion.verifiers as v; "
             "before = sorted(m for m in sys.modules if m.startswith(v.__name__ + '.')); "
             "v.create('edge_density'); "
             "after = sorted(m for m in sys.modules if m.startswith(v.__name__ + '.')); "
             "print(before, after)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
-    assert out.strip() == ("['services.fusion.verifiers.base'] "
-                           "['services.fusion.verifiers.base', "
-                           "'services.fusion.verifiers.edge']"), out
+    assert out.strip() == ("['aeb_radar_camera.services.fusion.verifiers.base'] "
+                           "['aeb_radar_camera.services.fusion.verifiers.base', "
+                           "'aeb_radar_camera.services.fusion.verifiers.edge']"), out
 
 
 @pytest.mark.parametrize("x", [3.5, 4.0])

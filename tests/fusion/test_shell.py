@@ -6,11 +6,11 @@ from typing import Any
 
 import pytest
 
-from common.clock import mono_ns, wall_ns
-from common.messages import BrakeCommand, Decision, VerifiedTargets, encode
-from services.fusion.frames import FrameDecoder
-from services.fusion.shell import FusionShell
-from services.fusion.verifiers import GateResult
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.messages import BrakeCommand, Decision, VerifiedTargets, encode
+from aeb_radar_camera.services.fusion.frames import FrameDecoder
+from aeb_radar_camera.services.fusion.shell import FusionShell
+from aeb_radar_camera.services.fusion.verifiers import GateResult
 from tests.fusion.helpers import FixedVerifier, cycle, make_core, track
 from tests.fusion.test_frames import compressed
 
@@ -133,8 +133,8 @@ def test_radar_sequence_gaps_and_regressions_are_counted_and_still_answered():
 def test_a_camera_calibration_other_than_ours_is_counted_and_named():
     import numpy as np
 
-    from common.messages import CameraInfo, Header
-    from services.fusion.camera_check import calibration_differences
+    from aeb_radar_camera.common.messages import CameraInfo, Header
+    from aeb_radar_camera.services.fusion.camera_check import calibration_differences
     from tests.fusion.helpers import CAL
 
     def info(**over) -> CameraInfo:

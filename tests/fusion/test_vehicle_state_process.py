@@ -8,9 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from common.clock import mono_ns, wall_ns
-from common.keys import EGO_MOTION, FUSION_BRAKE_CMD, FUSION_TARGETS, VEHICLE_DRIVER
-from common.messages import Decision, DriverInputs, EgoMotion, Gear, Header
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import (
+    EGO_MOTION,
+    FUSION_BRAKE_CMD,
+    FUSION_TARGETS,
+    VEHICLE_DRIVER,
+)
+from aeb_radar_camera.common.messages import Decision, DriverInputs, EgoMotion, Gear, Header
 from tests.fusion.helpers import CALIBRATION, track
 from tests.fusion.test_fusion_processes import Radar
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
@@ -78,7 +83,8 @@ def test_fusion_process_brakes_on_fresh_vehicle_state_and_warns_only_when_it_sto
         bus.subscribe(FUSION_TARGETS, targets, instance=INSTANCE)
         gateway = Gateway(bus)
         gateway.thread.start()
-        fusion = ServiceProcess("fusion", python_module("services.fusion", "-c", str(cfg)),
+        fusion = ServiceProcess("fusion", python_module("aeb_radar_camera.services.fusion", "-c",
+                                                        str(cfg)),
                                 tmp_path)
         try:
             watch.wait_alive("fusion", INSTANCE)

@@ -8,17 +8,18 @@ import sys
 
 import pytest
 
-from common.resources import DEPLOY
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.grid.main import main, parse_seeds, pick_cases, pick_families
+from aeb_radar_camera.tools.sim.families import FAMILIES
 from tests.support import REPO
-from tools.grid.main import main, parse_seeds, pick_cases, pick_families
-from tools.sim.families import FAMILIES
 
 pytestmark = pytest.mark.slow
 
 
 def test_quick_grid_in_its_own_process(tmp_path):
     out = tmp_path / "grid"
-    r = subprocess.run([sys.executable, "-m", "tools.cli", "grid", "--quick", "--workers", "2",
+    r = subprocess.run([sys.executable, "-m", "aeb_radar_camera.tools.cli", "grid", "--quick",
+                        "--workers", "2",
                         "--out", str(out)], capture_output=True, text=True, timeout=240,
                        cwd=REPO)
     assert r.returncode == 0, r.stderr[-3000:]

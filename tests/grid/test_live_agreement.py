@@ -6,12 +6,12 @@ from collections.abc import Iterator
 
 import pytest
 
-from common.resources import DEPLOY
-from tools.grid.lockstep import LoopConfig, run_scenario
-from tools.sim.runner import RunResult
-from tools.sim.scenario import find_scenario, load_scenario
-from tools.sim.session import SETTLE_TIMEOUT_S, closed_loop
-from tools.sim.verdict import Verdict
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.grid.lockstep import LoopConfig, run_scenario
+from aeb_radar_camera.tools.sim.runner import RunResult
+from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.session import SETTLE_TIMEOUT_S, closed_loop
+from aeb_radar_camera.tools.sim.verdict import Verdict
 
 pytestmark = pytest.mark.slow
 

@@ -7,13 +7,13 @@ from collections.abc import Iterator
 
 import pytest
 
-from common.calibration import Calibration
-from common.messages import Decision
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
-from tools.grid.camera import SceneCamera
-from tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
-from tools.sim.plot import plot_timeline
-from tools.sim.scenario import Scenario, find_scenario, load_scenario
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import Decision
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.grid.camera import SceneCamera
+from aeb_radar_camera.tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
+from aeb_radar_camera.tools.sim.plot import plot_timeline
+from aeb_radar_camera.tools.sim.scenario import Scenario, find_scenario, load_scenario
 
 DEFAULT = LoopConfig.load(DEPLOY / "fusion.toml")
 PAPER = LoopConfig.load(DEPLOY / "fusion-paper.toml")

@@ -9,14 +9,14 @@ from dataclasses import replace
 import msgspec
 import pytest
 
-from common.calibration import Calibration
-from common.messages import Decision
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION
-from tools.grid.camera import SceneCamera
-from tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
-from tools.sim.families import Case
-from tools.sim.scenario import find_scenario, load_scenario
-from tools.sim.scenario_run import LoopSettings
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import Decision
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.grid.camera import SceneCamera
+from aeb_radar_camera.tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
+from aeb_radar_camera.tools.sim.families import Case
+from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.scenario_run import LoopSettings
 
 DEFAULT = LoopConfig.load(DEPLOY / "fusion.toml")
 

@@ -6,9 +6,9 @@ import threading
 
 import pytest
 
-from common.resources import DEPLOY
-from tools.grid.pool import Case, Outcome, run_cases
-from tools.sim.scenario import find_scenario, load_scenario
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.grid.pool import Case, Outcome, run_cases
+from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
 
 pytestmark = pytest.mark.slow
 

@@ -1,9 +1,16 @@
 """The recall study's plan and tables: >= 200 held-out cases covering every obstacle kind,
 size, pose and light; a regression is a threat the paper avoids and the default hits."""
 
-from tools.grid.recall_cases import PLAN, Row, generated, issue_rows, markdown, summarise
-from tools.messages import ObjectKind
-from tools.sim.families import SPLITS
+from aeb_radar_camera.tools.grid.recall_cases import (
+    PLAN,
+    Row,
+    generated,
+    issue_rows,
+    markdown,
+    summarise,
+)
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.families import SPLITS
 
 
 def test_the_plan_is_200_held_out_cases_over_every_kind_pose_and_light():

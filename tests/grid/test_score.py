@@ -7,9 +7,9 @@ import math
 
 import pytest
 
-from common.resources import DEPLOY
-from tools.grid.lockstep import LoopConfig
-from tools.grid.score import (
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.grid.lockstep import LoopConfig
+from aeb_radar_camera.tools.grid.score import (
     Reach,
     actuator_half_s,
     case_points,
@@ -20,10 +20,10 @@ from tools.grid.score import (
     sensor_floor,
     shadow_diff,
 )
-from tools.messages import ObjectKind
-from tools.sim.scenario import ScenarioKind
-from tools.sim.verdict import Sample, judge
-from tools.sim.world import Collision
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.scenario import ScenarioKind
+from aeb_radar_camera.tools.sim.verdict import Sample, judge
+from aeb_radar_camera.tools.sim.world import Collision
 
 REACH = Reach(range_m=25.0, brake_ttc_s=3.5)
 KPH = 1 / 3.6

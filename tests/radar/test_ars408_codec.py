@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from services.radar.ars408 import (
+from aeb_radar_camera.services.radar.ars408 import (
     MESSAGES,
     ClusterGeneral,
     ClusterListStatus,
@@ -38,8 +38,8 @@ from services.radar.ars408 import (
     encode,
     object_cycle_frames,
 )
-from services.radar.ars408.dbc import DBC_PATH, render
-from services.radar.ars408.table import BY_KIND
+from aeb_radar_camera.services.radar.ars408.dbc import DBC_PATH, render
+from aeb_radar_camera.services.radar.ars408.table import BY_KIND
 
 OBJECT_GENERAL = {
     "id": lambda b: b[0],
@@ -340,7 +340,7 @@ def test_ego_motion_frames():
 
 def test_shipped_dbc_is_generated_from_the_table():
     assert DBC_PATH.read_text(encoding="utf-8") == render(), \
-        "run: python -m services.radar.ars408.dbc --write"
+        "run: python -m aeb_radar_camera.services.radar.ars408.dbc --write"
     text = render()
     # Spot checks of DBC conventions: Motorola start bit = MSB, DistLat left positive.
     assert " SG_ Obj_DistLong : 15|13@0+ (0.2,-500) [-500|1138.2] \"m\" HOST" in text

@@ -1,9 +1,9 @@
 """Cycle assembly: the status message's count is the authority; complete cycles go out at
 their last frame; incomplete ones are counted and still emitted."""
 
-from common.config.radar import CycleSettings, Expect
-from common.messages.radar import OutputMode
-from services.radar.assembly import ClosedBy, CycleAssembler, ListRole
+from aeb_radar_camera.common.config.radar import CycleSettings, Expect
+from aeb_radar_camera.common.messages.radar import OutputMode
+from aeb_radar_camera.services.radar.assembly import ClosedBy, CycleAssembler, ListRole
 
 OBJ = OutputMode.OBJECTS
 CL = OutputMode.CLUSTERS

@@ -5,10 +5,9 @@ import threading
 import can
 import pytest
 
-from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
-from services.radar.ports import radar_frame
-from tests.can_support import RECORDING, RECORDING_FRAMES
-from tools.sim.can_links import (
+from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
+from aeb_radar_camera.services.radar.ports import radar_frame
+from aeb_radar_camera.tools.sim.can_links import (
     SlcanPtyLink,
     SocketcandServer,
     parse_slcan_frame,
@@ -16,6 +15,7 @@ from tools.sim.can_links import (
     replay_log,
     slcan_line,
 )
+from tests.can_support import RECORDING, RECORDING_FRAMES
 
 CYCLE = object_cycle_frames([ObjectGeneral(1, 12.0, 0.4, -3.0, 0.0, 0, 10.0)], 7)
 

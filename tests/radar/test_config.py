@@ -5,9 +5,9 @@ import re
 
 import pytest
 
-from common.config.loader import ConfigError, load_config, parse_config
-from common.config.radar import Pace, RadarConfig
-from services.radar.ports import ConfigurationError, check_settings
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.config.radar import Pace, RadarConfig
+from aeb_radar_camera.services.radar.ports import ConfigurationError, check_settings
 from tests.support import REPO
 
 

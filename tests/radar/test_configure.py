@@ -1,8 +1,8 @@
 """The 0x200 configuration write and its confirmation from 0x201 (pure)."""
 
-from common.config.radar import OutputTypeCfg, RadarWriteSettings
-from services.radar.ars408 import RadarStateFrame, decode_frame
-from services.radar.configure import ConfigWriter, WriteState
+from aeb_radar_camera.common.config.radar import OutputTypeCfg, RadarWriteSettings
+from aeb_radar_camera.services.radar.ars408 import RadarStateFrame, decode_frame
+from aeb_radar_camera.services.radar.configure import ConfigWriter, WriteState
 
 S = 1_000_000_000
 

@@ -1,15 +1,20 @@
 """One radar's core: a cycle is tracked once its general frames are in; its quality list
 is decoded once it is in; the extended frames, last on the bus, only annotate."""
 
-from common.config.radar import CycleSettings, Expect, PrefilterSettings, RadarSettings
-from services.radar.ars408 import (
+from aeb_radar_camera.common.config.radar import (
+    CycleSettings,
+    Expect,
+    PrefilterSettings,
+    RadarSettings,
+)
+from aeb_radar_camera.services.radar.ars408 import (
     ObjectExtended,
     ObjectGeneral,
     ObjectQuality,
     object_cycle_frames,
 )
-from services.radar.core import RadarCore
-from services.radar.detections import PROB_OF_EXIST
+from aeb_radar_camera.services.radar.core import RadarCore
+from aeb_radar_camera.services.radar.detections import PROB_OF_EXIST
 from tests.can_support import feed
 
 KNOWN = CycleSettings(expect_quality=Expect.YES, expect_extended=Expect.YES)

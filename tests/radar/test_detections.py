@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from common.config.radar import MergeSettings, PrefilterSettings
-from common.messages.radar import OutputMode
-from services.radar.ars408 import (
+from aeb_radar_camera.common.config.radar import MergeSettings, PrefilterSettings
+from aeb_radar_camera.common.messages.radar import OutputMode
+from aeb_radar_camera.services.radar.ars408 import (
     BY_KIND,
     ClusterGeneral,
     ClusterQuality,
@@ -15,8 +15,8 @@ from services.radar.ars408 import (
     ObjectQuality,
     encode,
 )
-from services.radar.assembly import RawCycle
-from services.radar.detections import (
+from aeb_radar_camera.services.radar.assembly import RawCycle
+from aeb_radar_camera.services.radar.detections import (
     INVALID_STATE,
     OBJ_CLASS,
     PROB_OF_EXIST,
@@ -26,7 +26,7 @@ from services.radar.detections import (
     merge,
     prefilter,
 )
-from services.radar.neighbours import pairs_within_self
+from aeb_radar_camera.services.radar.neighbours import pairs_within_self
 
 
 def raw_cycle(mode, general, quality=(), extended=()):
@@ -189,8 +189,8 @@ def test_general_frames_decode_as_their_frames_one_by_one(mode, n):
     """Each valid frame a detection, in order; out-of-range frames dropped and counted;
     in object mode a repeated ID is a fault (the first frame of the ID wins, even a
     rejected one), in cluster mode a detection."""
-    from services.radar.ars408 import RadarFrameError, decode
-    from services.radar.detections import decode_general
+    from aeb_radar_camera.services.radar.ars408 import RadarFrameError, decode
+    from aeb_radar_camera.services.radar.detections import decode_general
 
     rng = np.random.default_rng(4 + n)
     make = ObjectGeneral if mode is OutputMode.OBJECTS else ClusterGeneral

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.config.radar import EgoMotionSettings
-from common.messages.header import Header
-from common.messages.vehicle import EgoMotion
-from services.radar.ego import EgoMotionForwarder
+from aeb_radar_camera.common.config.radar import EgoMotionSettings
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.vehicle import EgoMotion
+from aeb_radar_camera.services.radar.ego import EgoMotionForwarder
 
 NOW_NS = 10**18
 FORWARD = EgoMotionSettings(forward=True, min_interval_s=0.0)

@@ -14,13 +14,13 @@ from pathlib import Path
 import can
 import pytest
 
-from common.keys import RADAR_STATUS, RADAR_TRACKS
-from common.messages import RadarTracks, decode
-from services.radar.ars408 import decode_frame
+from aeb_radar_camera.common.keys import RADAR_STATUS, RADAR_TRACKS
+from aeb_radar_camera.common.messages import RadarTracks, decode
+from aeb_radar_camera.services.radar.ars408 import decode_frame
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink, replay_log
+from aeb_radar_camera.tools.sim.radar_feed import PythonCanSink
 from tests.can_support import RECORDING, VcanUnavailable, vcan_interface
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
-from tools.sim.can_links import SlcanPtyLink, replay_log
-from tools.sim.radar_feed import PythonCanSink
 
 pytestmark = pytest.mark.slow
 
@@ -72,7 +72,8 @@ def run_against_the_service(
     with open_bus(router, source="test") as bus:
         health = HealthWatch(bus)
         got = Received(bus)
-        proc = ServiceProcess("radar", python_module("services.radar", "--config", str(config)),
+        proc = ServiceProcess("radar", python_module("aeb_radar_camera.services.radar", "--config",
+                                                     str(config)),
                               tmp_path)
         stop = threading.Event()
         feeder = threading.Thread(target=feed, args=(stop,), daemon=True)
@@ -152,7 +153,8 @@ channel = "{vcan_name}"
 def test_invalid_configuration_exits_2_naming_the_field(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[radar.tracker]\nconfirm_hits = 0\n")
-    proc = ServiceProcess("radar-bad", python_module("services.radar", "--config", str(bad)),
+    proc = ServiceProcess("radar-bad", python_module("aeb_radar_camera.services.radar", "--config",
+                                                     str(bad)),
                           tmp_path)
     assert proc.proc.wait(60) == 2
     assert "radar.tracker.confirm_hits" in proc.output()
@@ -160,7 +162,8 @@ def test_invalid_configuration_exits_2_naming_the_field(tmp_path):
     missing = tmp_path / "missing.toml"
     missing.write_text('[radar.can]\ninterface = "replay"\n[radar.replay]\nfile = "/nope.log"\n')
     proc = ServiceProcess("radar-missing",
-                          python_module("services.radar", "--config", str(missing)), tmp_path)
+                          python_module("aeb_radar_camera.services.radar", "--config",
+                                        str(missing)), tmp_path)
     assert proc.proc.wait(60) == 2
     assert "/nope.log" in proc.output()
     proc.stop()
@@ -181,7 +184,8 @@ loop = true
         health = HealthWatch(bus)
         tracks = Collector()
         bus.subscribe(RADAR_TRACKS, tracks, sensor="front")
-        proc = ServiceProcess("radar-replay", python_module("services.radar", "--config",
+        proc = ServiceProcess("radar-replay", python_module("aeb_radar_camera.services.radar",
+                                                            "--config",
                                                             str(config)), tmp_path)
         try:
             health.wait_alive("radar", "front")

@@ -6,8 +6,8 @@ from collections import Counter
 
 import pytest
 
-from common.messages.radar import BusState
-from services.radar.ars408 import decode_frame
+from aeb_radar_camera.common.messages.radar import BusState
+from aeb_radar_camera.services.radar.ars408 import decode_frame
 from tests.can_support import RECORDING_CYCLES, RECORDING_FRAMES, recording_messages, run_recording
 
 

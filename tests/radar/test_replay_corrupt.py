@@ -6,9 +6,9 @@ import threading
 
 import pytest
 
-from common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
-from services.radar.ports import ReplayPort
-from services.radar.shell import RadarShell
+from aeb_radar_camera.common.config.radar import CanSettings, Pace, RadarSettings, ReplaySettings
+from aeb_radar_camera.services.radar.ports import ReplayPort
+from aeb_radar_camera.services.radar.shell import RadarShell
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.radar.test_shell import Output
 

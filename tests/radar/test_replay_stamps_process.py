@@ -5,7 +5,7 @@ replay never stalls without a word."""
 
 import pytest
 
-from common.keys import RADAR_STATUS, RADAR_TRACKS
+from aeb_radar_camera.common.keys import RADAR_STATUS, RADAR_TRACKS
 from tests.radar.test_replay_corrupt import BAD_STAMPS, first_cycles
 from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
 
@@ -42,7 +42,8 @@ sensor_id = 0
         tracks, status = Collector(), Collector()
         bus.subscribe(RADAR_TRACKS, tracks, sensor="front")
         bus.subscribe(RADAR_STATUS, status, sensor="front")
-        proc = ServiceProcess("radar-replay", python_module("services.radar", "--config",
+        proc = ServiceProcess("radar-replay", python_module("aeb_radar_camera.services.radar",
+                                                            "--config",
                                                             str(config)), tmp_path)
         try:
             health.wait_alive("radar", "front")

@@ -9,8 +9,8 @@ import can
 import msgspec
 import pytest
 
-from common.clock import wall_ns
-from common.config.radar import (
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.config.radar import (
     CanSettings,
     CycleSettings,
     EgoMotionSettings,
@@ -21,10 +21,10 @@ from common.config.radar import (
     ReplaySettings,
     SensorSettings,
 )
-from common.messages.header import Header
-from common.messages.radar import BusState
-from common.messages.vehicle import EgoMotion
-from services.radar.ars408 import (
+from aeb_radar_camera.common.messages.header import Header
+from aeb_radar_camera.common.messages.radar import BusState
+from aeb_radar_camera.common.messages.vehicle import EgoMotion
+from aeb_radar_camera.services.radar.ars408 import (
     ObjectGeneral,
     RadarFrame,
     RadarStateFrame,
@@ -33,11 +33,11 @@ from services.radar.ars408 import (
     encode,
     object_cycle_frames,
 )
-from services.radar.ports import radar_message
-from services.radar.shell import RadarShell
+from aeb_radar_camera.services.radar.ports import radar_message
+from aeb_radar_camera.services.radar.shell import RadarShell
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.support import Collector, wait_for
-from tools.sim.can_links import SlcanPtyLink
 
 FAST_REOPEN = CanSettings(interface="slcan", channel="unused", reopen_backoff_initial_s=0.01,
                           reopen_backoff_max_s=0.05, silent_after_s=0.3)

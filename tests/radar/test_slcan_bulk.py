@@ -9,14 +9,14 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
-from common.slcan_bulk import MAX_LINE, BulkSlcanBus
-from services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
-from services.radar.ports import open_port, radar_frame
-from services.radar.shell import RadarShell
+from aeb_radar_camera.common.config.radar import CanSettings, Expect, RadarSettings, ReplaySettings
+from aeb_radar_camera.common.slcan_bulk import MAX_LINE, BulkSlcanBus
+from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, RadarFrame, object_cycle_frames
+from aeb_radar_camera.services.radar.ports import open_port, radar_frame
+from aeb_radar_camera.services.radar.shell import RadarShell
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink, slcan_line
 from tests.radar.test_shell import Output
 from tests.support import wait_for
-from tools.sim.can_links import SlcanPtyLink, slcan_line
 
 
 @pytest.fixture

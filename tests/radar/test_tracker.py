@@ -5,13 +5,22 @@ import msgspec
 import numpy as np
 import pytest
 
-from common.config.radar import CycleSettings, Expect, RadarSettings, TrackerSettings
-from services.radar.ars408 import ClusterGeneral, ObjectGeneral, cluster_cycle_frames
-from services.radar.ars408.codec import encode
-from services.radar.ars408.records import ObjectListStatus
-from services.radar.core import RadarCore
-from services.radar.detections import Detections
-from services.radar.tracker import KalmanTracker
+from aeb_radar_camera.common.config.radar import (
+    CycleSettings,
+    Expect,
+    RadarSettings,
+    TrackerSettings,
+)
+from aeb_radar_camera.services.radar.ars408 import (
+    ClusterGeneral,
+    ObjectGeneral,
+    cluster_cycle_frames,
+)
+from aeb_radar_camera.services.radar.ars408.codec import encode
+from aeb_radar_camera.services.radar.ars408.records import ObjectListStatus
+from aeb_radar_camera.services.radar.core import RadarCore
+from aeb_radar_camera.services.radar.detections import Detections
+from aeb_radar_camera.services.radar.tracker import KalmanTracker
 from tests.can_support import feed
 
 DT = 0.075

@@ -6,10 +6,16 @@ tracks (every pair tested) and many (candidates from the strip grid)."""
 import numpy as np
 import pytest
 
-from common.config.radar import TrackerSettings
-from services.radar.detections import Detections
-from services.radar.neighbours import candidates_in_boxes, pairs_within_self
-from services.radar.tracker import COV_PV, VAR_P, VAR_V, KalmanTracker, greedy_pairs
+from aeb_radar_camera.common.config.radar import TrackerSettings
+from aeb_radar_camera.services.radar.detections import Detections
+from aeb_radar_camera.services.radar.neighbours import candidates_in_boxes, pairs_within_self
+from aeb_radar_camera.services.radar.tracker import (
+    COV_PV,
+    VAR_P,
+    VAR_V,
+    KalmanTracker,
+    greedy_pairs,
+)
 
 
 def plain_greedy(ti, di, cost):

@@ -10,7 +10,7 @@ import jsonschema
 import msgspec
 from mcap.reader import make_reader
 
-from common.keys import CAMERA_DEPTH, REGISTRY, VEHICLE_DRIVER, VEHICLE_STATUS
+from aeb_radar_camera.common.keys import CAMERA_DEPTH, REGISTRY, VEHICLE_DRIVER, VEHICLE_STATUS
 from tests.foxglove.protobuf import message_class
 
 # Every key of the registry that carries messages (liveliness tokens are not samples),

@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from common.bus import Bus, TypedPublisher
-from common.clock import mono_ns, wall_ns
-from common.imaging import encode_jpeg
-from common.keys import (
+from aeb_radar_camera.common.bus import Bus, TypedPublisher
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_INFO,
     CAMERA_JPEG,
@@ -22,7 +22,7 @@ from common.keys import (
     RADAR_STATUS,
     RADAR_TRACKS,
 )
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BusState,
     CameraInfo,
     CanFrame,

@@ -13,11 +13,11 @@ import cv2
 import numpy as np
 import pytest
 
-from common.net import free_port
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.tools.recording.evidence_frames import contrast
+from aeb_radar_camera.tools.recording.format import parse_topic
 from tests.recording.checks import STACK_SPECS, check_recording, stamp_ns
 from tests.support import REPO, ServiceProcess, python_module
-from tools.recording.evidence_frames import contrast
-from tools.recording.format import parse_topic
 
 SIM = REPO / "tests" / "data" / "recording" / "pedestrian_standing_20kph.mcap"
 
@@ -51,7 +51,8 @@ def test_the_kept_simulator_recording_is_whole_and_valid_for_foxglove():
 
 
 def test_evidence_of_the_warning_and_the_brake(tmp_path):
-    proc = subprocess.run(python_module("tools.cli", "evidence", "--from", str(SIM), "--out",
+    proc = subprocess.run(python_module("aeb_radar_camera.tools.cli", "evidence", "--from",
+                                        str(SIM), "--out",
                                         str(tmp_path), "--fusion-config",
                                         "deploy/fusion.toml"),
                           capture_output=True, text=True, timeout=120, cwd=REPO)
@@ -100,12 +101,14 @@ def test_a_demo_run_recorded_beside_it(tmp_path):
     port = free_port()
     out = tmp_path / "demo.mcap"
     recorder = ServiceProcess("record", python_module(
-        "tools.cli", "record", "-o", str(out), "--connect", f"tcp/127.0.0.1:{port}",
+        "aeb_radar_camera.tools.cli", "record", "-o", str(out), "--connect",
+        f"tcp/127.0.0.1:{port}",
         "--evidence", str(tmp_path / "evidence"), "--fusion-config", "deploy/fusion.toml"),
         tmp_path)
     try:
         demo = subprocess.run(python_module(
-            "tools.cli", "demo", "--scenarios", "stationary_car_30kph", "--port", str(port),
+            "aeb_radar_camera.tools.cli", "demo", "--scenarios", "stationary_car_30kph", "--port",
+            str(port),
             "--raw-can", "--out", str(tmp_path / "demo")),
             capture_output=True, text=True, timeout=600, cwd=REPO)
         assert demo.returncode == 0, demo.stdout[-3000:] + demo.stderr[-3000:]
@@ -115,11 +118,13 @@ def test_a_demo_run_recorded_beside_it(tmp_path):
     brakes = [p for p in (tmp_path / "evidence").iterdir() if "_BRAKE_" in p.name]
     assert brakes and (brakes[0] / "frame_annotated.jpg").is_file()
     # The radar's re-run on the demo's raw CAN reproduces its tracks; fusion's decisions.
-    radar = subprocess.run(python_module("tools.cli", "rerun", "radar", str(out), "--compare",
+    radar = subprocess.run(python_module("aeb_radar_camera.tools.cli", "rerun", "radar", str(out),
+                                         "--compare",
                                          "--quiet"),
                            capture_output=True, text=True, timeout=120, cwd=REPO)
     assert radar.returncode == 0 and "with a difference: 0" in radar.stdout, radar.stdout
-    fusion = subprocess.run(python_module("tools.cli", "rerun", "fusion", str(out), "--compare",
+    fusion = subprocess.run(python_module("aeb_radar_camera.tools.cli", "rerun", "fusion",
+                                          str(out), "--compare",
                                           "--quiet", "--json", str(tmp_path / "f.json")),
                             capture_output=True, text=True, timeout=120, cwd=REPO)
     fields = json.loads((tmp_path / "f.json").read_text())["comparison"]["fields"]

@@ -6,17 +6,17 @@ import json
 import msgspec
 import pytest
 
-from common.messages import CompressedFrame, RadarTracks, encode
-from tests.system.messages import header, radar_tracks, track
-from tools.recording.format import (
+from aeb_radar_camera.common.messages import CompressedFrame, RadarTracks, encode
+from aeb_radar_camera.tools.recording.format import (
     UNKNOWN_CHANNEL,
     channel_of_topic,
     parse_topic,
     publish_time,
     stack_channel,
 )
-from tools.recording.reader import Recording, RecordingError, decode_record
-from tools.recording.writer import RecordingWriter
+from aeb_radar_camera.tools.recording.reader import Recording, RecordingError, decode_record
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
+from tests.system.messages import header, radar_tracks, track
 
 TRACKS = "aeb/ego/radar/front/tracks"
 FRAMES = "aeb/ego/camera/front/jpeg"

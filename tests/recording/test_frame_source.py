@@ -11,13 +11,13 @@ from functools import partial
 import numpy as np
 import pytest
 
-from common.imaging import encode_jpeg, jpeg_crc32
-from common.messages import CompressedFrame, DecodeError, Header, encode
-from services.fusion.frames import RING_SIZE, FrameDecoder, FrameError, FrameFeed
+from aeb_radar_camera.common.imaging import encode_jpeg, jpeg_crc32
+from aeb_radar_camera.common.messages import CompressedFrame, DecodeError, Header, encode
+from aeb_radar_camera.services.fusion.frames import RING_SIZE, FrameDecoder, FrameError, FrameFeed
+from aeb_radar_camera.tools.recording.frame_source import DECODED_KEPT, FrameSource
 from tests.fusion.helpers import CAL, MS, T0
 from tests.fusion.test_depth_check import car, render_depth
 from tests.fusion.test_depth_fusion import depth_payload
-from tools.recording.frame_source import DECODED_KEPT, FrameSource
 
 W, H = CAL.width, CAL.height
 PERIOD = 33 * MS

@@ -7,20 +7,21 @@ import subprocess
 
 import msgspec
 
-from common.messages import BrakeCommand, encode
+from aeb_radar_camera.common.messages import BrakeCommand, encode
+from aeb_radar_camera.tools.recording.format import stack_channel
+from aeb_radar_camera.tools.recording.info import inspect
+from aeb_radar_camera.tools.recording.reader import Recording
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
 from tests.messages_support import example
 from tests.support import REPO, python_module
-from tools.recording.format import stack_channel
-from tools.recording.info import inspect
-from tools.recording.reader import Recording
-from tools.recording.writer import RecordingWriter
 
 SIM = REPO / "tests" / "data" / "recording" / "pedestrian_standing_20kph.mcap"
 CMD = "aeb/ego/fusion/primary/brake_cmd"
 
 
 def info(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(python_module("tools.cli", "info", *args), capture_output=True,
+    return subprocess.run(python_module("aeb_radar_camera.tools.cli", "info", *args),
+                          capture_output=True,
                           text=True, timeout=120, cwd=REPO)
 
 

@@ -9,10 +9,10 @@ import threading
 
 import pytest
 
-from common.keys import RADAR_TRACKS
+from aeb_radar_camera.common.keys import RADAR_TRACKS
+from aeb_radar_camera.tools.recording.keyboard import apply, commands
+from aeb_radar_camera.tools.recording.playback import RATE_STEP, Playback
 from tests.support import REPO, START_TIMEOUT_S, Collector, open_bus, python_module, wait_for
-from tools.recording.keyboard import apply, commands
-from tools.recording.playback import RATE_STEP, Playback
 
 S = 1_000_000_000
 
@@ -90,7 +90,8 @@ SIM = REPO / "tests" / "data" / "recording" / "pedestrian_standing_20kph.mcap"
 def test_replay_on_a_terminal_pauses_steps_and_changes_rate_from_the_keyboard(router):
     master, slave = pty.openpty()
     proc = subprocess.Popen(python_module(
-        "tools.cli", "replay", str(SIM), "--connect", router, "--keys", "radar_tracks",
+        "aeb_radar_camera.tools.cli", "replay", str(SIM), "--connect", router, "--keys",
+        "radar_tracks",
         "--quiet"), stdin=slave, stdout=slave, stderr=slave, cwd=REPO,
         start_new_session=False, preexec_fn=_controlling(slave))
     os.close(slave)

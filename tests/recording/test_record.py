@@ -10,8 +10,12 @@ import time
 
 import pytest
 
-from common.messages import Header
-from common.net import free_port
+from aeb_radar_camera.common.messages import Header
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.tools.recording.reader import Recording, decode_record
+from aeb_radar_camera.tools.recording.record import default_name
+from aeb_radar_camera.tools.recording.recorder import RECORDER_STATUS
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
 from tests.foxglove.protobuf import decode as decode_protobuf
 from tests.recording.publish import StackPublisher
 from tests.support import (
@@ -22,10 +26,6 @@ from tests.support import (
     python_module,
     wait_for,
 )
-from tools.recording.reader import Recording, decode_record
-from tools.recording.record import default_name
-from tools.recording.recorder import RECORDER_STATUS
-from tools.recording.writer import RecordingWriter
 
 pytestmark = pytest.mark.slow
 
@@ -40,7 +40,7 @@ STACK_KEYS = {
 def start_recorder(router, tmp_path, *extra, name="record"):
     out = tmp_path / f"{name}.mcap"
     proc = ServiceProcess(name, python_module(
-        "tools.cli", "record", "-o", str(out), "--connect", router,
+        "aeb_radar_camera.tools.cli", "record", "-o", str(out), "--connect", router,
         "--summary-json", str(tmp_path / f"{name}.json"), *extra), tmp_path)
     return proc, out
 
@@ -196,7 +196,8 @@ def test_an_existing_recording_is_never_overwritten(tmp_path, split):
     existing.write_bytes(b"a drive worth keeping")
     argv = ["record", "-o", str(out), "--connect", f"tcp/127.0.0.1:{free_port()}",
             *(["--split-duration", "60"] if split else [])]
-    done = subprocess.run(python_module("tools.cli", *argv), capture_output=True, text=True,
+    done = subprocess.run(python_module("aeb_radar_camera.tools.cli", *argv), capture_output=True,
+                          text=True,
                           timeout=60, cwd=tmp_path)
     assert done.returncode == 2, done.stderr
     assert f"{existing} already exists" in done.stderr and "never overwrites" in done.stderr

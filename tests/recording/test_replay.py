@@ -15,10 +15,13 @@ from pathlib import Path
 
 import pytest
 
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
-from common.messages import BrakeCommand, BrakeState, RadarTracks, decode
-from common.net import free_port
-from common.resources import DEPLOY
+from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeState, RadarTracks, decode
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.recording.reader import Recording
+from aeb_radar_camera.tools.sim.actuator import SimActuator
+from aeb_radar_camera.tools.sim.stack import write_configs
 from tests.support import (
     REPO,
     START_TIMEOUT_S,
@@ -29,9 +32,6 @@ from tests.support import (
     python_module,
     wait_for,
 )
-from tools.recording.reader import Recording
-from tools.sim.actuator import SimActuator
-from tools.sim.stack import write_configs
 
 pytestmark = pytest.mark.slow
 
@@ -43,7 +43,8 @@ def recorded(topic: str, msg_type):
 
 
 def replay(router: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(python_module("tools.cli", "replay", str(SIM), "--connect", router,
+    return subprocess.run(python_module("aeb_radar_camera.tools.cli", "replay", str(SIM),
+                                        "--connect", router,
                                         "--quiet", *args),
                           capture_output=True, text=True, timeout=timeout, cwd=REPO)
 
@@ -58,7 +59,7 @@ def test_fusion_and_brake_on_a_replay_decide_as_recorded(router, tmp_path):
     as_recorded = {"fusion": ("--instance", "primary", "--set",
                               f"fusion.command_key={DEPLOY / 'keys' / 'primary.key'}"),
                    "brake": ()}
-    procs = [ServiceProcess(name, python_module(f"services.{name}", "--config",
+    procs = [ServiceProcess(name, python_module(f"aeb_radar_camera.services.{name}", "--config",
                                                 str(configs.of(name)), "--connect", router,
                                                 *as_recorded[name]),
                             tmp_path) for name in ("fusion", "brake")]
@@ -94,7 +95,8 @@ def test_fusion_and_brake_on_a_replay_decide_as_recorded(router, tmp_path):
 def test_the_radar_runs_on_the_recorded_raw_can(router, tmp_path):
     path_file = tmp_path / "pty"
     rp = ServiceProcess("replay", python_module(
-        "tools.cli", "replay", str(SIM), "--connect", router, "--keys", "radar_can",
+        "aeb_radar_camera.tools.cli", "replay", str(SIM), "--connect", router, "--keys",
+        "radar_can",
         "--remap", "can/radar=can/replayed", "--can-pty", "--can-pty-path-file",
         str(path_file), "--quiet"), tmp_path)
     try:
@@ -107,7 +109,8 @@ def test_the_radar_runs_on_the_recorded_raw_can(router, tmp_path):
         with open_bus(router, source="test") as bus:
             tracks = Collector()
             bus.subscribe(RADAR_TRACKS, tracks, sensor="front")
-            radar = ServiceProcess("radar", python_module("services.radar", "--config",
+            radar = ServiceProcess("radar", python_module("aeb_radar_camera.services.radar",
+                                                          "--config",
                                                           str(cfg)), tmp_path)
             try:
                 assert rp.proc.wait(120) == 0, rp.output()
@@ -150,7 +153,8 @@ def test_rate_fast_window_loop_and_another_vehicle(router, tmp_path):
         bus.subscribe(RADAR_TRACKS, looped, sensor="front")
         stop = threading.Event()
         proc = ServiceProcess("loop", python_module(
-            "tools.cli", "replay", str(SIM), "--connect", router, "--keys", "radar_tracks",
+            "aeb_radar_camera.tools.cli", "replay", str(SIM), "--connect", router, "--keys",
+            "radar_tracks",
             "--vehicle", "replay1", "--fast", "--start", "2", "--end", "3", "--loop", "--quiet"),
             tmp_path)
         try:
@@ -167,7 +171,8 @@ def test_rate_fast_window_loop_and_another_vehicle(router, tmp_path):
 def test_a_replay_that_is_the_router_does_not_say_it_waits_for_one(tmp_path):
     listen = f"tcp/127.0.0.1:{free_port()}"
     done = subprocess.run(python_module(
-        "tools.cli", "replay", str(SIM), "--listen", listen, "--keys", "radar_tracks",
+        "aeb_radar_camera.tools.cli", "replay", str(SIM), "--listen", listen, "--keys",
+        "radar_tracks",
         "--fast", "--quiet", "--log-level", "INFO"), capture_output=True, text=True,
         timeout=120, cwd=REPO)
     assert done.returncode == 0, done.stderr

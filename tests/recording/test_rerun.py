@@ -11,21 +11,33 @@ import json
 import subprocess
 import threading
 
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from common.config.radar import CanSettings, Pace, RadarSettings, RawCanSettings, ReplaySettings
-from common.keys import RADAR_CAN, RADAR_TRACKS
-from common.messages import RawCanFrames, Verification, VerifiedTargets, decode, encode
-from services.radar.shell import RadarShell
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.config.radar import (
+    CanSettings,
+    Pace,
+    RadarSettings,
+    RawCanSettings,
+    ReplaySettings,
+)
+from aeb_radar_camera.common.keys import RADAR_CAN, RADAR_TRACKS
+from aeb_radar_camera.common.messages import (
+    RawCanFrames,
+    Verification,
+    VerifiedTargets,
+    decode,
+    encode,
+)
+from aeb_radar_camera.services.radar.shell import RadarShell
+from aeb_radar_camera.tools.recording.compare import Difference, check_declared
+from aeb_radar_camera.tools.recording.depth import message_head
+from aeb_radar_camera.tools.recording.format import channel_of_topic, stack_channel
+from aeb_radar_camera.tools.recording.reader import Recording
+from aeb_radar_camera.tools.recording.rerun_fusion import FusionRerun, normalised
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
 from tests.can_support import RECORDING, RECORDING_CYCLES
 from tests.support import REPO, python_module
 from tests.system.messages import radar_tracks, track
-from tools.recording.compare import Difference, check_declared
-from tools.recording.depth import message_head
-from tools.recording.format import channel_of_topic, stack_channel
-from tools.recording.reader import Recording
-from tools.recording.rerun_fusion import FusionRerun, normalised
-from tools.recording.writer import RecordingWriter
 
 DATA = REPO / "tests" / "data" / "recording"
 SIM = DATA / "pedestrian_standing_20kph.mcap"
@@ -36,7 +48,8 @@ AS_RECORDED = ("-c", str(RECORDED_CONFIG), "--instance", "primary")
 
 
 def rerun(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(python_module("tools.cli", "rerun", *args), capture_output=True,
+    return subprocess.run(python_module("aeb_radar_camera.tools.cli", "rerun", *args),
+                          capture_output=True,
                           text=True, timeout=timeout, cwd=REPO)
 
 
@@ -163,7 +176,7 @@ def test_a_recording_without_raw_can_is_refused_for_the_radar(tmp_path):
 def test_numbers_compare_to_rounding_unless_exact():
     import msgspec
 
-    from tools.recording.compare import Comparison
+    from aeb_radar_camera.tools.recording.compare import Comparison
 
     recorded = radar_tracks(1, (track(1, x=12.0),))
     t = recorded.tracks[0]

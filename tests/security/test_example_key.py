@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from common.command_auth import CommandKey, load_key, new_key, write_key
-from common.resources import EXAMPLE_KEYS
-from services.brake.serial_link import simulated_port
+from aeb_radar_camera.common.command_auth import CommandKey, load_key, new_key, write_key
+from aeb_radar_camera.common.resources import EXAMPLE_KEYS
+from aeb_radar_camera.services.brake.serial_link import simulated_port
 from tests.support import ServiceProcess, python_module, wait_for
 
 pytestmark = pytest.mark.slow
@@ -34,7 +34,8 @@ def brake(folder: Path, key: Path, port: str, extra: str = "") -> ServiceProcess
     config = folder / "brake.toml"
     config.write_text(f'[zenoh]\nconnect = ["tcp/127.0.0.1:1"]\n[brake]\n'
                       f'command_keys = ["{key}"]\n{extra}[brake.serial]\nport = "{port}"\n')
-    return ServiceProcess("brake", python_module("services.brake", "--config", str(config)),
+    return ServiceProcess("brake", python_module("aeb_radar_camera.services.brake", "--config",
+                                                 str(config)),
                           folder)
 
 

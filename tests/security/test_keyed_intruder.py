@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from common.messages import BrakeState, BrakeStatus
+from aeb_radar_camera.common.messages import BrakeState, BrakeStatus
 from tests.brake.helpers import write_test_key
 from tests.brake.rig import BrakeRig, brake_rig
 from tests.brake.test_intruder import finished, intruder

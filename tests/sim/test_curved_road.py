@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from tools.messages import ObjectKind, RoadGeometry
-from tools.sim.road import Pose, Road
-from tools.sim.scenario import (
+from aeb_radar_camera.tools.messages import ObjectKind, RoadGeometry
+from aeb_radar_camera.tools.sim.road import Pose, Road
+from aeb_radar_camera.tools.sim.scenario import (
     EgoSpec,
     Motion,
     RoadSpec,
@@ -17,7 +17,7 @@ from tools.sim.scenario import (
     ScenarioKind,
     SceneObject,
 )
-from tools.sim.world import World
+from aeb_radar_camera.tools.sim.world import World
 
 R = 50.0
 BEND = RoadSpec(curve_start_m=10.0, radius_m=R)
@@ -133,8 +133,8 @@ def test_a_lead_car_follows_its_lane_through_the_bend_and_a_crossing_one_crosses
 
 
 def test_a_road_tighter_than_50_m_or_unknown_road_fields_are_refused(tmp_path):
-    from common.config.loader import ConfigError
-    from tools.sim.scenario import load_scenario
+    from aeb_radar_camera.common.config.loader import ConfigError
+    from aeb_radar_camera.tools.sim.scenario import load_scenario
 
     for road, match in (("radius_m = 40.0", "at least 50 m"), ("radius = 80.0", "radius")):
         f = tmp_path / "bad.toml"

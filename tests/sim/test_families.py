@@ -9,8 +9,8 @@ import tomllib
 import msgspec
 import pytest
 
-from tools.messages import Lighting, ObjectKind
-from tools.sim.families import (
+from aeb_radar_camera.tools.messages import Lighting, ObjectKind
+from aeb_radar_camera.tools.sim.families import (
     EGO_WIDTH_M,
     FAMILIES,
     SPLITS,
@@ -21,8 +21,8 @@ from tools.sim.families import (
     seeds_of,
     split_of,
 )
-from tools.sim.scenario import Scenario, ScenarioKind, load_scenario, scenario_toml
-from tools.sim.world import World
+from aeb_radar_camera.tools.sim.scenario import Scenario, ScenarioKind, load_scenario, scenario_toml
+from aeb_radar_camera.tools.sim.world import World
 
 DT = 0.02
 # Families whose objects never fall behind the ego (they keep ahead, or drive away).

@@ -8,17 +8,16 @@ import threading
 import can
 import pytest
 
-from common.clock import mono_ns, wall_ns
-from common.keys import EGO_MOTION, RADAR_TRACKS
-from common.messages import EgoMotion, Header
-from services.radar.ars408 import decode_frame, ego_motion_frames, encode
-from services.radar.ars408.records import ObjectGeneral
-from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
-from tools.messages import ObjectKind
-from tools.sim.can_links import SlcanPtyLink
-from tools.sim.radar_feed import HostMotion, RadarFeed, state_frames
-from tools.sim.radar_model import DynProp, RadarModel, ReceivedMotion
-from tools.sim.scenario import (
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import EGO_MOTION, RADAR_TRACKS
+from aeb_radar_camera.common.messages import EgoMotion, Header
+from aeb_radar_camera.services.radar.ars408 import decode_frame, ego_motion_frames, encode
+from aeb_radar_camera.services.radar.ars408.records import ObjectGeneral
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
+from aeb_radar_camera.tools.sim.radar_feed import HostMotion, RadarFeed, state_frames
+from aeb_radar_camera.tools.sim.radar_model import DynProp, RadarModel, ReceivedMotion
+from aeb_radar_camera.tools.sim.scenario import (
     EgoSpec,
     Motion,
     RadarLook,
@@ -27,7 +26,8 @@ from tools.sim.scenario import (
     ScenarioKind,
     SceneObject,
 )
-from tools.sim.world import World
+from aeb_radar_camera.tools.sim.world import World
+from tests.support import Collector, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
 
 QUIET = RadarLook(ghost_rate_per_cycle=0.0, split_probability=0.0, dropout_probability=0.0,
                   id_swap_probability=0.0, range_sigma_m=0.0, lateral_sigma_m=0.0,
@@ -166,7 +166,8 @@ forward = true
             health = HealthWatch(bus)
             tracks = Collector()
             bus.subscribe(RADAR_TRACKS, tracks, sensor="front")
-            proc = ServiceProcess("radar", python_module("services.radar", "--config",
+            proc = ServiceProcess("radar", python_module("aeb_radar_camera.services.radar",
+                                                         "--config",
                                                          str(config)), tmp_path)
             stop = threading.Event()
             motion = bus.publisher(EGO_MOTION)

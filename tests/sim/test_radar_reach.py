@@ -3,12 +3,12 @@ tracks the rule never sees (tools/sim/radar_reach.py, deploy/radar.toml)."""
 
 from pathlib import Path
 
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from common.config.radar import RadarConfig, RadarSettings
-from common.resources import DEPLOY
-from tools.sim.radar_reach import radar_for
-from tools.sim.stack import write_configs
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.config.radar import RadarConfig, RadarSettings
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.sim.radar_reach import radar_for
+from aeb_radar_camera.tools.sim.stack import write_configs
 
 
 def test_a_kinematic_fusion_widens_the_prefilter_to_its_range_gate_and_the_paper_keeps_25_m():

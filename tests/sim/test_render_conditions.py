@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.resources import EXAMPLE_CALIBRATION
-from tools.messages import Lighting, ObjectKind, RoadGeometry, SimWorld
-from tools.sim.camera_source import scene_at
-from tools.sim.render import ROADSIDE_Y_M, Renderer
-from tools.sim.road import Road, RoadView
-from tools.sim.scenario import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.messages import Lighting, ObjectKind, RoadGeometry, SimWorld
+from aeb_radar_camera.tools.sim.camera_source import scene_at
+from aeb_radar_camera.tools.sim.render import ROADSIDE_Y_M, Renderer
+from aeb_radar_camera.tools.sim.road import Road, RoadView
+from aeb_radar_camera.tools.sim.scenario import (
     CameraLook,
     EgoSpec,
     RoadSpec,
@@ -21,8 +21,8 @@ from tools.sim.scenario import (
     ScenarioKind,
     SceneObject,
 )
-from tools.sim.sprites import LANE_WIDTH_M
-from tools.sim.world import Body, World
+from aeb_radar_camera.tools.sim.sprites import LANE_WIDTH_M
+from aeb_radar_camera.tools.sim.world import Body, World
 
 QUIET = CameraLook(noise=0.0)
 EDGE_LINE_M = 1.5 * LANE_WIDTH_M          # the solid line at the road's edges
@@ -133,7 +133,7 @@ def test_the_camera_source_draws_the_vehicle_frame_along_the_road():
     world = World(sc)
     world.step(2.5, 0.0)
     pose = world.ego_pose()
-    from common.messages import Header
+    from aeb_radar_camera.common.messages import Header
 
     msg = SimWorld(header=Header(0, "sim", 1_000_000_000, 0), scenario="t", run=1,
                    active=True, t_s=world.t_s, ego_x_m=pose.x_m,

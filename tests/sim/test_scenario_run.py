@@ -4,10 +4,10 @@ it: the radar's schedule, the samples, when a run ends, `sim/world`."""
 import random
 from itertools import pairwise
 
-from common.messages import Header
-from tools.messages import ObjectKind
-from tools.sim.scenario import EgoSpec, Scenario, ScenarioKind, SceneObject
-from tools.sim.scenario_run import (
+from aeb_radar_camera.common.messages import Header
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.scenario import EgoSpec, Scenario, ScenarioKind, SceneObject
+from aeb_radar_camera.tools.sim.scenario_run import (
     LoopSettings,
     RadarSchedule,
     ScenarioRun,

@@ -1,6 +1,6 @@
 """Message factories for the system tests (valid messages with plausible values)."""
 
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     BrakeState,
     BrakeStatus,

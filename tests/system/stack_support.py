@@ -13,14 +13,14 @@ from pathlib import Path
 import can
 import pytest
 
-from common.bus import Bus
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.tools.sim.actuator import SimActuator
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
+from aeb_radar_camera.tools.sim.radar_feed import FrameSink, PythonCanSink, RadarFeed
+from aeb_radar_camera.tools.sim.runner import SimActuatorView, Simulator
+from aeb_radar_camera.tools.sim.scenario import RadarLook
+from aeb_radar_camera.tools.sim.stack import SERVICES, TOKENS, StackConfigs, write_configs
 from tests.support import START_TIMEOUT_S, HealthWatch, ServiceProcess, open_bus, python_module
-from tools.sim.actuator import SimActuator
-from tools.sim.can_links import SlcanPtyLink
-from tools.sim.radar_feed import FrameSink, PythonCanSink, RadarFeed
-from tools.sim.runner import SimActuatorView, Simulator
-from tools.sim.scenario import RadarLook
-from tools.sim.stack import SERVICES, TOKENS, StackConfigs, write_configs
 
 # The brake's heartbeat above one radar cycle: while commands flow, every actuator line
 # is a command line, so cycles and lines pair exactly (tools/sim/latency.py).
@@ -93,7 +93,8 @@ def sim_stack(tmp_path: Path, endpoint: str, can_variant: str = "slcan",
         procs: dict[str, ServiceProcess] = {}
         for name in SERVICES:
             ep = (connect or {}).get(name, endpoint)
-            argv = python_module(f"services.{name}", "--config", str(configs.of(name)),
+            argv = python_module(f"aeb_radar_camera.services.{name}", "--config",
+                                 str(configs.of(name)),
                                  "--connect", ep)
             procs[name] = ServiceProcess(name, wrap(name, argv) if wrap else argv, tmp_path)
             stack.callback(procs[name].stop)

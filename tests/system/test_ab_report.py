@@ -7,13 +7,13 @@ import threading
 
 import pytest
 
-from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.messages import Decision, Verification, encode
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
+from aeb_radar_camera.common.messages import Decision, Verification, encode
+from aeb_radar_camera.tools.ab.compare import Comparator, render
+from aeb_radar_camera.tools.recording.format import channel_of_topic
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
 from tests.support import START_TIMEOUT_S, open_bus, python_module
 from tests.system.messages import brake_command, target, verified_targets
-from tools.ab.compare import Comparator, render
-from tools.recording.format import channel_of_topic
-from tools.recording.writer import RecordingWriter
 
 
 def disagrees(seq: int) -> bool:
@@ -72,7 +72,8 @@ def test_cycles_only_one_instance_published_are_counted_not_compared():
 
 
 def ab_report(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(python_module("tools.cli", "ab-report", *args), capture_output=True,
+    return subprocess.run(python_module("aeb_radar_camera.tools.cli", "ab-report", *args),
+                          capture_output=True,
                           text=True, timeout=60)
 
 
@@ -135,7 +136,8 @@ def test_ab_report_live_with_a_recording_that_reports_the_same(router, tmp_path)
         thread.start()
         try:
             live = subprocess.run(
-                python_module("tools.cli", "ab-report", "--connect", router, "--duration", "4",
+                python_module("aeb_radar_camera.tools.cli", "ab-report", "--connect", router,
+                              "--duration", "4",
                               "--record", str(rec), "--json"),
                 capture_output=True, text=True, timeout=START_TIMEOUT_S + 30)
         finally:
@@ -149,13 +151,15 @@ def test_ab_report_live_with_a_recording_that_reports_the_same(router, tmp_path)
     assert report["commands_disagreed"] > 0
     for e in report["episodes"]:
         assert disagrees(e["first_seq"]) and disagrees(e["last_seq"])
-    replay = subprocess.run(python_module("tools.cli", "ab-report", "--from", str(rec),
+    replay = subprocess.run(python_module("aeb_radar_camera.tools.cli", "ab-report", "--from",
+                                          str(rec),
                                           "--json"), capture_output=True, text=True, timeout=60)
     assert replay.returncode == 0, replay.stderr
     again = json.loads(replay.stdout)
     assert again["commands_disagreed"] == report["commands_disagreed"]
     assert again["episodes"] == report["episodes"]
-    text = subprocess.run(python_module("tools.cli", "ab-report", "--from", str(rec)),
+    text = subprocess.run(python_module("aeb_radar_camera.tools.cli", "ab-report", "--from",
+                                        str(rec)),
                           capture_output=True, text=True, timeout=60)
     assert "A/B: primary (followed by the brake) vs candidate (shadow)" in text.stdout
 

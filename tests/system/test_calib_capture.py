@@ -9,21 +9,21 @@ import threading
 import msgspec
 import pytest
 
-from common.imaging import encode_jpeg
-from common.keys import CAMERA_JPEG, RADAR_TRACKS
-from common.messages import CompressedFrame, RadarTracks
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.common.keys import CAMERA_JPEG, RADAR_TRACKS
+from aeb_radar_camera.common.messages import CompressedFrame, RadarTracks
+from aeb_radar_camera.tools.calib import check as calib_check
+from aeb_radar_camera.tools.calib.capture import Pairing
+from aeb_radar_camera.tools.sim.scenes import Obstacle, Scene, render
 from tests.fusion.helpers import CAL, CALIBRATION, cycle, track
 from tests.support import open_bus
-from tools.calib import check as calib_check
-from tools.calib.capture import Pairing
-from tools.sim.scenes import Obstacle, Scene, render
 
 MS = 1_000_000
 T0 = 1_800_000_000 * 10**9
 
 
 def frame(stamp_ns: int, seq: int = 0, jpeg: bytes = b"\xff\xd8") -> CompressedFrame:
-    from common.messages import Header
+    from aeb_radar_camera.common.messages import Header
 
     return CompressedFrame(header=Header(seq=seq, source="camera/front", stamp_ns=stamp_ns,
                                          pub_mono_ns=0), camera="front", width=848, height=480,
@@ -110,7 +110,8 @@ def test_capture_from_the_bus_then_check(router, tmp_path, capsys, scene_jpeg):
     thread = threading.Thread(target=publish, daemon=True)
     thread.start()
     try:
-        done = subprocess.run([sys.executable, "-m", "tools.cli", "calib-capture", "--out",
+        done = subprocess.run([sys.executable, "-m", "aeb_radar_camera.tools.cli", "calib-capture",
+                               "--out",
                                str(tmp_path / "cap"), "--connect", router, "--timeout", "60"],
                               capture_output=True, text=True, timeout=120)
     finally:
@@ -137,7 +138,8 @@ def test_capture_from_the_bus_then_check(router, tmp_path, capsys, scene_jpeg):
 
 
 def test_nothing_on_the_bus_is_exit_1_saying_what_was_seen(router, tmp_path):
-    done = subprocess.run([sys.executable, "-m", "tools.cli", "calib-capture", "--out",
+    done = subprocess.run([sys.executable, "-m", "aeb_radar_camera.tools.cli", "calib-capture",
+                           "--out",
                            str(tmp_path / "cap"), "--connect", router, "--timeout", "1"],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 1

@@ -7,12 +7,12 @@ import io
 import can
 import pytest
 
-from common.resources import ARS408_RECORDING
-from services.radar.ars408 import RadarFrameError, decode_frame
+from aeb_radar_camera.common.resources import ARS408_RECORDING
+from aeb_radar_camera.services.radar.ars408 import RadarFrameError, decode_frame
+from aeb_radar_camera.tools.can_export import LONG_HEAD, main
 from tests.can_support import RECORDING_FRAMES, recording_messages
 from tests.extras_support import run_without
 from tests.support import REPO
-from tools.can_export import LONG_HEAD, main
 
 
 def export(capsys, *args: str) -> tuple[list[dict[str, str]], str]:
@@ -92,6 +92,6 @@ def test_bad_input_is_exit_2_naming_it(capsys, monkeypatch, args, said):
 
 
 def test_without_cantools_the_extra_is_named():
-    r = run_without({"cantools"}, "import sys\nfrom tools.cli import main\n"
+    r = run_without({"cantools"}, "import sys\nfrom aeb_radar_camera.tools.cli import main\n"
                                   f"sys.exit(main(['can-export', {str(ARS408_RECORDING)!r}]))")
     assert r.returncode == 2 and "pip install 'aeb-radar-camera[dbc]'" in r.stderr

@@ -7,13 +7,14 @@ import sys
 
 import pytest
 
-from tools.cli import main
-from tools.commands import COMMANDS
-from tools.launch.table import load_table, resolve_launches
+from aeb_radar_camera.tools.cli import main
+from aeb_radar_camera.tools.commands import COMMANDS
+from aeb_radar_camera.tools.launch.table import load_table, resolve_launches
 
 
 def test_version_is_the_installed_distributions():
-    out = subprocess.run([sys.executable, "-m", "tools.cli", "--version"], capture_output=True,
+    out = subprocess.run([sys.executable, "-m", "aeb_radar_camera.tools.cli", "--version"],
+                         capture_output=True,
                          text=True, timeout=60)
     assert out.returncode == 0
     assert importlib.metadata.version("aeb-radar-camera") in out.stdout
@@ -52,8 +53,8 @@ def test_levels_are_case_insensitive_and_up_passes_its_level_to_every_aeb_child(
 
 
 def test_a_lower_case_level_reaches_the_service(tmp_path):
-    from common.config.brake import BrakeConfig
-    from common.service import load_service_config, service_argparser
+    from aeb_radar_camera.common.config.brake import BrakeConfig
+    from aeb_radar_camera.common.service import load_service_config, service_argparser
 
     args = service_argparser("brake", "").parse_args(["--log-level", "debug"])
     assert load_service_config(args, BrakeConfig).log.level.value == "DEBUG"

@@ -16,7 +16,8 @@ SCENARIOS = ["stationary_car_30kph", "no_threat_parked_cars_30kph"]
 def test_demo_runs_scenarios_prints_a_summary_and_writes_plots(tmp_path):
     out = tmp_path / "demo"
     proc = subprocess.run(
-        python_module("tools.cli", "demo", "--scenarios", ",".join(SCENARIOS), "--out", str(out),
+        python_module("aeb_radar_camera.tools.cli", "demo", "--scenarios", ",".join(SCENARIOS),
+                      "--out", str(out),
                       "--candidate"),
         capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:] + \
@@ -43,10 +44,11 @@ def test_demo_runs_scenarios_prints_a_summary_and_writes_plots(tmp_path):
 
 
 def test_demo_lists_scenarios_and_rejects_unknown_ones():
-    listed = subprocess.run(python_module("tools.cli", "demo", "--list"), capture_output=True,
+    listed = subprocess.run(python_module("aeb_radar_camera.tools.cli", "demo", "--list"),
+                            capture_output=True,
                             text=True, timeout=120)
     assert listed.returncode == 0
     assert "* stationary_car_30kph" in listed.stdout
-    bad = subprocess.run(python_module("tools.cli", "demo", "--scenarios", "nope"),
+    bad = subprocess.run(python_module("aeb_radar_camera.tools.cli", "demo", "--scenarios", "nope"),
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "no scenario 'nope'" in bad.stderr

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from common.resources import DEPLOY
+from aeb_radar_camera.common.resources import DEPLOY
 from tests.support import free_port, wait_for
 
 ZENOH_CONFIGS = sorted((DEPLOY / "zenoh").rglob("*.json5"))
@@ -157,11 +157,11 @@ TABLES = ["single-host", "ecu-a", "ecu-b"]
 
 
 def _config_types() -> dict[str, type]:
-    from common.config.brake import BrakeConfig
-    from common.config.camera import CameraConfig
-    from common.config.fusion import FusionConfig
-    from common.config.radar import RadarConfig
-    from common.config.vehicle import VehicleConfig
+    from aeb_radar_camera.common.config.brake import BrakeConfig
+    from aeb_radar_camera.common.config.camera import CameraConfig
+    from aeb_radar_camera.common.config.fusion import FusionConfig
+    from aeb_radar_camera.common.config.radar import RadarConfig
+    from aeb_radar_camera.common.config.vehicle import VehicleConfig
 
     return {"radar": RadarConfig, "camera": CameraConfig, "fusion": FusionConfig,
             "brake": BrakeConfig, "vehicle": VehicleConfig}
@@ -169,8 +169,8 @@ def _config_types() -> dict[str, type]:
 
 @pytest.mark.parametrize("name", TABLES)
 def test_shipped_process_tables_resolve_to_valid_service_configs(name):
-    from common.config.loader import load_config
-    from tools.launch.table import load_table, resolve_launches
+    from aeb_radar_camera.common.config.loader import load_config
+    from aeb_radar_camera.tools.launch.table import load_table, resolve_launches
 
     path = DEPLOY / f"{name}.toml"
     table, workdir = load_table(path)
@@ -190,8 +190,8 @@ def test_shipped_process_tables_resolve_to_valid_service_configs(name):
 def test_the_two_boards_meet_at_ecu_a_and_brake_ages_commands_on_wall_clocks():
     import tomllib
 
-    from common.config.brake import BrakeConfig
-    from common.config.loader import load_config
+    from aeb_radar_camera.common.config.brake import BrakeConfig
+    from aeb_radar_camera.common.config.loader import load_config
 
     a = zenoh.Config.from_file(str(DEPLOY / "zenoh/ecu-a-router.json5"))
     b = zenoh.Config.from_file(str(DEPLOY / "zenoh/ecu-b-router.json5"))

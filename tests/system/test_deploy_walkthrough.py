@@ -67,7 +67,7 @@ def on(ns: str, *argv: str) -> list[str]:
 
 
 def aeb(*args: str) -> list[str]:
-    return python_module("tools.cli", *args)
+    return python_module("aeb_radar_camera.tools.cli", *args)
 
 
 def set_table(path: Path, header: str, body: str) -> None:
@@ -140,7 +140,7 @@ def test_the_two_board_walk_through_as_written_arms_the_brake_and_brakes(tmp_pat
                       'options = { sleep_after_open = 0 }')
             set_table(a / "camera.toml", "[camera.source]",
                       'kind = "synthetic"   # SIMULATION: renders the simulated world\n'
-                      'factory = "tools.sim.camera_source:make_source"')
+                      'factory = "aeb_radar_camera.tools.sim.camera_source:make_source"')
             set_table(a / "ecu-a" / "brake.toml", "[brake.serial]",
                       f'port = "{ports["actuator"]}"')
             checks = {}
@@ -162,7 +162,7 @@ def test_the_two_board_walk_through_as_written_arms_the_brake_and_brakes(tmp_pat
             assert "from primary" in str(waiting["reason"])
             # 2. B reaches A on TCP 7447.
             reach = subprocess.run(on(ns_b, sys.executable, "-c", (
-                "import sys, time\nfrom common.net import wait_listening\n"
+                "import sys, time\nfrom aeb_radar_camera.common.net import wait_listening\n"
                 f"wait_listening(7447, {START_TIMEOUT_S}, '{A_ADDRESS}')")),
                 capture_output=True, text=True, timeout=120, cwd=REPO)
             assert reach.returncode == 0, reach.stderr

@@ -4,14 +4,14 @@ from pathlib import Path
 
 import pytest
 
-from common.calibration import Calibration
-from common.config.camera import CameraConfig
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from common.config.radar import RadarConfig
-from common.resources import DEPLOY
-from tools.init import UNIT_AEB, UNIT_CONFIGS, main
-from tools.launch.table import load_table, resolve_launches
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.camera import CameraConfig
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.init import UNIT_AEB, UNIT_CONFIGS, main
+from aeb_radar_camera.tools.launch.table import load_table, resolve_launches
 
 
 def shipped_files() -> set[str]:

@@ -18,17 +18,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.clock import mono_ns
-from common.config.brake import BrakeConfig
-from common.config.loader import load_config
-from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
-from common.messages import BrakeState
-from services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD, RADAR_TRACKS
+from aeb_radar_camera.common.messages import BrakeState
+from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.tools.sim.latency import chain_latencies_ns, stage_breakdown_ns
+from aeb_radar_camera.tools.sim.scenario import ScenarioKind, find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.world import World
 from tests.support import Collector
 from tests.system.stack_support import brake_lines, sim_stack
-from tools.sim.latency import chain_latencies_ns, stage_breakdown_ns
-from tools.sim.scenario import ScenarioKind, find_scenario, load_scenario
-from tools.sim.world import World
 
 pytestmark = pytest.mark.slow
 

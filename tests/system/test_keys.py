@@ -6,9 +6,16 @@ from pathlib import Path
 
 import pytest
 
-from common.command_auth import CommandKey, KeyFileError, load_key, load_keyring, new_key, write_key
-from common.resources import EXAMPLE_KEYS
-from tools import init, keygen
+from aeb_radar_camera.common.command_auth import (
+    CommandKey,
+    KeyFileError,
+    load_key,
+    load_keyring,
+    new_key,
+    write_key,
+)
+from aeb_radar_camera.common.resources import EXAMPLE_KEYS
+from aeb_radar_camera.tools import init, keygen
 
 
 def test_keygen_writes_a_fresh_private_key_and_never_overwrites_silently(tmp_path: Path):

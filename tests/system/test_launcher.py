@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from common.service import STOP_GRACE_S
+from aeb_radar_camera.common.service import STOP_GRACE_S
 from tests.support import (
     START_TIMEOUT_S,
     HealthWatch,
@@ -26,7 +26,7 @@ pytestmark = pytest.mark.slow
 
 
 def up(*args: str) -> list[str]:
-    return python_module("tools.cli", "up", "--colour", "never", *args)
+    return python_module("aeb_radar_camera.tools.cli", "up", "--colour", "never", *args)
 
 
 def run_check(tmp_path: Path, table: str, *extra: str):
@@ -91,7 +91,7 @@ def test_invalid_tables_exit_2_naming_the_problem(tmp_path, table, named):
 def test_the_tables_cpu_latency_request_is_held_for_the_run_and_a_refusal_is_said(tmp_path):
     import struct
 
-    from tools.launch.main import held_cpu_latency
+    from aeb_radar_camera.tools.launch.main import held_cpu_latency
 
     said: list[str] = []
     stand_in = tmp_path / "cpu_dma_latency"
@@ -161,7 +161,7 @@ while True:
 
 ALIVE = """
 import os, sys, threading
-from common.service import stop_event_on_signals
+from aeb_radar_camera.common.service import stop_event_on_signals
 from tests.support import open_bus
 stop = stop_event_on_signals()
 with open_bus(sys.argv[1]) as bus:

@@ -6,9 +6,11 @@ import threading
 
 import pytest
 
-from common.clock import mono_ns, wall_ns
-from common.keys import BRAKE_STATUS, RADAR_TRACKS
-from common.messages import BrakeState, Decision, Verification
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import BRAKE_STATUS, RADAR_TRACKS
+from aeb_radar_camera.common.messages import BrakeState, Decision, Verification
+from aeb_radar_camera.tools.monitor.state import MonitorState
+from aeb_radar_camera.tools.monitor.view import render_text, snapshot
 from tests.support import START_TIMEOUT_S, HealthWatch, open_bus, python_module
 from tests.system.messages import (
     brake_status,
@@ -17,8 +19,6 @@ from tests.system.messages import (
     track,
     verified_targets,
 )
-from tools.monitor.state import MonitorState
-from tools.monitor.view import render_text, snapshot
 
 MS = 1_000_000
 
@@ -72,7 +72,7 @@ def test_snapshot_and_text_show_health_brake_tracks_and_targets():
     now = feed_tracks(state, 5, 75.0)
     state.observe(BRAKE_STATUS, "aeb/ego/brake/status",
                   brake_status(3, BrakeState.BRAKING), now, now)
-    from common.keys import FUSION_TARGETS
+    from aeb_radar_camera.common.keys import FUSION_TARGETS
 
     state.observe(FUSION_TARGETS, "aeb/ego/fusion/primary/targets",
                   verified_targets("primary", 4, (target(1, 12.0, Decision.BRAKE,
@@ -114,7 +114,8 @@ def test_monitor_command_sees_a_live_bus(router):
         try:
             HealthWatch(bus).wait_alive("radar", "front")
             proc = subprocess.run(
-                python_module("tools.cli", "monitor", "--connect", router, "--once", "--json",
+                python_module("aeb_radar_camera.tools.cli", "monitor", "--connect", router,
+                              "--once", "--json",
                               "--duration", "4"),
                 capture_output=True, text=True, timeout=START_TIMEOUT_S + 30)
             assert proc.returncode == 0, proc.stderr
@@ -129,7 +130,8 @@ def test_monitor_command_sees_a_live_bus(router):
             assert snap["tracks"]["front"]["tracks"][0]["range_m"] == 12.0
             # Plain text when stdout is not a terminal, one table per interval.
             proc = subprocess.run(
-                python_module("tools.cli", "monitor", "--connect", router, "--duration", "2.5",
+                python_module("aeb_radar_camera.tools.cli", "monitor", "--connect", router,
+                              "--duration", "2.5",
                               "--interval", "1"),
                 capture_output=True, text=True, timeout=START_TIMEOUT_S + 30)
             assert proc.returncode == 0, proc.stderr
@@ -143,6 +145,7 @@ def test_monitor_command_sees_a_live_bus(router):
 
 
 def test_monitor_exits_2_on_a_bad_endpoint():
-    proc = subprocess.run(python_module("tools.cli", "monitor", "--connect", "nonsense",
+    proc = subprocess.run(python_module("aeb_radar_camera.tools.cli", "monitor", "--connect",
+                                        "nonsense",
                                         "--once"), capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "error:" in proc.stderr

@@ -11,11 +11,12 @@ from contextlib import contextmanager
 
 import pytest
 
-from common.config.brake import BrakeConfig
-from common.config.loader import load_config
-from common.keys import BRAKE_STATUS
-from common.messages import BrakeState
-from services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.keys import BRAKE_STATUS
+from aeb_radar_camera.common.messages import BrakeState
+from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
 from tests.support import (
     START_TIMEOUT_S,
     Collector,
@@ -26,7 +27,6 @@ from tests.support import (
     wait_for,
 )
 from tests.system.stack_support import brake_lines, sim_stack
-from tools.sim.scenario import find_scenario, load_scenario
 
 pytestmark = pytest.mark.slow
 
@@ -73,7 +73,8 @@ def test_fusion_on_board_b_brakes_and_a_cut_link_fails_safe(tmp_path):
     with board_b() as (ns, side_a, address):
         port = free_port()
         local, remote = f"tcp/127.0.0.1:{port}", f"tcp/{address}:{port}"
-        router = ServiceProcess("router", python_module("common.router", "--listen", local,
+        router = ServiceProcess("router", python_module("aeb_radar_camera.common.router",
+                                                        "--listen", local,
                                                         "--listen", remote), tmp_path)
         try:
             wait_for(lambda: port_open(port) or not router.alive(), START_TIMEOUT_S, 0.05,

@@ -7,14 +7,14 @@ import subprocess
 
 import pytest
 
-from common.net import free_port
+from aeb_radar_camera.common.net import free_port
 from tests.support import REPO, START_TIMEOUT_S, ServiceProcess, python_module, wait_for
 
 SERVICES = {
-    "radar": ("services.radar", "deploy/radar-replay.toml"),
-    "camera": ("services.camera", "deploy/camera-sim.toml"),
-    "fusion": ("services.fusion", "deploy/fusion.toml"),
-    "vehicle": ("services.vehicle", "deploy/vehicle-replay.toml"),
+    "radar": ("aeb_radar_camera.services.radar", "deploy/radar-replay.toml"),
+    "camera": ("aeb_radar_camera.services.camera", "deploy/camera-sim.toml"),
+    "fusion": ("aeb_radar_camera.services.fusion", "deploy/fusion.toml"),
+    "vehicle": ("aeb_radar_camera.services.vehicle", "deploy/vehicle-replay.toml"),
 }
 
 
@@ -63,6 +63,7 @@ def test_a_bus_tool_waiting_for_the_router_stops_on_a_signal(tmp_path, tool):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     # No give-up time: only the signal can end the wait.
     args = [a.format(tmp=tmp_path) for a in BUS_TOOLS[tool]]
-    proc = ServiceProcess(tool, python_module("tools.cli", *args, "--connect", endpoint,
+    proc = ServiceProcess(tool, python_module("aeb_radar_camera.tools.cli", *args, "--connect",
+                                              endpoint,
                                               "--connect-timeout", "0"), tmp_path)
     waits_then_stops_on(proc, endpoint, signal.SIGTERM, f"aeb {tool}")

@@ -9,12 +9,12 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from common.config.brake import BrakeConfig
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config, parse_config
-from common.config.radar import RadarConfig
-from tools.launch.table import load_table, resolve_launches
-from tools.sim.stack import FUSION_CONFIG, with_realtime, write_configs
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.tools.launch.table import load_table, resolve_launches
+from aeb_radar_camera.tools.sim.stack import FUSION_CONFIG, with_realtime, write_configs
 
 
 @pytest.mark.parametrize(("config", "table"), [(RadarConfig, "radar"), (BrakeConfig, "brake"),

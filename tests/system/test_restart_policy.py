@@ -4,7 +4,7 @@ import signal
 
 import pytest
 
-from tools.launch.restart import (
+from aeb_radar_camera.tools.launch.restart import (
     Backoff,
     RestartMode,
     RestartState,

@@ -6,10 +6,10 @@ import json
 import msgspec
 import pytest
 
-from common.keys import REGISTRY
-from common.messages.schema import schema_name
+from aeb_radar_camera.common.keys import REGISTRY
+from aeb_radar_camera.common.messages.schema import schema_name
+from aeb_radar_camera.tools.schemas import main
 from tests.messages_support import example, message_types
-from tools.schemas import main
 
 
 @pytest.fixture(scope="module")

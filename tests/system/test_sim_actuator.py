@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 import serial
 
-from common.clock import mono_ns
-from services.brake.protocol import (
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.services.brake.protocol import (
     FAULT_WATCHDOG,
     Ack,
     ActuatorState,
@@ -28,8 +28,8 @@ from services.brake.protocol import (
     decode,
     encode,
 )
+from aeb_radar_camera.tools.sim.actuator import SimActuator, SimEvent, WatchdogPolicy, control
 from tests.support import REPO, wait_for
-from tools.sim.actuator import SimActuator, SimEvent, WatchdogPolicy, control
 
 
 class Host:
@@ -204,7 +204,7 @@ def test_control_lines(sim_host):
 def test_runs_as_its_own_process_with_a_status_file(tmp_path):
     link, status = tmp_path / "act", tmp_path / "status.json"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tools.sim.actuator", "--pty-link", str(link),
+        [sys.executable, "-m", "aeb_radar_camera.tools.sim.actuator", "--pty-link", str(link),
          "--status-file", str(status), "--status-hz", "50"],
         cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True,
@@ -243,7 +243,7 @@ def test_runs_as_its_own_process_with_a_status_file(tmp_path):
 
 def test_refuses_to_start_without_a_port(tmp_path):
     res = subprocess.run(
-        [sys.executable, "-m", "tools.sim.actuator", "--port",
+        [sys.executable, "-m", "aeb_radar_camera.tools.sim.actuator", "--port",
          str(tmp_path / "nope"), "--no-control"],
         cwd=REPO, capture_output=True, text=True, timeout=60,
     )

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.messages import Header
-from services.camera.plugin import PluginContext, make_plugin_source
-from services.camera.source import FrameSource, SourceConfigError, SourceError
-from tools.messages import ObjectKind, SimObject, SimWorld
-from tools.sim.camera_source import SimCameraSource, bodies_at
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import Header
+from aeb_radar_camera.services.camera.plugin import PluginContext, make_plugin_source
+from aeb_radar_camera.services.camera.source import FrameSource, SourceConfigError, SourceError
+from aeb_radar_camera.tools.messages import ObjectKind, SimObject, SimWorld
+from aeb_radar_camera.tools.sim.camera_source import SimCameraSource, bodies_at
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
 S = 1_000_000_000
@@ -58,10 +58,10 @@ def test_factory_needs_the_camera_bus_and_knows_its_options():
     cal = Calibration.load(CALIBRATION)
     ctx = PluginContext(848, 480, 30.0, cal)
     with pytest.raises(SourceConfigError, match="bus"):
-        make_plugin_source("tools.sim.camera_source:make_source", ctx)
+        make_plugin_source("aeb_radar_camera.tools.sim.camera_source:make_source", ctx)
     ctx = PluginContext(848, 480, 30.0, cal, options={"colour": 1})
     with pytest.raises(SourceConfigError, match="colour"):
-        make_plugin_source("tools.sim.camera_source:make_source", ctx)
+        make_plugin_source("aeb_radar_camera.tools.sim.camera_source:make_source", ctx)
     assert issubclass(SimCameraSource, FrameSource)
 
 

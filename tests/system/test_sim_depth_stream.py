@@ -8,13 +8,13 @@ import threading
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.depth_image import decode_depth, to_metres
-from common.keys import CAMERA_DEPTH, CAMERA_JPEG
-from common.messages import CompressedFrame, DepthFrame
-from common.resources import EXAMPLE_CALIBRATION
-from tools.sim.scenario import find_scenario, load_scenario
-from tools.sim.session import closed_loop
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_image import decode_depth, to_metres
+from aeb_radar_camera.common.keys import CAMERA_DEPTH, CAMERA_JPEG
+from aeb_radar_camera.common.messages import CompressedFrame, DepthFrame
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.session import closed_loop
 
 pytestmark = pytest.mark.slow
 

@@ -9,17 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.config.radar import RadarSettings
-from services.radar.core import RadarCore
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.radar import RadarSettings
+from aeb_radar_camera.services.radar.core import RadarCore
+from aeb_radar_camera.tools.messages import FALSE_TARGETS, ObjectKind
+from aeb_radar_camera.tools.sim.radar_feed import cluster_frames, object_frames
+from aeb_radar_camera.tools.sim.radar_model import RadarModel
+from aeb_radar_camera.tools.sim.render import BACKDROP_M, Renderer
+from aeb_radar_camera.tools.sim.scenario import ScenarioKind, find_scenario, load_scenario
+from aeb_radar_camera.tools.sim.texture_density import survey
+from aeb_radar_camera.tools.sim.world import Body, World
 from tests.can_support import feed
-from tools.messages import FALSE_TARGETS, ObjectKind
-from tools.sim.radar_feed import cluster_frames, object_frames
-from tools.sim.radar_model import RadarModel
-from tools.sim.render import BACKDROP_M, Renderer
-from tools.sim.scenario import ScenarioKind, find_scenario, load_scenario
-from tools.sim.texture_density import survey
-from tools.sim.world import Body, World
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
 FALSE_TARGET_SCENARIOS = ("no_threat_manhole_30kph", "no_threat_overhead_sign_30kph",
@@ -84,8 +84,8 @@ def test_false_targets_are_no_obstacles_for_the_ground_truth():
 
 
 def test_the_timeline_plot_shows_the_false_target(tmp_path):
-    from tools.sim.plot import plot_timeline
-    from tools.sim.verdict import Sample, judge
+    from aeb_radar_camera.tools.sim.plot import plot_timeline
+    from aeb_radar_camera.tools.sim.verdict import Sample, judge
 
     sc = load_scenario(find_scenario("no_threat_manhole_30kph"))
     world = World(sc)
@@ -104,7 +104,7 @@ def test_the_timeline_plot_shows_the_false_target(tmp_path):
 
 @pytest.mark.parametrize("name", FALSE_TARGET_SCENARIOS)
 def test_false_target_scenarios_load_as_no_threat_and_are_in_the_demo(name):
-    from tools.sim.scenario import DEMO_SCENARIOS
+    from aeb_radar_camera.tools.sim.scenario import DEMO_SCENARIOS
 
     sc = load_scenario(find_scenario(name))
     assert sc.kind is ScenarioKind.NO_THREAT and sc.name == name
@@ -201,9 +201,9 @@ def test_plain_test_scenes_keep_a_sparse_background(cal):
 
 
 def test_the_evaluation_labels_a_false_target_track_as_a_negative():
-    from common.messages import Header
-    from tools.eval.sim_truth import label_track
-    from tools.messages import SimObject, SimWorld
+    from aeb_radar_camera.common.messages import Header
+    from aeb_radar_camera.tools.eval.sim_truth import label_track
+    from aeb_radar_camera.tools.messages import SimObject, SimWorld
 
     objects = (SimObject(0, ObjectKind.PLATE, 20.0, 0.0, 0.0, 0.8, 0.8, 0.02, 0.0, 0.0),
                SimObject(1, ObjectKind.BOX, 30.3, 0.0, 0.0, 0.6, 0.6, 0.6, 0.0, 0.0),
@@ -218,7 +218,7 @@ def test_the_evaluation_labels_a_false_target_track_as_a_negative():
 
 
 def test_depth_in_millimetres_is_the_metres_converted(roadside):
-    from common.depth_image import to_units
+    from aeb_radar_camera.common.depth_image import to_units
 
     bodies = [Body(0, ObjectKind.CAR, 15.0, 0.5, 0.0, 4.4, 1.8, 1.5, 0.0, 0.0),
               Body(1, ObjectKind.SIGN, 30.1, 0.0, 0.0, 0.2, 9.0, 1.6, 0.0, 0.0, 5.0)]
@@ -232,7 +232,7 @@ def test_on_the_rendered_depth_the_depth_verifier_sees_the_car_and_not_the_false
     """The simulator's depth carries what the depth verifier needs: a car fills its
     column at the radar's range, a manhole cover, an overhead sign and a multipath
     ghost leave it empty; the edge-density gate passes them all (the roadside's edges)."""
-    from tools.sim.verifier_probe import probe
+    from aeb_radar_camera.tools.sim.verifier_probe import probe
 
     for name, depth_share in (("stationary_car_30kph", (0.95, 1.0)),
                               ("no_threat_manhole_30kph", (0.0, 0.05)),

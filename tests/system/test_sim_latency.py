@@ -1,6 +1,6 @@
 """Pairing radar cycles with actuator lines, pure."""
 
-from tools.sim.latency import chain_latencies_ns, stage_breakdown_ns
+from aeb_radar_camera.tools.sim.latency import chain_latencies_ns, stage_breakdown_ns
 
 MS = 1_000_000
 

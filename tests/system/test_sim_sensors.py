@@ -8,13 +8,13 @@ import cv2
 import numpy as np
 import pytest
 
-from common.calibration import Calibration
-from common.imaging import decode_gray, encode_jpeg
-from tools.messages import ObjectKind
-from tools.sim.radar_model import OBJ_CLASS, DynProp, RadarModel, in_field_of_view
-from tools.sim.render import Renderer
-from tools.sim.scenario import DEFAULT_SIZE, CameraLook, RadarLook
-from tools.sim.world import Body
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.radar_model import OBJ_CLASS, DynProp, RadarModel, in_field_of_view
+from aeb_radar_camera.tools.sim.render import Renderer
+from aeb_radar_camera.tools.sim.scenario import DEFAULT_SIZE, CameraLook, RadarLook
+from aeb_radar_camera.tools.sim.world import Body
 
 CALIBRATION = Path(__file__).resolve().parents[2] / "deploy/calibration/d435_848x480.toml"
 QUIET = RadarLook(ghost_rate_per_cycle=0.0, split_probability=0.0, dropout_probability=0.0,
@@ -174,7 +174,7 @@ def test_sky_is_sparse_and_dusk_lowers_contrast():
 
 
 def test_sensor_noise_is_grey_and_a_scene_renders_the_same_whatever_came_before():
-    from tools.sim.render import Light
+    from aeb_radar_camera.tools.sim.render import Light
 
     cal = Calibration.load(CALIBRATION)
     ped = [body(ObjectKind.PEDESTRIAN, 10.0)]
@@ -208,8 +208,8 @@ def test_nearer_objects_hide_farther_ones(renderer):
 
 
 def test_feed_paces_bursts_stamps_each_write_and_then_lets_the_reader_run():
-    from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-    from tools.sim.radar_feed import BURST_FRAMES, FRAME_TIME_S, RadarFeed
+    from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, object_cycle_frames
+    from aeb_radar_camera.tools.sim.radar_feed import BURST_FRAMES, FRAME_TIME_S, RadarFeed
 
     events: list[tuple[str, int]] = []
     clock = {"now": 1_000_000}

@@ -3,9 +3,9 @@ config's instance (`aeb demo --fusion-config deploy/fusion-paper.toml`)."""
 
 import tomllib
 
-from common.resources import DEPLOY
-from tools.demo import parse_args
-from tools.sim.stack import FUSION_CONFIG, fusion_instance, write_configs
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.demo import parse_args
+from aeb_radar_camera.tools.sim.stack import FUSION_CONFIG, fusion_instance, write_configs
 
 
 def test_the_brake_follows_the_instance_of_the_given_fusion_config(tmp_path):

@@ -6,9 +6,9 @@ import math
 import msgspec
 import pytest
 
-from common.config.loader import ConfigError, parse_config
-from tools.messages import ObjectKind
-from tools.sim.scenario import (
+from aeb_radar_camera.common.config.loader import ConfigError, parse_config
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.scenario import (
     EgoSpec,
     Motion,
     Scenario,
@@ -18,8 +18,8 @@ from tools.sim.scenario import (
     find_scenario,
     load_scenario,
 )
-from tools.sim.verdict import Sample, judge, summary_line
-from tools.sim.world import World
+from aeb_radar_camera.tools.sim.verdict import Sample, judge, summary_line
+from aeb_radar_camera.tools.sim.world import World
 
 DT = 0.005
 
@@ -194,7 +194,7 @@ def test_verdict_of_an_avoided_threat():
 
 
 def test_verdict_of_a_collision_and_of_false_activations():
-    from tools.sim.world import Collision
+    from aeb_radar_camera.tools.sim.world import Collision
 
     s = samples("NNNNN", [0] * 5)
     hit = Collision(0.4, 0, ObjectKind.CAR, 25 / 3.6, 25 / 3.6)

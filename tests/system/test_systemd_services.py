@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
 from tests.notify_support import NotifyListener
 from tests.support import START_TIMEOUT_S, free_port
 
@@ -50,7 +50,7 @@ def ready_then_pings(listener: NotifyListener, proc: subprocess.Popen[bytes],
 
 
 def aeb(*args: str) -> list[str]:
-    return [sys.executable, "-m", "tools.cli", *args]
+    return [sys.executable, "-m", "aeb_radar_camera.tools.cli", *args]
 
 
 def table(folder: Path, port: int, services: str = "") -> Path:

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from common.resources import DEPLOY
-from tools.init import UNIT_AEB, UNIT_CONFIGS
-from tools.init import main as init
-from tools.launch.main import parse_args
-from tools.launch.table import load_table, resolve_launches
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.init import UNIT_AEB, UNIT_CONFIGS
+from aeb_radar_camera.tools.init import main as init
+from aeb_radar_camera.tools.launch.main import parse_args
+from aeb_radar_camera.tools.launch.table import load_table, resolve_launches
 
 UNITS = sorted((DEPLOY / "systemd").glob("*.service"))
 TABLES = ["single-host", "ecu-a", "ecu-b"]

@@ -12,13 +12,13 @@ from contextlib import contextmanager
 import msgspec
 import pytest
 
-from common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, RADAR_TRACKS
-from common.messages import BrakeCommand, RadarTracks, encode
+from aeb_radar_camera.common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, RADAR_TRACKS
+from aeb_radar_camera.common.messages import BrakeCommand, RadarTracks, encode
+from aeb_radar_camera.tools.topics.catalog import Catalog
+from aeb_radar_camera.tools.topics.echo import decode_sample, json_line, table_row
+from aeb_radar_camera.tools.topics.rates import PeriodStats
 from tests.messages_support import example
 from tests.support import open_bus
-from tools.topics.catalog import Catalog
-from tools.topics.echo import decode_sample, json_line, table_row
-from tools.topics.rates import PeriodStats
 
 MS = 1_000_000
 
@@ -84,7 +84,7 @@ def test_json_lines_and_table_rows_summarise_bytes():
 # -- against a router ---------------------------------------------------------------------
 
 def aeb(*args: str) -> list[str]:
-    return [sys.executable, "-m", "tools.cli", *args]
+    return [sys.executable, "-m", "aeb_radar_camera.tools.cli", *args]
 
 
 @contextmanager

@@ -8,9 +8,9 @@ import sys
 
 import pytest
 
-from common.command_auth import new_key, write_key
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
-from tools.launch.main import main as up
+from aeb_radar_camera.common.command_auth import new_key, write_key
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
+from aeb_radar_camera.tools.launch.main import main as up
 
 TABLE_HEAD = """
 [router]
@@ -159,7 +159,7 @@ def test_exec_replaces_the_launcher_with_the_process(tmp_path):
     (tmp_path / "table.toml").write_text(
         'workdir = "run"\n[[service]]\nname = "probe"\n'
         f'exec = ["{sys.executable}", "-c", "{probe}", "x"]\nenv = {{ AEB_PROBE = "yes" }}\n')
-    proc = subprocess.Popen([sys.executable, "-m", "tools.cli", "up", "--table",
+    proc = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.cli", "up", "--table",
                              str(tmp_path / "table.toml"), "--exec", "probe"],
                             stdout=subprocess.PIPE, text=True)
     out, _ = proc.communicate(timeout=60)
@@ -178,7 +178,7 @@ def test_exec_of_an_unknown_name_is_a_clear_error(configs, capsys):
 def test_services_check_without_a_router(configs):
     # --check of a service alone: no bus, no device, immediate
     env = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
-    done = subprocess.run([sys.executable, "-m", "tools.cli", "fusion", "--config",
+    done = subprocess.run([sys.executable, "-m", "aeb_radar_camera.tools.cli", "fusion", "--config",
                            str(configs / "fusion.toml"), "--connect", "tcp/127.0.0.1:1",
                            "--check"], capture_output=True, text=True, timeout=120, env=env)
     assert done.returncode == 0, done.stderr
@@ -186,8 +186,8 @@ def test_services_check_without_a_router(configs):
 
 
 def test_a_radar_that_passes_tracks_short_of_the_fusion_rules_reach_is_said(configs, capsys):
-    from tools.launch.check import reach_warnings
-    from tools.launch.table import load_table, resolve_launches
+    from aeb_radar_camera.tools.launch.check import reach_warnings
+    from aeb_radar_camera.tools.launch.table import load_table, resolve_launches
 
     (configs / "radar.toml").write_text('[radar.prefilter]\nmax_range_m = 25.0\n')
     (configs / "kinematic.toml").write_text(

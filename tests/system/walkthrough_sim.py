@@ -17,15 +17,15 @@ import json
 import sys
 from pathlib import Path
 
-from common.bus import Bus
-from common.config.base import ZenohMode, ZenohSettings
-from common.keys import BRAKE_STATUS
-from common.messages import BrakeStatus
-from tools.sim.actuator import SimActuator
-from tools.sim.can_links import SlcanPtyLink
-from tools.sim.radar_feed import RadarFeed
-from tools.sim.runner import SimActuatorView, Simulator
-from tools.sim.scenario import RadarLook, find_scenario, load_scenario
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.keys import BRAKE_STATUS
+from aeb_radar_camera.common.messages import BrakeStatus
+from aeb_radar_camera.tools.sim.actuator import SimActuator
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
+from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+from aeb_radar_camera.tools.sim.runner import SimActuatorView, Simulator
+from aeb_radar_camera.tools.sim.scenario import RadarLook, find_scenario, load_scenario
 
 SCENARIO = "pedestrian_standing_20kph"
 

@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from tools.arrivals import Arrivals
+from aeb_radar_camera.tools.arrivals import Arrivals
 
 
 def test_waits_for_an_item_added_by_another_thread_from_a_position_on():

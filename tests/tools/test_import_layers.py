@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 TOOLS = Path(__file__).resolve().parents[2] / "tools"
+PACKAGE = "aeb_radar_camera"       # tools/ is installed as aeb_radar_camera.tools
 
 # Bottom to top.
 LAYERS: tuple[tuple[str, ...], ...] = (
@@ -32,7 +33,7 @@ LAYER_OF = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 
 @dataclass(frozen=True)
 class Import:
-    module: str          # the importing module, e.g. tools.recording.record
+    module: str          # the importing module, e.g. aeb_radar_camera.tools.recording.record
     line: int
     target: str          # the imported module, or the package a name was imported from
 
@@ -65,7 +66,7 @@ def imports_of(module: str, source: str, is_package: bool,
 
 
 def tools_imports(root: Path = TOOLS) -> list[Import]:
-    paths = {module_name(p, root.parent): p for p in sorted(root.rglob("*.py"))}
+    paths = {f"{PACKAGE}.{module_name(p, root.parent)}": p for p in sorted(root.rglob("*.py"))}
     found = []
     for name, path in paths.items():
         found += imports_of(name, path.read_text(encoding="utf-8"),
@@ -74,9 +75,10 @@ def tools_imports(root: Path = TOOLS) -> list[Import]:
 
 
 def unit(module: str) -> str | None:
-    """tools.recording.record -> recording; tools.demo -> demo; None outside tools/."""
+    """aeb_radar_camera.tools.recording.record -> recording; aeb_radar_camera.tools.demo ->
+    demo; None outside tools/."""
     parts = module.split(".")
-    return parts[1] if parts[0] == "tools" and len(parts) > 1 else None
+    return parts[2] if parts[:2] == [PACKAGE, "tools"] and len(parts) > 2 else None
 
 
 def units(root: Path = TOOLS) -> set[str]:
@@ -167,18 +169,21 @@ def test_no_circle_between_modules():
 
 
 def test_the_reading_sees_every_form_of_import():
-    source = ("import tools.sim.world\n"
-              "from tools.recording import reader\n"
-              "from tools.recording.format import ChannelType\n"
+    source = ("import aeb_radar_camera.tools.sim.world\n"
+              "from aeb_radar_camera.tools.recording import reader\n"
+              "from aeb_radar_camera.tools.recording.format import ChannelType\n"
               "from . import state\n"
               "from ..eval.frames import load_gray\n"
               "def later():\n"
               "    from benchmarks.figures import Figure\n")
-    known = {"tools.recording.reader", "tools.monitor.state"}
-    got = {(i.line, i.target) for i in imports_of("tools.monitor.main", source, False, known)}
-    assert got == {(1, "tools.sim.world"), (2, "tools.recording.reader"),
-                   (3, "tools.recording.format"), (4, "tools.monitor.state"),
-                   (5, "tools.eval.frames"), (7, "benchmarks.figures")}
+    known = {"aeb_radar_camera.tools.recording.reader", "aeb_radar_camera.tools.monitor.state"}
+    got = {(i.line, i.target) for i in imports_of("aeb_radar_camera.tools.monitor.main", source,
+                                                  False, known)}
+    assert got == {(1, "aeb_radar_camera.tools.sim.world"),
+                   (2, "aeb_radar_camera.tools.recording.reader"),
+                   (3, "aeb_radar_camera.tools.recording.format"),
+                   (4, "aeb_radar_camera.tools.monitor.state"),
+                   (5, "aeb_radar_camera.tools.eval.frames"), (7, "benchmarks.figures")}
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import cantools
 
-from common.resources import DEPLOY
-from services.vehicle.dbc import load_dbc
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.vehicle.dbc import load_dbc
 
 DBC = DEPLOY / "vehicle" / "generic-car.dbc"
 LOG = DEPLOY / "recordings" / "vehicle" / "candump-generic-car-drive.log"

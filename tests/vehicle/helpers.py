@@ -6,11 +6,11 @@ from typing import Any, cast
 import can
 import msgspec
 
-from common.config.loader import load_config, parse_config
-from common.config.vehicle import GatewaySettings, VehicleConfig
-from common.resources import DEPLOY
-from services.vehicle.core import VehicleCore
-from services.vehicle.dbc import load_dbc
+from aeb_radar_camera.common.config.loader import load_config, parse_config
+from aeb_radar_camera.common.config.vehicle import GatewaySettings, VehicleConfig
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.vehicle.core import VehicleCore
+from aeb_radar_camera.services.vehicle.dbc import load_dbc
 from tests.vehicle.drive import DBC
 
 DB = load_dbc(str(DBC))

@@ -7,8 +7,8 @@ import random
 import msgspec
 import pytest
 
-from common.messages.radar import BUS_NOT_READY, BusState
-from common.messages.vehicle import DriverInputs, EgoMotion, Gear
+from aeb_radar_camera.common.messages.radar import BUS_NOT_READY, BusState
+from aeb_radar_camera.common.messages.vehicle import DriverInputs, EgoMotion, Gear
 from tests.vehicle.helpers import DB, MS, SHIPPED, WALL0, Fed, frame, settings
 
 KPH = SHIPPED.motion.speed.scale if SHIPPED.motion.speed else 0.0

@@ -7,13 +7,13 @@ import math
 import msgspec
 import pytest
 
-from common.config.loader import ConfigError, load_config, parse_config
-from common.config.vehicle import VehicleConfig
-from common.messages.vehicle import EgoMotion, Gear
-from common.resources import DEPLOY
-from services.vehicle.core import VehicleCore
-from services.vehicle.dbc import load_dbc
-from services.vehicle.mapping import MappingError, build_plan
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.config.vehicle import VehicleConfig
+from aeb_radar_camera.common.messages.vehicle import EgoMotion, Gear
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.vehicle.core import VehicleCore
+from aeb_radar_camera.services.vehicle.dbc import load_dbc
+from aeb_radar_camera.services.vehicle.mapping import MappingError, build_plan
 from tests.vehicle.helpers import DB, SHIPPED, WALL0, settings
 
 # Two messages with a signal of the same name, and a float signal.

@@ -22,12 +22,12 @@ from typing import Any
 import cantools
 import pytest
 
-from common.clock import mono_ns, wall_ns
-from common.keys import EGO_MOTION, VEHICLE_DRIVER, VEHICLE_STATUS
-from common.messages.radar import BusState
-from common.messages.vehicle import Gear
-from common.resources import DEPLOY
-from common.vehicle_state import StateFreshness, VehicleState
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import EGO_MOTION, VEHICLE_DRIVER, VEHICLE_STATUS
+from aeb_radar_camera.common.messages.radar import BusState
+from aeb_radar_camera.common.messages.vehicle import Gear
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.common.vehicle_state import StateFreshness, VehicleState
 from tests.support import REPO, HealthWatch, ServiceProcess, open_bus, python_module, wait_for
 from tests.vehicle.drive import LOG
 from tests.vehicle.helpers import SHIPPED, decoded
@@ -108,7 +108,7 @@ class Watched:
 def start_gateway(tmp_path: Path, router: str, *settings: str) -> ServiceProcess:
     sets = [a for s in settings for a in ("--set", s)]
     return ServiceProcess("vehicle", python_module(
-        "tools.cli", "vehicle", "--config", str(REPLAY), "--connect", router,
+        "aeb_radar_camera.tools.cli", "vehicle", "--config", str(REPLAY), "--connect", router,
         "--set", "gateway.status_period_s=0.5", *sets), tmp_path)
 
 
@@ -240,7 +240,8 @@ def test_a_gateway_that_stops_goes_stale_at_its_subscribers_and_aeb_echo_shows_i
             wait_for(lambda: len(watched.motion) >= 20 and len(watched.driver) >= 20, 60,
                      what="motion and driver")
             echo = {key: subprocess.run(
-                python_module("tools.cli", "echo", key, "--count", "2", "--timeout", "30",
+                python_module("aeb_radar_camera.tools.cli", "echo", key, "--count", "2",
+                              "--timeout", "30",
                               "--connect", router),
                 capture_output=True, text=True, timeout=120, cwd=REPO)
                 for key in ("vehicle/motion", "vehicle/driver", "vehicle_status")}

@@ -8,15 +8,15 @@ import can
 import msgspec
 import pytest
 
-from common.config.can import CanSettings, Pace, ReplaySettings
-from common.messages.radar import BusState
-from services.radar.ars408.codec import RadarFrame
-from services.vehicle.core import VehicleCore
-from services.vehicle.shell import VehicleShell
+from aeb_radar_camera.common.config.can import CanSettings, Pace, ReplaySettings
+from aeb_radar_camera.common.messages.radar import BusState
+from aeb_radar_camera.services.radar.ars408.codec import RadarFrame
+from aeb_radar_camera.services.vehicle.core import VehicleCore
+from aeb_radar_camera.services.vehicle.shell import VehicleShell
+from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
 from tests.support import Collector, wait_for
 from tests.vehicle.drive import LOG
 from tests.vehicle.helpers import DB, SHIPPED, frame
-from tools.sim.can_links import SlcanPtyLink
 
 
 class Sink:

@@ -13,8 +13,8 @@ compared.
 from collections import Counter
 from dataclasses import dataclass, field
 
-from common.messages import BrakeCommand, VerifiedTarget, VerifiedTargets
-from tools.recording.compare import Comparison
+from aeb_radar_camera.common.messages import BrakeCommand, VerifiedTarget, VerifiedTargets
+from aeb_radar_camera.tools.recording.compare import Comparison
 
 PENDING_CYCLES = 50    # a cycle still unpaired after this many newer ones is unmatched
 COMMAND_FIELDS = ("decision",)

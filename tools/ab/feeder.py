@@ -3,9 +3,9 @@ in the demo)."""
 
 import threading
 
-from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.messages import BrakeCommand, DecodeError, VerifiedTargets, decode
-from tools.ab.compare import Comparator
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS
+from aeb_radar_camera.common.messages import BrakeCommand, DecodeError, VerifiedTargets, decode
+from aeb_radar_camera.tools.ab.compare import Comparator
 
 
 class Feeder:

@@ -21,14 +21,14 @@ import threading
 from dataclasses import asdict
 from typing import Any
 
-from common.clock import wall_ns
-from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, KeySpec
-from common.log import setup_logging
-from common.service import stop_event_on_signals
-from tools.ab.compare import Comparator, Report, render
-from tools.ab.feeder import Feeder
-from tools.bus import add_bus_args, open_bus
-from tools.recording.format import channel_of_topic, publish_time
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, KeySpec
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.ab.compare import Comparator, Report, render
+from aeb_radar_camera.tools.ab.feeder import Feeder
+from aeb_radar_camera.tools.bus import add_bus_args, open_bus
+from aeb_radar_camera.tools.recording.format import channel_of_topic, publish_time
 
 # mcap's reader and writer are imported where they are used: `--help` needs no extra
 
@@ -63,7 +63,7 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> None:
     """Raises SystemExit(2) when the bus cannot be opened."""
     stop = stop_event_on_signals()
     bus = open_bus(args, "ab-report", stop)
-    from tools.recording.writer import RecordingWriter
+    from aeb_radar_camera.tools.recording.writer import RecordingWriter
 
     record = RecordingWriter(args.record, metadata={"vehicle": args.vehicle,
                                                     "recorder": "aeb ab-report"}) \
@@ -94,7 +94,7 @@ def listen(args: argparse.Namespace, feeder: Feeder) -> None:
 def read_recording(args: argparse.Namespace, feeder: Feeder) -> None:
     """Feed both instances' recorded outputs in recorded order. Raises RecordingError
     for what is not a recording, and for one without output of either instance."""
-    from tools.recording.reader import Recording, RecordingError
+    from aeb_radar_camera.tools.recording.reader import Recording, RecordingError
 
     rec = Recording.open(args.source)
     vehicle = rec.metadata().get("vehicle", args.vehicle)
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     feeder = Feeder(comparator)
     if args.source:
-        from tools.recording.reader import RecordingError
+        from aeb_radar_camera.tools.recording.reader import RecordingError
 
         try:
             read_recording(args, feeder)

@@ -27,11 +27,11 @@ from pathlib import Path
 
 import msgspec
 
-from common.keys import CAMERA_JPEG, RADAR_TRACKS
-from common.log import setup_logging
-from common.messages import CompressedFrame, RadarTracks, encode
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus
+from aeb_radar_camera.common.keys import CAMERA_JPEG, RADAR_TRACKS
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import CompressedFrame, RadarTracks, encode
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, open_bus
 
 _KEEP_CYCLES = 64       # about 5 s of radar cycles to choose from
 

@@ -28,14 +28,19 @@ import cv2
 import msgspec
 import numpy as np
 
-from common.calibration import Calibration
-from common.config.fusion import FusionConfig, FusionSettings
-from common.config.loader import ConfigError, load_config, parse_config
-from common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
-from common.log import add_log_level, setup_logging
-from common.messages import DecodeError, RadarTracks, decode
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import GateResult, Observation, VerifierConfigError, create
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.fusion import FusionConfig, FusionSettings
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.messages import DecodeError, RadarTracks, decode
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import (
+    GateResult,
+    Observation,
+    VerifierConfigError,
+    create,
+)
 
 _GREEN, _RED, _BLUE, _GREY, _YELLOW = (0, 200, 0), (0, 0, 230), (255, 120, 0), (160, 160, 160), \
     (0, 220, 255)

@@ -26,8 +26,8 @@ import signal
 import sys
 import threading
 
-from common.log import add_log_level, setup_logging
-from tools.eval.options import DEPTH_MODES, FRAMES_PER_TASK
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.tools.eval.options import DEPTH_MODES, FRAMES_PER_TASK
 
 
 def _add_extract(p: argparse.ArgumentParser) -> None:
@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         # SIGTERM stops like Ctrl-C: the worker processes are stopped, not left behind.
         signal.signal(signal.SIGTERM, _interrupt)
     # What runs the commands needs the eval extra; the options above do not (--help).
-    from tools.eval import evaluate
+    from aeb_radar_camera.tools.eval import evaluate
 
     return evaluate.run(args, main)
 

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from common.depth_error import D435Noise
-from services.fusion.verifiers import Observation
-from tools.eval.adapters import read_frame
-from tools.eval.adapters.kitti import KittiFormatError
-from tools.eval.adapters.paper_rois import (
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.verifiers import Observation
+from aeb_radar_camera.tools.eval.adapters import read_frame
+from aeb_radar_camera.tools.eval.adapters.kitti import KittiFormatError
+from aeb_radar_camera.tools.eval.adapters.paper_rois import (
     Candidate,
     PaperRoiSettings,
     background_candidates,
@@ -24,11 +24,16 @@ from tools.eval.adapters.paper_rois import (
     point_candidates,
     scaled,
 )
-from tools.eval.depth import project_depth
-from tools.eval.frames import FrameLoadError, prepare_image, read_image, source_digest
-from tools.eval.options import DEPTH_MODES
-from tools.eval.records import KIND_LIDAR, KIND_RADAR, FrameRef, RoiRecord
-from tools.eval.scoring import Scorer, lighting
+from aeb_radar_camera.tools.eval.depth import project_depth
+from aeb_radar_camera.tools.eval.frames import (
+    FrameLoadError,
+    prepare_image,
+    read_image,
+    source_digest,
+)
+from aeb_radar_camera.tools.eval.options import DEPTH_MODES
+from aeb_radar_camera.tools.eval.records import KIND_LIDAR, KIND_RADAR, FrameRef, RoiRecord
+from aeb_radar_camera.tools.eval.scoring import Scorer, lighting
 
 
 @dataclass(frozen=True)

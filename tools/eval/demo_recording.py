@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from common.keys import (
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_DEPTH,
     CAMERA_INFO,
@@ -21,10 +21,10 @@ from common.keys import (
     RADAR_TRACKS,
     KeySpec,
 )
-from common.service import stop_event_on_signals
-from tools.keys import SIM_WORLD
-from tools.recording.recorder import Recorder
-from tools.recording.writer import RecordingWriter
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.keys import SIM_WORLD
+from aeb_radar_camera.tools.recording.recorder import Recorder
+from aeb_radar_camera.tools.recording.writer import RecordingWriter
 
 SPECS: tuple[KeySpec[Any], ...] = (RADAR_TRACKS, CAMERA_JPEG, CAMERA_DEPTH, CAMERA_INFO,
                                    FUSION_TARGETS, FUSION_BRAKE_CMD, BRAKE_STATUS, SIM_WORLD)
@@ -34,9 +34,9 @@ def record_demo(out: Path, scenarios: str, camera_fps: float,
                 fusion_config: Path | None = None) -> int:
     """Run and record the scenarios, fusion configured by `fusion_config` (default: the
     demo's); 0 when recorded (whatever the verdicts), 2 when the stack could not start."""
-    from tools.sim.scenario import DEMO_SCENARIOS, pick_scenarios
-    from tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
-    from tools.sim.stack import FUSION_CONFIG
+    from aeb_radar_camera.tools.sim.scenario import DEMO_SCENARIOS, pick_scenarios
+    from aeb_radar_camera.tools.sim.session import SETTLE_TIMEOUT_S, StackStartError, closed_loop
+    from aeb_radar_camera.tools.sim.stack import FUSION_CONFIG
 
     chosen = pick_scenarios(scenarios or ",".join(DEMO_SCENARIOS))
     stop = stop_event_on_signals(grace_s=None)

@@ -13,8 +13,8 @@ takes its tolerance from the same model.
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.depth_error import D435Noise
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_error import D435Noise
 
 __all__ = ["D435Noise", "box_scene_depth", "car_box", "project_depth"]
 

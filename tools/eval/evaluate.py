@@ -11,17 +11,17 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config, parse_config
-from common.depth_error import D435Noise
-from services.fusion.verifiers import VerifierConfigError
-from tools.eval import labels as labelfile
-from tools.eval import plots, tables
-from tools.eval.dataset_rois import DatasetSettings
-from tools.eval.frames import FrameLoadError, record_digest
-from tools.eval.labels import LabelFileError
-from tools.eval.recording import RecordingSettings
-from tools.eval.records import (
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError
+from aeb_radar_camera.tools.eval import labels as labelfile
+from aeb_radar_camera.tools.eval import plots, tables
+from aeb_radar_camera.tools.eval.dataset_rois import DatasetSettings
+from aeb_radar_camera.tools.eval.frames import FrameLoadError, record_digest
+from aeb_radar_camera.tools.eval.labels import LabelFileError
+from aeb_radar_camera.tools.eval.recording import RecordingSettings
+from aeb_radar_camera.tools.eval.records import (
     ROIS_FILE,
     RUN_FILE,
     SCORES_VERIFIER,
@@ -34,10 +34,10 @@ from tools.eval.records import (
     write_records,
     write_run,
 )
-from tools.eval.report import ReportSettings, evaluate_all
-from tools.eval.runner import Progress, SourceError, execute, plan
-from tools.eval.scoring import VerifierSpec, default_specs, parse_spec
-from tools.machine import machine_info
+from aeb_radar_camera.tools.eval.report import ReportSettings, evaluate_all
+from aeb_radar_camera.tools.eval.runner import Progress, SourceError, execute, plan
+from aeb_radar_camera.tools.eval.scoring import VerifierSpec, default_specs, parse_spec
+from aeb_radar_camera.tools.machine import machine_info
 
 
 def _calibrations(items: list[str], cameras: list[str]) -> dict[str, str]:
@@ -166,8 +166,8 @@ def held_out(records: list[RoiRecord], weights: str) -> list[RoiRecord]:
     elsewhere are still training frames. A record whose frame cannot be read cannot be
     shown to be held out: left out, counted on stderr. Raises VerifierConfigError for a
     weights file that cannot be read, ValueError for one that names no frame content."""
-    from services.fusion.verifiers.appearance import HogLinearModel
-    from tools.eval.training import trained_digests
+    from aeb_radar_camera.services.fusion.verifiers.appearance import HogLinearModel
+    from aeb_radar_camera.tools.eval.training import trained_digests
 
     trained = trained_digests(HogLinearModel.load(weights), weights)
     cache: dict[FrameRef, str] = {}
@@ -238,8 +238,8 @@ def _report(args: argparse.Namespace, records: list[RoiRecord],
 
 
 def _paper(args: argparse.Namespace, main: Callable[[list[str]], int]) -> int:
-    from tools.eval import paper
-    from tools.eval.options import PAPER_SWEEP
+    from aeb_radar_camera.tools.eval import paper
+    from aeb_radar_camera.tools.eval.options import PAPER_SWEEP
 
     out = Path(args.out)
     labels, scores = paper.write(out)
@@ -260,7 +260,7 @@ def run(args: argparse.Namespace, main: Callable[[list[str]], int]) -> int:
         if args.command == "paper":
             return _paper(args, main)
         if args.command == "record-demo":
-            from tools.eval.demo_recording import record_demo
+            from aeb_radar_camera.tools.eval.demo_recording import record_demo
 
             return record_demo(Path(args.out), args.scenarios, args.camera_fps,
                                Path(args.fusion_config) if args.fusion_config else None)

@@ -12,10 +12,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
-from common.messages import CompressedFrame, DecodeError, decode
-from tools.eval.records import FrameRef, RoiRecord
-from tools.recording.reader import Recording, RecordingError
+from aeb_radar_camera.common.imaging import ImageDecodeError, decode_bgr, decode_gray, encode_jpeg
+from aeb_radar_camera.common.messages import CompressedFrame, DecodeError, decode
+from aeb_radar_camera.tools.eval.records import FrameRef, RoiRecord
+from aeb_radar_camera.tools.recording.reader import Recording, RecordingError
 
 
 class FrameLoadError(ValueError):

@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from tools.eval.records import RoiRecord
+from aeb_radar_camera.tools.eval.records import RoiRecord
 
 YES, NO, AMBIGUOUS = "YES", "NO", "ambiguous"
 VALUES = (YES, NO, AMBIGUOUS)

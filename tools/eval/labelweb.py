@@ -22,10 +22,10 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from common.log import add_log_level, setup_logging
-from tools.commands import DEFAULT_PORTS, port_in_use
-from tools.eval.label_page import PAGE
-from tools.eval.labels import (
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.tools.commands import DEFAULT_PORTS, port_in_use
+from aeb_radar_camera.tools.eval.label_page import PAGE
+from aeb_radar_camera.tools.eval.labels import (
     AMBIGUOUS,
     NO,
     VALUES,
@@ -36,7 +36,7 @@ from tools.eval.labels import (
     now_utc,
     read_labels,
 )
-from tools.eval.records import RecordFileError, RoiRecord, read_records
+from aeb_radar_camera.tools.eval.records import RecordFileError, RoiRecord, read_records
 
 # OpenCV, numpy and the sampling are imported where they are used: `aeb label --help`
 # needs no extra installed
@@ -138,7 +138,7 @@ class LabelSession:
         import cv2
         import numpy as np
 
-        from tools.eval.frames import load_bgr
+        from aeb_radar_camera.tools.eval.frames import load_bgr
 
         r = self.items[index]
         img = np.ascontiguousarray(load_bgr(r.frame_ref))
@@ -153,7 +153,7 @@ class LabelSession:
         """The ROI alone, enlarged. Raises IndexError, FrameLoadError."""
         import cv2
 
-        from tools.eval.frames import load_bgr
+        from aeb_radar_camera.tools.eval.frames import load_bgr
 
         r = self.items[index]
         img = load_bgr(r.frame_ref)
@@ -166,7 +166,7 @@ class LabelSession:
 def _png(img: "np.ndarray") -> bytes:
     import cv2
 
-    from tools.eval.frames import FrameLoadError
+    from aeb_radar_camera.tools.eval.frames import FrameLoadError
 
     ok, buf = cv2.imencode(".png", img)
     if not ok:
@@ -177,7 +177,7 @@ def _png(img: "np.ndarray") -> bytes:
 def make_server(session: LabelSession, host: str = "127.0.0.1", port: int = 0
                 ) -> ThreadingHTTPServer:
     """The page's HTTP server (not started); `server_address[1]` is its port."""
-    from tools.eval.frames import FrameLoadError
+    from aeb_radar_camera.tools.eval.frames import FrameLoadError
 
     class Handler(BaseHTTPRequestHandler):
         def log_message(self, format: str, *args: Any) -> None:   # quiet
@@ -236,7 +236,7 @@ def pick_sample(records: list[RoiRecord], label_path: Path, n: int, keys: list[s
                 groups: list[tuple[str, str]], edges: tuple[float, ...], seed: int
                 ) -> list[RoiRecord]:
     """The sample kept beside the label file, or a new stratified one (then kept)."""
-    from tools.eval.sampling import stratified, stratum_key
+    from aeb_radar_camera.tools.eval.sampling import stratified, stratum_key
 
     sample_path = label_path.with_name(label_path.name + ".sample")
     by_id = {r.id: r for r in records}
@@ -281,7 +281,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging("label", args.log_level)
-    from common.service import stop_event_on_signals
+    from aeb_radar_camera.common.service import stop_event_on_signals
 
     try:
         src = Path(args.rois)
@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--group {g!r}: expected NAME=GLOB")
             groups.append((name, pattern))
         keys = [k.strip() for k in args.strata.split(",") if k.strip()]
-        from tools.eval.sampling import DENSITY_EDGES
+        from aeb_radar_camera.tools.eval.sampling import DENSITY_EDGES
 
         edges = tuple(float(e) for e in args.edges.split(",") if e.strip()) or DENSITY_EDGES
         items = pick_sample(pool, label_path, args.sample, keys, groups, edges, args.seed)

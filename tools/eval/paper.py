@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.eval.labels import AMBIGUOUS, NO, YES, Label, write_labels
+from aeb_radar_camera.tools.eval.labels import AMBIGUOUS, NO, YES, Label, write_labels
 
 # (low, high, YES, NO, order) per band of scores between the paper's thresholds, from the
 # counts that Tables III and IV imply (e.g. 159 YES >= 0.010, 158 >= 0.025, 131 >=

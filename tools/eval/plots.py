@@ -11,8 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from tools.eval.labels import YES
-from tools.eval.records import RoiRecord
+from aeb_radar_camera.tools.eval.labels import YES
+from aeb_radar_camera.tools.eval.records import RoiRecord
 
 
 def _save(fig: Any, path: Path) -> Path:

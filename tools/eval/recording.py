@@ -25,10 +25,16 @@ from typing import Any
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.config.fusion import FusionSettings
-from common.keys import CAMERA_DEPTH, CAMERA_INFO, CAMERA_JPEG, RADAR_TRACKS, KeySpec
-from common.messages import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.fusion import FusionSettings
+from aeb_radar_camera.common.keys import (
+    CAMERA_DEPTH,
+    CAMERA_INFO,
+    CAMERA_JPEG,
+    RADAR_TRACKS,
+    KeySpec,
+)
+from aeb_radar_camera.common.messages import (
     CameraInfo,
     CompressedFrame,
     DecodeError,
@@ -37,20 +43,25 @@ from common.messages import (
     RadarTracks,
     decode,
 )
-from common.messages.schema import schema_name
-from services.fusion.cameras import Camera, CameraView, camera_views
-from services.fusion.core import finite_track
-from services.fusion.frames import DecodedFrame, FrameError
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from services.fusion.verifiers import Observation
-from tools.eval import sim_truth
-from tools.eval.adapters.paper_rois import free_rois
-from tools.eval.frames import content_digest
-from tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
-from tools.eval.scoring import Scorer, lighting
-from tools.messages import SimWorld
-from tools.recording.frame_source import FrameSource
-from tools.recording.reader import ChannelSummary, Record, Recording, RecordingError
+from aeb_radar_camera.common.messages.schema import schema_name
+from aeb_radar_camera.services.fusion.cameras import Camera, CameraView, camera_views
+from aeb_radar_camera.services.fusion.core import finite_track
+from aeb_radar_camera.services.fusion.frames import DecodedFrame, FrameError
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.services.fusion.verifiers import Observation
+from aeb_radar_camera.tools.eval import sim_truth
+from aeb_radar_camera.tools.eval.adapters.paper_rois import free_rois
+from aeb_radar_camera.tools.eval.frames import content_digest
+from aeb_radar_camera.tools.eval.records import KIND_TRACK, FrameRef, RoiRecord
+from aeb_radar_camera.tools.eval.scoring import Scorer, lighting
+from aeb_radar_camera.tools.messages import SimWorld
+from aeb_radar_camera.tools.recording.frame_source import FrameSource
+from aeb_radar_camera.tools.recording.reader import (
+    ChannelSummary,
+    Record,
+    Recording,
+    RecordingError,
+)
 
 _FRAME = schema_name(CompressedFrame)
 _INFO = schema_name(CameraInfo)

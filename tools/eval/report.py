@@ -23,11 +23,17 @@ from typing import Any
 
 import numpy as np
 
-from tools.eval import metrics
-from tools.eval.labels import AMBIGUOUS, NO, YES
-from tools.eval.options import PAPER_SWEEP
-from tools.eval.records import KIND_BACKGROUND, KIND_LIDAR, KIND_RADAR, KIND_TRACK, RoiRecord
-from tools.eval.scoring import PAPER_GATE
+from aeb_radar_camera.tools.eval import metrics
+from aeb_radar_camera.tools.eval.labels import AMBIGUOUS, NO, YES
+from aeb_radar_camera.tools.eval.options import PAPER_SWEEP
+from aeb_radar_camera.tools.eval.records import (
+    KIND_BACKGROUND,
+    KIND_LIDAR,
+    KIND_RADAR,
+    KIND_TRACK,
+    RoiRecord,
+)
+from aeb_radar_camera.tools.eval.scoring import PAPER_GATE
 
 PAPER_TAU = 0.025
 # Range bands of the strata: near (the paper's 8 m example), middle, far.

@@ -21,15 +21,15 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import IO, Any
 
-from common.config.loader import ConfigError
-from services.fusion.verifiers import VerifierConfigError
-from tools.eval.adapters import detect, frame_ids
-from tools.eval.dataset_rois import DatasetSettings, dataset_records
-from tools.eval.options import FRAMES_PER_TASK
-from tools.eval.recording import RecordingSettings, recording_records
-from tools.eval.records import RoiRecord
-from tools.eval.scoring import Scorer, VerifierSpec
-from tools.recording.reader import RecordingError
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError
+from aeb_radar_camera.tools.eval.adapters import detect, frame_ids
+from aeb_radar_camera.tools.eval.dataset_rois import DatasetSettings, dataset_records
+from aeb_radar_camera.tools.eval.options import FRAMES_PER_TASK
+from aeb_radar_camera.tools.eval.recording import RecordingSettings, recording_records
+from aeb_radar_camera.tools.eval.records import RoiRecord
+from aeb_radar_camera.tools.eval.scoring import Scorer, VerifierSpec
+from aeb_radar_camera.tools.recording.reader import RecordingError
 
 
 class SourceError(ValueError):

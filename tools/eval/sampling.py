@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from tools.eval.records import RoiRecord
+from aeb_radar_camera.tools.eval.records import RoiRecord
 
 DENSITY_EDGES = (0.025, 0.05, 0.1)
 KEYS = ("lighting", "group", "kind", "camera", "session")

@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from common.calibration import Calibration
-from services.fusion.roi import Roi
-from services.fusion.verifiers import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.verifiers import (
     Observation,
     ParamValue,
     Verifier,
@@ -21,7 +21,7 @@ from services.fusion.verifiers import (
     available,
     create,
 )
-from tools.eval.records import Score
+from aeb_radar_camera.tools.eval.records import Score
 
 PAPER_GATE = "edge_density"
 # The lighting estimate of a frame from its grey levels: night when half the frame is

@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.messages import DecodeError, decode
-from tools.eval.adapters.paper_rois import Box2D, footprint_distance
-from tools.messages import ObjectKind, SimWorld
-from tools.sim.camera_source import bodies_at
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.messages import DecodeError, decode
+from aeb_radar_camera.tools.eval.adapters.paper_rois import Box2D, footprint_distance
+from aeb_radar_camera.tools.messages import ObjectKind, SimWorld
+from aeb_radar_camera.tools.sim.camera_source import bodies_at
 
 # A track this close to an object's footprint is that object: the simulated radar's
 # position noise (0.1-0.15 m) and its split returns on large objects stay well inside.

@@ -34,7 +34,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.log import add_log_level, setup_logging
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -65,7 +65,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def __getattr__(name: str) -> Any:
     # The numeric core lives in tools/eval/training.py, imported on use so that --help
     # needs none of the eval extra; its names stay reachable from here.
-    from tools.eval import training
+    from aeb_radar_camera.tools.eval import training
 
     try:
         return getattr(training, name)
@@ -76,9 +76,9 @@ def __getattr__(name: str) -> Any:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging("train-verifier", args.log_level)
-    from tools.eval import labels as labelfile
-    from tools.eval import training
-    from tools.eval.records import RecordFileError
+    from aeb_radar_camera.tools.eval import labels as labelfile
+    from aeb_radar_camera.tools.eval import training
+    from aeb_radar_camera.tools.eval.records import RecordFileError
 
     try:
         options = training.TrainOptions(

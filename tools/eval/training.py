@@ -16,12 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from services.fusion.roi import Roi
-from services.fusion.verifiers import Observation
-from services.fusion.verifiers.appearance import HogLinearModel, hog_linear_features
-from tools.eval import labels as labelfile
-from tools.eval.frames import FrameLoadError, load_gray, record_digest
-from tools.eval.records import FrameRef, RoiRecord, read_records
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.verifiers import Observation
+from aeb_radar_camera.services.fusion.verifiers.appearance import (
+    HogLinearModel,
+    hog_linear_features,
+)
+from aeb_radar_camera.tools.eval import labels as labelfile
+from aeb_radar_camera.tools.eval.frames import FrameLoadError, load_gray, record_digest
+from aeb_radar_camera.tools.eval.records import FrameRef, RoiRecord, read_records
 
 # A generated case's scenario name ends in its seed (tools/sim/families.py: Case.name).
 CASE_SEED = re.compile(r"_s(\d+)$")
@@ -63,7 +66,7 @@ def case_seed(scenario: str) -> int | None:
 def training_seeds(spec: str) -> list[int]:
     """The seeds of `spec` (tools.sim.families.seeds_of), all of the `train` split.
     Raises TrainingError for a bad spec or a seed outside `train`."""
-    from tools.sim.families import SPLITS, describe_splits, seeds_of, split_of
+    from aeb_radar_camera.tools.sim.families import SPLITS, describe_splits, seeds_of, split_of
 
     try:
         seeds = seeds_of(spec)
@@ -83,7 +86,7 @@ def training_seeds(spec: str) -> list[int]:
 
 def demo_scenario_names() -> set[str]:
     """The demo's scenarios (tools/sim/scenarios): never trained on."""
-    from tools.sim.scenario import all_scenarios
+    from aeb_radar_camera.tools.sim.scenario import all_scenarios
 
     return {p.stem for p in all_scenarios()}
 

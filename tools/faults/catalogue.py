@@ -30,9 +30,9 @@ from typing import Any
 import msgspec
 import numpy as np
 
-from common.clock import mono_ns, wall_ns
-from common.imaging import decode_bgr, encode_jpeg, jpeg_crc32
-from common.keys import (
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.imaging import decode_bgr, encode_jpeg, jpeg_crc32
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_INFO,
     CAMERA_JPEG,
@@ -44,16 +44,16 @@ from common.keys import (
     RADAR_TRACKS,
     KeySpec,
 )
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeState,
     CompressedFrame,
     VerifierStatus,
 )
-from common.messages.codec import DecodeError, decode, encode
-from services.brake.protocol import HostMode
-from tools.faults.mutate import mutate_bytes, mutate_msgpack
-from tools.faults.observe import Observer
-from tools.faults.samples import example
+from aeb_radar_camera.common.messages.codec import DecodeError, decode, encode
+from aeb_radar_camera.services.brake.protocol import HostMode
+from aeb_radar_camera.tools.faults.mutate import mutate_bytes, mutate_msgpack
+from aeb_radar_camera.tools.faults.observe import Observer
+from aeb_radar_camera.tools.faults.samples import example
 
 MS = 1_000_000
 SERVICES = ("radar", "camera", "fusion", "brake")
@@ -449,7 +449,7 @@ class Intruder(Fault):
         self.flood_s = flood_s
 
     def inject(self, ctx: Context) -> Outcome:
-        from tools.faults.intruder import run as attack
+        from aeb_radar_camera.tools.faults.intruder import run as attack
         obs = ctx.observer
         last = obs.status.last()
         rejected0 = sum(last.msg.rejected.values()) if last else 0

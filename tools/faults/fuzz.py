@@ -1,4 +1,5 @@
-"""`aeb faults fuzz` (`python -m tools.faults.fuzz`): a long plain-loop fuzz of every
+"""`aeb faults fuzz` (`python -m aeb_radar_camera.tools.faults.fuzz`): a long plain-loop fuzz
+of every
 input the services parse, in-process, each through the code the service runs on it:
 
 - CAN frames through the radar core (valid simulated cycles, mutated, and random IDs);
@@ -35,19 +36,19 @@ from typing import Any
 import msgspec
 import numpy as np
 
-from common.config.brake import BrakeConfig
-from common.config.camera import CameraConfig
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config, parse_config
-from common.config.radar import RadarConfig
-from common.imaging import encode_jpeg, jpeg_crc32
-from common.keys import CAMERA_JPEG, EGO_MOTION, FUSION_BRAKE_CMD, RADAR_TRACKS
-from common.keys import REGISTRY as KEYS
-from common.messages import BrakeCommand, CompressedFrame, Decision, Header
-from common.messages.codec import DecodeError, decode, encode
-from common.resources import DEPLOY, EXAMPLE_KEYS
-from tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
-from tools.faults.samples import example
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.camera import CameraConfig
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config, parse_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.imaging import encode_jpeg, jpeg_crc32
+from aeb_radar_camera.common.keys import CAMERA_JPEG, EGO_MOTION, FUSION_BRAKE_CMD, RADAR_TRACKS
+from aeb_radar_camera.common.keys import REGISTRY as KEYS
+from aeb_radar_camera.common.messages import BrakeCommand, CompressedFrame, Decision, Header
+from aeb_radar_camera.common.messages.codec import DecodeError, decode, encode
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_KEYS
+from aeb_radar_camera.tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
+from aeb_radar_camera.tools.faults.samples import example
 
 SCALES = {"can": 1_000_000, "payloads": 100_000, "jpeg": 10_000, "serial": 100_000,
           "candump": 10_000, "config": 10_000}
@@ -100,9 +101,9 @@ def _quiet_logs() -> None:
 
 def simulated_cycles(n_cycles: int = 40) -> list[list[tuple[int, bytes]]]:
     """Valid ARS408 cycles (arbitration ID, data) from the SIMULATED radar in a scenario."""
-    from tools.sim.radar_feed import RadarFeed
-    from tools.sim.scenario import find_scenario, load_scenario
-    from tools.sim.world import World
+    from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+    from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
+    from aeb_radar_camera.tools.sim.world import World
 
     sent: list[list[tuple[int, bytes]]] = []
 
@@ -121,9 +122,9 @@ def simulated_cycles(n_cycles: int = 40) -> list[list[tuple[int, bytes]]]:
 
 
 def fuzz_can(n: int, rng: random.Random, progress: Progress) -> Tally:
-    from common.config.radar import RadarSettings
-    from services.radar.ars408.table import ID_TABLE, classify
-    from services.radar.core import RadarCore
+    from aeb_radar_camera.common.config.radar import RadarSettings
+    from aeb_radar_camera.services.radar.ars408.table import ID_TABLE, classify
+    from aeb_radar_camera.services.radar.core import RadarCore
 
     tally = Tally("can frames -> radar core")
     settings = RadarSettings()
@@ -183,10 +184,10 @@ class _Consumers:
     """Each service's handler for the keys it consumes, built once."""
 
     def __init__(self) -> None:
-        from common.config.radar import EgoMotionSettings
-        from services.brake.core import BrakeCore
-        from services.fusion.main import build_core
-        from services.radar.ego import EgoMotionForwarder
+        from aeb_radar_camera.common.config.radar import EgoMotionSettings
+        from aeb_radar_camera.services.brake.core import BrakeCore
+        from aeb_radar_camera.services.fusion.main import build_core
+        from aeb_radar_camera.services.radar.ego import EgoMotionForwarder
 
         cfg = BrakeConfig()
         self.brake_key = FUSION_BRAKE_CMD.key(VEHICLE, instance=cfg.brake.instance)
@@ -210,7 +211,7 @@ class _Consumers:
             tally.rejected[reason.value] += 1
 
     def ego_motion(self, payload: bytes, tally: Tally) -> None:
-        from common.messages import EgoMotion
+        from aeb_radar_camera.common.messages import EgoMotion
         msg = decode(payload, EgoMotion)
         before = self.ego.rejected.total()
         self.ego.on_motion(msg, msg.header.stamp_ns, self.now)
@@ -221,7 +222,7 @@ class _Consumers:
             tally.accepted += 1
 
     def camera_frame(self, payload: bytes, tally: Tally) -> None:
-        from services.fusion.frames import FrameError, decode_frame
+        from aeb_radar_camera.services.fusion.frames import FrameError, decode_frame
         try:
             decode_frame(payload, self.now, self.width, self.height)
         except FrameError as exc:
@@ -230,8 +231,8 @@ class _Consumers:
         tally.accepted += 1
 
     def radar_tracks(self, payload: bytes, tally: Tally) -> None:
-        from common.messages import RadarTracks
-        from services.fusion.frames import FrameFeed
+        from aeb_radar_camera.common.messages import RadarTracks
+        from aeb_radar_camera.services.fusion.frames import FrameFeed
         tracks = decode(payload, RadarTracks)
         decided = self.fusion.decide(tracks, [FrameFeed()], tracks.header.stamp_ns, self.now)
         self.fusion.report(decided)
@@ -250,7 +251,7 @@ def key_seeds() -> dict[str, bytes]:
 
 def example_keyring() -> dict[str, Any]:
     """The INSECURE example key of fusion `primary` (deploy/keys), as the sim stack uses."""
-    from common.command_auth import load_keyring
+    from aeb_radar_camera.common.command_auth import load_keyring
     return load_keyring([str(EXAMPLE_KEYS / "primary.key")], "primary")
 
 
@@ -259,7 +260,7 @@ _signer: list[Any] = []
 
 def sign(cmd: BrakeCommand) -> bytes:
     """`cmd` encoded and signed as fusion `primary` would."""
-    from common.command_auth import CommandSigner
+    from aeb_radar_camera.common.command_auth import CommandSigner
     if not _signer:
         _signer.append(CommandSigner(next(iter(example_keyring().values()))))
     payload: bytes = _signer[0].sign(cmd)
@@ -354,7 +355,7 @@ def fuzz_jpeg(n: int, rng: random.Random, progress: Progress) -> Tally:
     """Half the frames carry the CRC-32 the camera computed before the corruption (a
     frame damaged on its way), half none (a publisher that does not set it: not
     checked, so only the decoder stands between the bytes and the gate)."""
-    from services.fusion.frames import FrameError, decode_frame
+    from aeb_radar_camera.services.fusion.frames import FrameError, decode_frame
     tally = Tally("mutated jpegs -> fusion frame decoder")
     width, height = 848, 480
     seed = seed_jpeg(width, height)
@@ -400,8 +401,8 @@ def _mutate_jpeg_body(rng: random.Random, jpeg: bytes) -> bytes:
 
 
 def fuzz_serial(n: int, rng: random.Random, progress: Progress) -> Tally:
-    from services.brake.core import BrakeCore
-    from services.brake.protocol import (
+    from aeb_radar_camera.services.brake.core import BrakeCore
+    from aeb_radar_camera.services.brake.protocol import (
         Ack,
         ActuatorState,
         BadLine,
@@ -410,8 +411,8 @@ def fuzz_serial(n: int, rng: random.Random, progress: Progress) -> Tally:
         Nak,
         ProtocolError,
     )
-    from services.brake.protocol import decode as decode_line
-    from services.brake.protocol import encode as encode_line
+    from aeb_radar_camera.services.brake.protocol import decode as decode_line
+    from aeb_radar_camera.services.brake.protocol import encode as encode_line
 
     tally = Tally("serial lines -> brake line reader, protocol, core")
     cfg = BrakeConfig()
@@ -463,7 +464,7 @@ def candump_seed() -> list[str]:
 
 
 def fuzz_candump(n: int, rng: random.Random, progress: Progress) -> Tally:
-    from services.radar.ports import Pace, ReplayPort
+    from aeb_radar_camera.services.radar.ports import Pace, ReplayPort
     tally = Tally("candump lines -> radar replay port")
     lines = candump_seed()
     with tempfile.TemporaryDirectory(prefix="aeb-fuzz-") as tmp:
@@ -503,26 +504,26 @@ def _start_objects(name: str, cfg: Any) -> None:
     """What a service builds from its config at start, before any I/O. Raises what
     the service turns into exit code 2 (ConfigError and the service's own)."""
     if name == "brake":
-        from common.command_auth import load_keyring
-        from services.brake.core import BrakeCore
+        from aeb_radar_camera.common.command_auth import load_keyring
+        from aeb_radar_camera.services.brake.core import BrakeCore
         keys = load_keyring(cfg.brake.command_keys, cfg.brake.instance)
         BrakeCore(cfg.brake, FUSION_BRAKE_CMD.key(VEHICLE, instance="primary"), 0, keys)
     elif name == "radar":
-        from services.radar.core import RadarCore
-        from services.radar.ports import check_settings
+        from aeb_radar_camera.services.radar.core import RadarCore
+        from aeb_radar_camera.services.radar.ports import check_settings
         check_settings(cfg.radar.can, cfg.radar.replay)
         for sensor in cfg.radar.sensors:
             RadarCore(sensor, cfg.radar)
     elif name == "fusion":
-        from services.fusion.main import build_core
+        from aeb_radar_camera.services.fusion.main import build_core
         build_core(cfg)
 
 
 def fuzz_configs(n: int, rng: random.Random, progress: Progress) -> Tally:
-    from common.command_auth import KeyFileError
-    from common.config.loader import resolve_paths
-    from services.fusion.verifiers import VerifierConfigError
-    from services.radar.ports import ConfigurationError
+    from aeb_radar_camera.common.command_auth import KeyFileError
+    from aeb_radar_camera.common.config.loader import resolve_paths
+    from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError
+    from aeb_radar_camera.services.radar.ports import ConfigurationError
     tally = Tally("mutated configs -> load + start-up objects")
     files: dict[str, tuple[Path, type[Any]]] = {
              "brake": (DEPLOY / "brake.toml", BrakeConfig),

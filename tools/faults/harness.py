@@ -12,18 +12,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from common.command_auth import load_keyring
-from common.config.brake import BrakeConfig
-from common.config.loader import load_config
-from common.messages import BrakeState, VerifierStatus
-from common.net import free_port
-from services.brake.shell import TIMER_PERIOD_S
-from tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome
-from tools.faults.links import CanGate, NetnsLink, RelayLink
-from tools.faults.observe import Observer
-from tools.faults.registry import all_faults
-from tools.launch.table import Launch
-from tools.sim.session import closed_loop
+from aeb_radar_camera.common.command_auth import load_keyring
+from aeb_radar_camera.common.config.brake import BrakeConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.messages import BrakeState, VerifierStatus
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
+from aeb_radar_camera.tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome
+from aeb_radar_camera.tools.faults.links import CanGate, NetnsLink, RelayLink
+from aeb_radar_camera.tools.faults.observe import Observer
+from aeb_radar_camera.tools.faults.registry import all_faults
+from aeb_radar_camera.tools.launch.table import Launch
+from aeb_radar_camera.tools.sim.session import closed_loop
 
 LINE_MARGIN_MS = 10.0     # FAILSAFE decided -> its line read by the actuator (pty)
 STEADY_S = 0.3            # settled this long before the next injection
@@ -98,7 +98,7 @@ class Drive:
     def __init__(self, sim: Any) -> None:
         import msgspec
 
-        from tools.sim.scenario import find_scenario, load_scenario
+        from aeb_radar_camera.tools.sim.scenario import find_scenario, load_scenario
         base = load_scenario(find_scenario("no_threat_parked_cars_30kph"))
         car = base.object[0]
         self.scenario = msgspec.structs.replace(

@@ -1,7 +1,8 @@
 """A SIMULATED attacker on the vehicle network: publishes BrakeCommands on the brake's
 key as a process without the fusion instance's command key would (docs/security.md).
 
-    python -m tools.faults.intruder --connect tcp/127.0.0.1:7447 [--instance primary]
+    python -m aeb_radar_camera.tools.faults.intruder --connect tcp/127.0.0.1:7447 \
+        [--instance primary]
         [--attacks ahead,jump,forged,replay,flood] [--flood-s 1.0] [--flood-hz 1000]
         [--zenoh-config FILE]
 
@@ -43,12 +44,19 @@ import threading
 import time
 from collections.abc import Callable
 
-from common.bus import Bus, BusError
-from common.clock import mono_ns, wall_ns
-from common.command_auth import CommandKey, CommandSigner, KeyFileError, load_key
-from common.config.base import ZenohMode, ZenohSettings
-from common.keys import FUSION_BRAKE_CMD
-from common.messages import BrakeCommand, Decision, DecodeError, Header, VerifierStatus, decode
+from aeb_radar_camera.common.bus import Bus, BusError
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import CommandKey, CommandSigner, KeyFileError, load_key
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.common.messages import (
+    BrakeCommand,
+    Decision,
+    DecodeError,
+    Header,
+    VerifierStatus,
+    decode,
+)
 
 ATTACKS = ("ahead", "jump", "forged", "replay", "flood")
 KEYED_ATTACKS = ("keyed-ahead", "keyed-flood")
@@ -188,8 +196,9 @@ def run(bus: Bus, instance: str, attacks: tuple[str, ...], record_s: float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.faults.intruder", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="python -m aeb_radar_camera.tools.faults.intruder", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--connect", action="append", default=[])
     parser.add_argument("--zenoh-config", default="", help="Zenoh JSON5 (e.g. a TLS client)")
     parser.add_argument("--vehicle", default="ego")

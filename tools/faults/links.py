@@ -13,7 +13,7 @@ import threading
 from collections.abc import Sequence
 from typing import Any
 
-from tools.launch.table import Launch
+from aeb_radar_camera.tools.launch.table import Launch
 
 
 def _ip(*args: str, netns: str = "") -> subprocess.CompletedProcess[str]:

@@ -19,12 +19,12 @@ import sys
 import time
 from pathlib import Path
 
-from common.bus import BusError
-from common.config.loader import ConfigError
-from common.log import add_log_level, setup_logging
-from common.service import stop_event_on_signals
-from tools.faults import harness, report
-from tools.sim.session import StackStartError
+from aeb_radar_camera.common.bus import BusError
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.faults import harness, report
+from aeb_radar_camera.tools.sim.session import StackStartError
 
 SOAK_ROUNDS = 100
 SOAK_BUDGET_S = 40 * 60
@@ -56,7 +56,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args_in = sys.argv[1:] if argv is None else argv
     if args_in[:1] == ["fuzz"]:
-        from tools.faults import fuzz
+        from aeb_radar_camera.tools.faults import fuzz
         return fuzz.main(args_in[1:])
     args = parse_args(args_in)
     setup_logging("faults", args.log_level)

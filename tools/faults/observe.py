@@ -6,12 +6,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from common.bus import Bus
-from common.command_auth import CommandKey, mac_problem
-from common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
-from common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
-from common.messages.codec import DecodeError, decode
-from tools.arrivals import Arrivals
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.command_auth import CommandKey, mac_problem
+from aeb_radar_camera.common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
+from aeb_radar_camera.common.messages.codec import DecodeError, decode
+from aeb_radar_camera.tools.arrivals import Arrivals
 
 T = TypeVar("T")
 M = TypeVar("M", BrakeStatus, VerifiedTargets, BrakeCommand)

@@ -1,8 +1,8 @@
 """Every fault the harness injects, in the order a round injects them."""
 
-from tools.faults.catalogue import CameraImpostorFrames, Fault, catalogue
-from tools.faults.robust import BadConfigStrings, BadReplayStamps
-from tools.faults.security import BrakeRestartMidStop, PublishedKey, TrackFlood
+from aeb_radar_camera.tools.faults.catalogue import CameraImpostorFrames, Fault, catalogue
+from aeb_radar_camera.tools.faults.robust import BadConfigStrings, BadReplayStamps
+from aeb_radar_camera.tools.faults.security import BrakeRestartMidStop, PublishedKey, TrackFlood
 
 
 def all_faults() -> list[Fault]:

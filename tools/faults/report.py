@@ -7,8 +7,8 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from tools.faults.catalogue import Outcome
-from tools.faults.harness import Record, RunInfo
+from aeb_radar_camera.tools.faults.catalogue import Outcome
+from aeb_radar_camera.tools.faults.harness import Record, RunInfo
 
 
 def _stats(values: list[float]) -> tuple[float | None, float | None]:

@@ -19,13 +19,13 @@ import threading
 import time
 from pathlib import Path
 
-from common.bus import Bus
-from common.clock import mono_ns
-from common.config import ZenohMode, ZenohSettings
-from common.keys import RADAR_STATUS, RADAR_TRACKS
-from common.messages import BrakeState, RadarStatus, RadarTracks
-from common.resources import DEPLOY
-from tools.faults.catalogue import MS, SERVICES, Context, Fault, Outcome
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.config import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.keys import RADAR_STATUS, RADAR_TRACKS
+from aeb_radar_camera.common.messages import BrakeState, RadarStatus, RadarTracks
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.faults.catalogue import MS, SERVICES, Context, Fault, Outcome
 
 # python starting, loading its config and refusing it, on a loaded machine
 CONFIG_EXIT_BOUND_MS = 15_000.0
@@ -65,7 +65,8 @@ class BadConfigStrings(Fault):
         mark = ctx.observer.status.mark()
         t0 = mono_ns()
         try:
-            run = subprocess.run([sys.executable, "-m", f"services.{service}", "-c", str(bad)],
+            run = subprocess.run([sys.executable, "-m", f"aeb_radar_camera.services.{service}",
+                                  "-c", str(bad)],
                                  capture_output=True, text=True, timeout=60,
                                  cwd=source.parent)
         except subprocess.TimeoutExpired:
@@ -160,7 +161,8 @@ sensor_id = 0
         with Bus.open(settings, REPLAY_VEHICLE, "faults") as bus:
             bus.subscribe(RADAR_TRACKS, on_tracks, sensor="front")
             bus.subscribe(RADAR_STATUS, on_status, sensor="front")
-            proc = subprocess.Popen([sys.executable, "-m", "services.radar", "-c", str(config)],
+            proc = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.services.radar", "-c",
+                                     str(config)],
                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                     text=True, cwd=folder)
             try:

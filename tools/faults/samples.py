@@ -9,8 +9,8 @@ from typing import Any
 
 import msgspec
 
-from common.messages import SCHEMA_VERSION
-from tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.common.messages import SCHEMA_VERSION
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
 
 
 def message_types() -> list[type[msgspec.Struct]]:

@@ -18,13 +18,13 @@ import sys
 import threading
 import time
 
-from common.clock import mono_ns, wall_ns
-from common.command_auth import load_key
-from common.keys import RADAR_TRACKS
-from common.messages import BrakeState, Header, OutputMode, RadarTracks
-from common.resources import EXAMPLE_KEYS
-from tools.faults.catalogue import MS, Context, Fault, Outcome, _fusion_seqs
-from tools.faults.robust import CONFIG_EXIT_BOUND_MS, run_dir
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.command_auth import load_key
+from aeb_radar_camera.common.keys import RADAR_TRACKS
+from aeb_radar_camera.common.messages import BrakeState, Header, OutputMode, RadarTracks
+from aeb_radar_camera.common.resources import EXAMPLE_KEYS
+from aeb_radar_camera.tools.faults.catalogue import MS, Context, Fault, Outcome, _fusion_seqs
+from aeb_radar_camera.tools.faults.robust import CONFIG_EXIT_BOUND_MS, run_dir
 
 # a /dev path that is not a pty: a real actuator's port (absent here)
 REAL_PORT = "/dev/ttyACM-aeb-faults"
@@ -83,7 +83,8 @@ class PublishedKey(Fault):
         bad.write_text(_with_port(text, REAL_PORT))
         t0 = mono_ns()
         try:
-            run = subprocess.run([sys.executable, "-m", "services.brake", "-c", str(bad)],
+            run = subprocess.run([sys.executable, "-m", "aeb_radar_camera.services.brake", "-c",
+                                  str(bad)],
                                  capture_output=True, text=True, timeout=60, cwd=folder)
         except subprocess.TimeoutExpired:
             return Outcome(False, None, "the brake started on the example key and a real "
@@ -99,7 +100,7 @@ class PublishedKey(Fault):
                        bound_ms=CONFIG_EXIT_BOUND_MS)
 
     def _keyed_ahead(self, ctx: Context) -> Outcome:
-        from tools.faults.intruder import run as attack
+        from aeb_radar_camera.tools.faults.intruder import run as attack
         key = load_key(EXAMPLE_KEYS / "primary.key")
         obs = ctx.observer
         last = obs.status.last()
@@ -234,12 +235,12 @@ class BrakeRestartMidStop(Fault):
         return "" if run_dir(ctx).is_dir() else f"no {run_dir(ctx)}"
 
     def inject(self, ctx: Context) -> Outcome:
-        from common.bus import Bus
-        from common.command_auth import CommandSigner, new_key, write_key
-        from common.config import ZenohMode, ZenohSettings
-        from common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
-        from tools.faults.intruder import forged_command
-        from tools.sim.actuator import SimActuator
+        from aeb_radar_camera.common.bus import Bus
+        from aeb_radar_camera.common.command_auth import CommandSigner, new_key, write_key
+        from aeb_radar_camera.common.config import ZenohMode, ZenohSettings
+        from aeb_radar_camera.common.keys import BRAKE_STATUS, FUSION_BRAKE_CMD
+        from aeb_radar_camera.tools.faults.intruder import forged_command
+        from aeb_radar_camera.tools.sim.actuator import SimActuator
 
         folder = run_dir(ctx) / "side-brake"
         folder.mkdir(exist_ok=True)
@@ -254,7 +255,7 @@ class BrakeRestartMidStop(Fault):
         sim, pair = SimActuator.on_pty(link, seed=ctx.rng.randrange(1 << 16))
         braking = threading.Event()
         stop = threading.Event()
-        argv = [sys.executable, "-m", "services.brake", "-c", str(config)]
+        argv = [sys.executable, "-m", "aeb_radar_camera.services.brake", "-c", str(config)]
         procs: list[subprocess.Popen[bytes]] = []
         settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=(ctx.loop.endpoint,))
         try:

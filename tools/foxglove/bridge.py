@@ -28,21 +28,21 @@ from typing import TYPE_CHECKING, Any
 
 import msgspec
 
-from common.keys import CAMERA_JPEG
-from common.log import setup_logging
-from common.messages import DecodeError, decode
-from common.messages.schema import schema_name
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus, run_until
-from tools.commands import DEFAULT_PORTS, port_in_use
-from tools.recording.format import ChannelType, parse_topic
+from aeb_radar_camera.common.keys import CAMERA_JPEG
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import DecodeError, decode
+from aeb_radar_camera.common.messages.schema import schema_name
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, open_bus, run_until
+from aeb_radar_camera.tools.commands import DEFAULT_PORTS, port_in_use
+from aeb_radar_camera.tools.recording.format import ChannelType, parse_topic
 
 # foxglove-sdk and the views are imported once the arguments are read: `--help` needs no
 # extra installed
 if TYPE_CHECKING:
     import foxglove
 
-    from tools.recording.writer import WriterStats
+    from aeb_radar_camera.tools.recording.writer import WriterStats
 
 
 class FoxgloveSink:
@@ -52,7 +52,7 @@ class FoxgloveSink:
     (the image channel has them)."""
 
     def __init__(self, context: "foxglove.Context") -> None:
-        from tools.recording.writer import TopicCount, WriterStats
+        from aeb_radar_camera.tools.recording.writer import TopicCount, WriterStats
 
         self.context = context
         self.stats = WriterStats()
@@ -90,7 +90,7 @@ class FoxgloveSink:
         info = parse_topic(topic)
         if info is None or info.spec.msg_type is None or info.spec is CAMERA_JPEG:
             return None
-        from tools.recording.foxglove_views import object_schema
+        from aeb_radar_camera.tools.recording.foxglove_views import object_schema
 
         msg_type = info.spec.msg_type
         try:
@@ -151,9 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     import foxglove
 
-    from common.config.loader import ConfigError
-    from tools.recording.foxglove_views import Converter
-    from tools.recording.recorder import Recorder, decision_settings, selection
+    from aeb_radar_camera.common.config.loader import ConfigError
+    from aeb_radar_camera.tools.recording.foxglove_views import Converter
+    from aeb_radar_camera.tools.recording.recorder import Recorder, decision_settings, selection
 
     setup_logging("foxglove", args.log_level)
     stop = stop_event_on_signals()

@@ -12,16 +12,16 @@ timer runs at its due times (at the latest every TIMER_PERIOD_S).
 
 from collections.abc import Mapping
 
-from common.command_auth import CommandKey
-from common.config.brake import BrakeSettings
-from common.keys import FUSION_BRAKE_CMD
-from services.brake.core import BrakeCore, CoreView, Outgoing
-from services.brake.protocol import LineReader, encode
-from services.brake.shell import MIN_WAIT_NS, TIMER_PERIOD_S
-from tools.grid.clock import Events
-from tools.grid.delays import Delays
-from tools.sim.actuator import SimActuator
-from tools.sim.runner import SimActuatorView
+from aeb_radar_camera.common.command_auth import CommandKey
+from aeb_radar_camera.common.config.brake import BrakeSettings
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD
+from aeb_radar_camera.services.brake.core import BrakeCore, CoreView, Outgoing
+from aeb_radar_camera.services.brake.protocol import LineReader, encode
+from aeb_radar_camera.services.brake.shell import MIN_WAIT_NS, TIMER_PERIOD_S
+from aeb_radar_camera.tools.grid.clock import Events
+from aeb_radar_camera.tools.grid.delays import Delays
+from aeb_radar_camera.tools.sim.actuator import SimActuator
+from aeb_radar_camera.tools.sim.runner import SimActuatorView
 
 _TIMER_PERIOD_NS = round(TIMER_PERIOD_S * 1e9)
 

@@ -18,16 +18,16 @@ from dataclasses import dataclass, field
 import msgspec
 import numpy as np
 
-from common.calibration import Calibration
-from common.config.camera import DepthSettings
-from common.depth_image import encode_depth
-from common.imaging import encode_jpeg, jpeg_crc32
-from common.messages import CompressedFrame, DepthFrame, Header, encode
-from services.fusion.frames import decode_depth_frame
-from tools.grid.profile import Profile
-from tools.messages import SimWorld
-from tools.recording.frame_source import FrameSource, RecordedJpeg
-from tools.sim.camera_source import SimCameraSource
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.config.camera import DepthSettings
+from aeb_radar_camera.common.depth_image import encode_depth
+from aeb_radar_camera.common.imaging import encode_jpeg, jpeg_crc32
+from aeb_radar_camera.common.messages import CompressedFrame, DepthFrame, Header, encode
+from aeb_radar_camera.services.fusion.frames import decode_depth_frame
+from aeb_radar_camera.tools.grid.profile import Profile
+from aeb_radar_camera.tools.messages import SimWorld
+from aeb_radar_camera.tools.recording.frame_source import FrameSource, RecordedJpeg
+from aeb_radar_camera.tools.sim.camera_source import SimCameraSource
 
 # The camera source keeps only a world newer than the one it has: each frame's world is
 # shown to it at a time of its own that only grows (whatever order frames are rendered

@@ -32,13 +32,18 @@ from pathlib import Path
 
 import msgspec
 
-from common.calibration import Calibration
-from common.command_auth import CommandKey, CommandSigner, load_signing_key, new_key
-from common.config.brake import BrakeSettings
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config
-from common.config.radar import RadarSettings
-from common.messages import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.command_auth import (
+    CommandKey,
+    CommandSigner,
+    load_signing_key,
+    new_key,
+)
+from aeb_radar_camera.common.config.brake import BrakeSettings
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.config.radar import RadarSettings
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     Decision,
     DriverInputs,
@@ -48,22 +53,22 @@ from common.messages import (
     VerifiedTargets,
     decode,
 )
-from common.resources import EXAMPLE_CALIBRATION
-from services.brake.core import CoreView
-from services.fusion.core import CycleResult, FusionCore
-from services.fusion.main import build_core
-from services.fusion.verifiers import wants_depth
-from tools.grid.brake import LockstepBrake
-from tools.grid.camera import CameraSettings, LockstepCamera, SceneCamera
-from tools.grid.clock import Events
-from tools.grid.delays import Delays
-from tools.grid.profile import Profile
-from tools.grid.radar import LockstepRadar
-from tools.messages import SimWorld
-from tools.recording.frame_source import FrameSource
-from tools.sim.radar_reach import radar_for
-from tools.sim.scenario import RadarLook, Scenario
-from tools.sim.scenario_run import (
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.brake.core import CoreView
+from aeb_radar_camera.services.fusion.core import CycleResult, FusionCore
+from aeb_radar_camera.services.fusion.main import build_core
+from aeb_radar_camera.services.fusion.verifiers import wants_depth
+from aeb_radar_camera.tools.grid.brake import LockstepBrake
+from aeb_radar_camera.tools.grid.camera import CameraSettings, LockstepCamera, SceneCamera
+from aeb_radar_camera.tools.grid.clock import Events
+from aeb_radar_camera.tools.grid.delays import Delays
+from aeb_radar_camera.tools.grid.profile import Profile
+from aeb_radar_camera.tools.grid.radar import LockstepRadar
+from aeb_radar_camera.tools.messages import SimWorld
+from aeb_radar_camera.tools.recording.frame_source import FrameSource
+from aeb_radar_camera.tools.sim.radar_reach import radar_for
+from aeb_radar_camera.tools.sim.scenario import RadarLook, Scenario
+from aeb_radar_camera.tools.sim.scenario_run import (
     LoopSettings,
     RadarSchedule,
     ScenarioRun,
@@ -71,7 +76,7 @@ from tools.sim.scenario_run import (
     vehicle_messages,
     world_message,
 )
-from tools.sim.verdict import Sample, Verdict
+from aeb_radar_camera.tools.sim.verdict import Sample, Verdict
 
 SETTLE_LIMIT_S = 10.0             # the stack arms within half a second; beyond: broken
 SETTLED_POSITION_PCT = 2.0        # the runner's "actuator released"

@@ -34,16 +34,16 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from common.log import add_log_level, setup_logging
-from common.resources import DEPLOY
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.resources import DEPLOY
 
 # The grid's machinery (numpy, OpenCV, matplotlib: the demo extra) is imported once the
 # arguments are read: `aeb grid --help` works on any install.
 if TYPE_CHECKING:
-    from tools.grid.lockstep import LoopConfig
-    from tools.grid.pool import Outcome
-    from tools.grid.score import CaseScore
-    from tools.sim.families import Case as FamilyCase
+    from aeb_radar_camera.tools.grid.lockstep import LoopConfig
+    from aeb_radar_camera.tools.grid.pool import Outcome
+    from aeb_radar_camera.tools.grid.score import CaseScore
+    from aeb_radar_camera.tools.sim.families import Case as FamilyCase
 
 PAPER_CONFIG = DEPLOY / "fusion-paper.toml"
 QUICK_SPEED_KPH = 30.0        # the quick set's speed where a family has it (the paper's)
@@ -81,7 +81,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def parse_seeds(text: str) -> list[int]:
     """Seed specs joined by commas, each as tools/sim/families.seeds_of reads it; in
     order, without repeats. Raises ValueError."""
-    from tools.sim.families import seeds_of, split_of
+    from aeb_radar_camera.tools.sim.families import seeds_of, split_of
 
     seeds: list[int] = []
     for part in text.split(","):
@@ -96,7 +96,7 @@ def parse_seeds(text: str) -> list[int]:
 
 def pick_families(text: str) -> list[str]:
     """Family names from names and group names. Raises ValueError."""
-    from tools.sim.families import FAMILIES
+    from aeb_radar_camera.tools.sim.families import FAMILIES
 
     if text.strip() == "all":
         return list(FAMILIES)
@@ -119,8 +119,8 @@ def pick_families(text: str) -> list[str]:
 def pick_cases(families: list[str], speeds: list[float], seeds: list[int],
                quick: bool) -> list["FamilyCase"]:
     """The grid's cases. Raises ValueError when the choice leaves none."""
-    from tools.sim.families import FAMILIES
-    from tools.sim.families import Case as FamilyCase
+    from aeb_radar_camera.tools.sim.families import FAMILIES
+    from aeb_radar_camera.tools.sim.families import Case as FamilyCase
 
     cases: list[FamilyCase] = []
     for name in families:
@@ -163,13 +163,13 @@ def config_names(paths: list[Path]) -> dict[str, Path]:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging("grid", args.log_level)
-    from common.config.loader import ConfigError
-    from common.service import stop_event_on_signals
-    from tools.grid import report
-    from tools.grid.lockstep import LoopConfig
-    from tools.grid.pool import Case, print_progress, run_cases
-    from tools.grid.score import sensor_floor
-    from tools.sim.families import FAMILIES, listing
+    from aeb_radar_camera.common.config.loader import ConfigError
+    from aeb_radar_camera.common.service import stop_event_on_signals
+    from aeb_radar_camera.tools.grid import report
+    from aeb_radar_camera.tools.grid.lockstep import LoopConfig
+    from aeb_radar_camera.tools.grid.pool import Case, print_progress, run_cases
+    from aeb_radar_camera.tools.grid.score import sensor_floor
+    from aeb_radar_camera.tools.sim.families import FAMILIES, listing
 
     if args.list:
         print(listing())
@@ -233,8 +233,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _score(config: str, c: "FamilyCase", o: "Outcome", loop: "LoopConfig") -> "CaseScore":
-    from tools.grid.score import Reach, failed_case, reasons_of, score_case, shadow_of
-    from tools.sim.families import FAMILIES
+    from aeb_radar_camera.tools.grid.score import (
+        Reach,
+        failed_case,
+        reasons_of,
+        score_case,
+        shadow_of,
+    )
+    from aeb_radar_camera.tools.sim.families import FAMILIES
 
     family = FAMILIES[c.family]
     r = o.result

@@ -2,9 +2,10 @@
 seeds), beside an `aeb demo` run's (its summary.json), and what a simulated second costs
 and where that time goes. A SIMULATION measurement.
 
-    python -m tools.grid.measure                                   # the demo's scenarios
-    python -m tools.grid.measure --demo-summary out/demo/summary.json --seeds 0-4
-    python -m tools.grid.measure --fusion-config deploy/fusion-paper.toml --json out/x.json
+    python -m aeb_radar_camera.tools.grid.measure               # the demo's scenarios
+    python -m aeb_radar_camera.tools.grid.measure --demo-summary out/demo/summary.json --seeds 0-4
+    python -m aeb_radar_camera.tools.grid.measure --fusion-config deploy/fusion-paper.toml \
+        --json out/x.json
 
 Wall times are this host's, one run at a time (`--workers 1`, the default: runs in
 parallel share the cores and the figures with them); CPU times (the process's, all its
@@ -20,12 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from common.config.loader import ConfigError
-from common.resources import DEPLOY
-from tools.grid.delays import Delays
-from tools.grid.pool import Case, Outcome, print_progress, run_cases
-from tools.grid.profile import PARTS
-from tools.sim.scenario import DEMO_SCENARIOS, pick_scenarios
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.grid.delays import Delays
+from aeb_radar_camera.tools.grid.pool import Case, Outcome, print_progress, run_cases
+from aeb_radar_camera.tools.grid.profile import PARTS
+from aeb_radar_camera.tools.sim.scenario import DEMO_SCENARIOS, pick_scenarios
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -98,8 +99,9 @@ def print_table(table: list[dict[str, Any]], demo: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.grid.measure", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="python -m aeb_radar_camera.tools.grid.measure", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenarios", default=",".join(DEMO_SCENARIOS),
                         help="comma-separated names or files, or 'all'")
     parser.add_argument("--fusion-config", type=Path, default=DEPLOY / "fusion.toml")

@@ -24,11 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from common.calibration import Calibration
-from common.resources import EXAMPLE_CALIBRATION
-from tools.grid.camera import SceneCamera
-from tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
-from tools.sim.scenario import Scenario
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.tools.grid.camera import SceneCamera
+from aeb_radar_camera.tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
+from aeb_radar_camera.tools.sim.scenario import Scenario
 
 
 @dataclass(frozen=True)
@@ -97,7 +97,7 @@ def run_case(index: int, case: Case) -> Outcome:
 
 def _plot(result: LockstepResult, config: LoopConfig, path: Path) -> None:
     # matplotlib only for the runs that draw (the plot module imports it)
-    from tools.sim.plot import plot_timeline
+    from aeb_radar_camera.tools.sim.plot import plot_timeline
 
     d = config.fusion.fusion.decision
     plot_timeline(result.samples, result.verdict, path, d.ttc_offset_s, d.brake_ttc_eff_s)

@@ -12,17 +12,17 @@ from collections.abc import Sequence
 
 import msgspec
 
-from common.config.radar import RadarSettings
-from common.messages import RadarTracks, encode
-from services.radar.ars408 import RadarFrame
-from services.radar.ports import radar_message
-from services.radar.shell import RadarShell
-from tools.grid.clock import Events
-from tools.grid.delays import Delays
-from tools.recording.rerun_radar import Collected
-from tools.sim.radar_feed import RadarFeed
-from tools.sim.scenario import RadarLook
-from tools.sim.world import Body
+from aeb_radar_camera.common.config.radar import RadarSettings
+from aeb_radar_camera.common.messages import RadarTracks, encode
+from aeb_radar_camera.services.radar.ars408 import RadarFrame
+from aeb_radar_camera.services.radar.ports import radar_message
+from aeb_radar_camera.services.radar.shell import RadarShell
+from aeb_radar_camera.tools.grid.clock import Events
+from aeb_radar_camera.tools.grid.delays import Delays
+from aeb_radar_camera.tools.recording.rerun_radar import Collected
+from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+from aeb_radar_camera.tools.sim.scenario import RadarLook
+from aeb_radar_camera.tools.sim.world import Body
 
 
 class LockstepRadar:

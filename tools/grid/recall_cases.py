@@ -3,9 +3,9 @@ lockstep, on generated HELD-OUT cases (tools/sim/families.py, seeds of SPLITS['h
 nothing here was used to fit anything), the shipped deploy/fusion.toml against
 deploy/fusion-paper.toml. A SIMULATION.
 
-    python -m tools.grid.recall_cases --out out/recall            # the >= 200 cases
-    python -m tools.grid.recall_cases --issue-rows --runs 10       # issue 25's four rows
-    python -m tools.grid.recall_cases --quick                      # a few cases (tests)
+    python -m aeb_radar_camera.tools.grid.recall_cases --out out/recall       # >= 200 cases
+    python -m aeb_radar_camera.tools.grid.recall_cases --issue-rows --runs 10  # issue 25's rows
+    python -m aeb_radar_camera.tools.grid.recall_cases --quick                 # a few (tests)
 
 The cases: threat families at 10-30 km/h with every obstacle kind the simulator has
 (obstacle_standing: boxes 0.4-1.5 m, pedestrians, a bicycle, a car, facing or side-on;
@@ -32,11 +32,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from common.resources import DEPLOY
-from tools.grid.pool import Case, Outcome, print_progress, run_cases
-from tools.sim.families import FAMILIES, SPLITS
-from tools.sim.families import Case as FamilyCase
-from tools.sim.scenario import Scenario, ScenarioKind, find_scenario, load_scenario
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.grid.pool import Case, Outcome, print_progress, run_cases
+from aeb_radar_camera.tools.sim.families import FAMILIES, SPLITS
+from aeb_radar_camera.tools.sim.families import Case as FamilyCase
+from aeb_radar_camera.tools.sim.scenario import Scenario, ScenarioKind, find_scenario, load_scenario
 
 DEFAULT = DEPLOY / "fusion.toml"
 PAPER = DEPLOY / "fusion-paper.toml"
@@ -233,7 +233,7 @@ def run_issue_rows(runs: int, workers: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.grid.recall_cases",
+    parser = argparse.ArgumentParser(prog="python -m aeb_radar_camera.tools.grid.recall_cases",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="out/recall", help="where the results go")

@@ -20,8 +20,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from tools.grid.score import CaseScore, FamilyScore, SensorFloor, family_scores
-from tools.sim.scenario import ScenarioKind
+from aeb_radar_camera.tools.grid.score import CaseScore, FamilyScore, SensorFloor, family_scores
+from aeb_radar_camera.tools.sim.scenario import ScenarioKind
 
 HEATMAP_DPI = 80
 MAX_IMPACT_KPH = 60.0        # the colour scale's top: the grid's highest ego speed

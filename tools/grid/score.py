@@ -26,12 +26,12 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from common.config.fusion import RuleName
-from tools.sim.scenario import ScenarioKind
-from tools.sim.verdict import Sample, Verdict
+from aeb_radar_camera.common.config.fusion import RuleName
+from aeb_radar_camera.tools.sim.scenario import ScenarioKind
+from aeb_radar_camera.tools.sim.verdict import Sample, Verdict
 
 if TYPE_CHECKING:
-    from tools.grid.lockstep import FusionCycle, LoopConfig
+    from aeb_radar_camera.tools.grid.lockstep import FusionCycle, LoopConfig
 
 HALF_POSITION_PCT = 50.0
 # The simulated actuator's first-order time constant (tools/sim/actuator.py's default,

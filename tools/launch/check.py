@@ -13,11 +13,11 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config
-from common.config.radar import RadarConfig
-from common.systemd import NOTIFY_ENV
-from tools.launch.table import Launch
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.systemd import NOTIFY_ENV
+from aeb_radar_camera.tools.launch.table import Launch
 
 # the commands with a `--check` option
 CHECKABLE = frozenset({"radar", "camera", "fusion", "brake", "vehicle", "router"})

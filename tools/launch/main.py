@@ -17,15 +17,15 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 
-from common.config.loader import ConfigError
-from common.cpu_latency import CpuLatencyRefused, cpu_latency
-from common.log import add_log_level, setup_logging
-from common.resources import SINGLE_HOST_TABLE
-from common.service import stop_event_on_signals
-from common.systemd import Watchdog
-from tools.launch.check import check_all, reach_warnings
-from tools.launch.supervisor import LinePrinter, Supervisor
-from tools.launch.table import Launch, load_table, resolve_launches
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.cpu_latency import CpuLatencyRefused, cpu_latency
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.resources import SINGLE_HOST_TABLE
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.common.systemd import Watchdog
+from aeb_radar_camera.tools.launch.check import check_all, reach_warnings
+from aeb_radar_camera.tools.launch.supervisor import LinePrinter, Supervisor
+from aeb_radar_camera.tools.launch.table import Launch, load_table, resolve_launches
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -21,9 +21,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import IO
 
-from common import systemd
-from tools.launch.restart import RestartState, describe_exit, on_exit
-from tools.launch.table import Launch
+from aeb_radar_camera.common import systemd
+from aeb_radar_camera.tools.launch.restart import RestartState, describe_exit, on_exit
+from aeb_radar_camera.tools.launch.table import Launch
 
 _PR_SET_PDEATHSIG = 1
 _POLL_S = 0.05

@@ -15,9 +15,9 @@ from typing import Annotated
 
 import msgspec
 
-from common.config.loader import ConfigError, load_config
-from tools.commands import COMMANDS
-from tools.launch.restart import Backoff, RestartMode
+from aeb_radar_camera.common.config.loader import ConfigError, load_config
+from aeb_radar_camera.tools.commands import COMMANDS
+from aeb_radar_camera.tools.launch.restart import Backoff, RestartMode
 
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]*$")
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|unixsock-stream|ws)/.+")
@@ -132,7 +132,7 @@ def load_table(path: str | Path) -> tuple[ProcessTable, Path]:
 
 def aeb_argv(command: str) -> tuple[str, ...]:
     """An `aeb` command run with the current interpreter (works without the venv on PATH)."""
-    return (sys.executable, "-m", "tools.cli", command)
+    return (sys.executable, "-m", "aeb_radar_camera.tools.cli", command)
 
 
 def _resolve(workdir: Path, rel: str) -> Path:

@@ -20,15 +20,22 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from common.bus import Bus
-from common.clock import mono_ns, wall_ns
-from common.keys import KeySpec
-from common.log import setup_logging
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, endpoints, non_negative, on_this_host, open_bus, positive
-from tools.keys import MESSAGE_KEYS
-from tools.monitor.state import MonitorState
-from tools.monitor.view import render_text, snapshot
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import KeySpec
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import (
+    add_bus_args,
+    endpoints,
+    non_negative,
+    on_this_host,
+    open_bus,
+    positive,
+)
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.tools.monitor.state import MonitorState
+from aeb_radar_camera.tools.monitor.view import render_text, snapshot
 
 _CLEAR = "\x1b[H\x1b[2J"
 

@@ -14,8 +14,8 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from common.freshness import Freshness
-from common.keys import KeySpec
+from aeb_radar_camera.common.freshness import Freshness
+from aeb_radar_camera.common.keys import KeySpec
 
 WINDOW_S = 5.0
 _NS = 1_000_000_000

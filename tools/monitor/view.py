@@ -4,7 +4,7 @@ same snapshot as a text table for a terminal or a log."""
 import time
 from typing import Any
 
-from common.keys import (
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_INFO,
     FUSION_BRAKE_CMD,
@@ -13,8 +13,8 @@ from common.keys import (
     RADAR_TRACKS,
     KeySpec,
 )
-from tools.keys import SIM_WORLD
-from tools.monitor.state import MonitorState
+from aeb_radar_camera.tools.keys import SIM_WORLD
+from aeb_radar_camera.tools.monitor.state import MonitorState
 
 _NS = 1_000_000_000
 MAX_ROWS = 12

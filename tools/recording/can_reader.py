@@ -9,11 +9,11 @@ from collections.abc import Callable
 
 import can
 
-from common.clock import mono_ns, wall_ns
-from common.keys import RADAR_CAN
-from common.messages import CanFrame, Header, RawCanFrames
-from common.messages import encode as encode_msg
-from common.messages.radar import can_frame
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import RADAR_CAN
+from aeb_radar_camera.common.messages import CanFrame, Header, RawCanFrames
+from aeb_radar_camera.common.messages import encode as encode_msg
+from aeb_radar_camera.common.messages.radar import can_frame
 
 BATCH_S = 0.075
 _log = logging.getLogger("record.can")

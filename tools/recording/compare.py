@@ -26,7 +26,13 @@ from typing import Any
 
 import msgspec
 
-from common.messages import BrakeCommand, RadarTrack, RadarTracks, VerifiedTarget, VerifiedTargets
+from aeb_radar_camera.common.messages import (
+    BrakeCommand,
+    RadarTrack,
+    RadarTracks,
+    VerifiedTarget,
+    VerifiedTargets,
+)
 
 COMMAND_FIELDS = ("decision", "brake_level_pct", "verifier_status", "held", "track_id",
                   "range_m", "ttc_s", "reason")

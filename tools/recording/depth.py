@@ -8,8 +8,8 @@ from collections.abc import Mapping
 import msgspec
 import numpy as np
 
-from common.messages import DecodeError
-from services.fusion.frames import FrameError, decode_depth_frame
+from aeb_radar_camera.common.messages import DecodeError
+from aeb_radar_camera.services.fusion.frames import FrameError, decode_depth_frame
 
 
 class Head(msgspec.Struct):

@@ -37,8 +37,8 @@ from typing import Any
 
 import msgspec
 
-from common.config.fusion import DecisionSettings
-from common.keys import (
+from aeb_radar_camera.common.config.fusion import DecisionSettings
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_JPEG,
     FUSION_BRAKE_CMD,
@@ -46,8 +46,8 @@ from common.keys import (
     RADAR_CAN,
     RADAR_TRACKS,
 )
-from common.log import setup_logging
-from common.messages import (
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     BrakeStatus,
     CompressedFrame,
@@ -57,9 +57,9 @@ from common.messages import (
     VerifiedTarget,
     VerifiedTargets,
 )
-from common.messages.radar import can_message
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus, run_until
+from aeb_radar_camera.common.messages.radar import can_message
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, open_bus, run_until
 
 # What draws, decodes and writes CAN logs is imported where it is used: `aeb evidence
 # --help` needs no extra installed.
@@ -105,7 +105,7 @@ class EvidenceCollector:
         self._last: dict[str, tuple[Decision, int]] = {}
         self._pending: list[Event] = []
         self._lock = threading.Lock()
-        from tools.recording.foxglove_views import DECISION_LEVEL
+        from aeb_radar_camera.tools.recording.foxglove_views import DECISION_LEVEL
 
         self._level = DECISION_LEVEL
 
@@ -259,8 +259,8 @@ class EvidenceCollector:
             return []
         _, frame = found
         (folder / "frame.jpg").write_bytes(frame.jpeg)
-        from common.imaging import ImageDecodeError, decode_bgr
-        from tools.recording.evidence_frames import write_images
+        from aeb_radar_camera.common.imaging import ImageDecodeError, decode_bgr
+        from aeb_radar_camera.tools.recording.evidence_frames import write_images
 
         try:
             bgr = decode_bgr(frame.jpeg, frame.crc32)
@@ -472,9 +472,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from common.config.loader import ConfigError
-    from tools.recording.reader import Recording, RecordingError, decode_record
-    from tools.recording.recorder import Recorder, decision_settings, selection
+    from aeb_radar_camera.common.config.loader import ConfigError
+    from aeb_radar_camera.tools.recording.reader import Recording, RecordingError, decode_record
+    from aeb_radar_camera.tools.recording.recorder import Recorder, decision_settings, selection
 
     setup_logging("evidence", args.log_level)
     try:

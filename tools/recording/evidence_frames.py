@@ -14,8 +14,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common.messages import VerifiedTarget, VerifiedTargets
-from tools.recording.foxglove_views import frame_stamp_ns, state_colour, target_label
+from aeb_radar_camera.common.messages import VerifiedTarget, VerifiedTargets
+from aeb_radar_camera.tools.recording.foxglove_views import (
+    frame_stamp_ns,
+    state_colour,
+    target_label,
+)
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 TEXT_PX_PER_LINE = 15 / 480       # text height per frame line

@@ -22,9 +22,9 @@ from typing import Any
 
 import msgspec
 
-from common.keys import KeySpec
-from common.messages.schema import json_schema, schema_name
-from tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.common.keys import KeySpec
+from aeb_radar_camera.common.messages.schema import json_schema, schema_name
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
 
 MESSAGE_ENCODING = "msgpack"
 SCHEMA_ENCODING = "jsonschema"

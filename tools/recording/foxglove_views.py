@@ -34,9 +34,9 @@ import msgspec
 import numpy as np
 from foxglove import messages as fg
 
-from common.config.fusion import CorridorSettings, DecisionSettings
-from common.imaging import decode_bgr, encode_jpeg
-from common.keys import (
+from aeb_radar_camera.common.config.fusion import CorridorSettings, DecisionSettings
+from aeb_radar_camera.common.imaging import decode_bgr, encode_jpeg
+from aeb_radar_camera.common.keys import (
     BRAKE_STATUS,
     CAMERA_INFO,
     CAMERA_JPEG,
@@ -45,7 +45,7 @@ from common.keys import (
     RADAR_STATUS,
     RADAR_TRACKS,
 )
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     BrakeState,
     BrakeStatus,
@@ -58,8 +58,8 @@ from common.messages import (
     VerifiedTarget,
     VerifiedTargets,
 )
-from services.fusion.path import PredictedPath
-from tools.recording.format import ChannelType
+from aeb_radar_camera.services.fusion.path import PredictedPath
+from aeb_radar_camera.tools.recording.format import ChannelType
 
 RADAR_FRAME = "radar"          # the 3-D views' frame: x forward, y left, z up (radar origin)
 PATH_STEP_M = 1.0              # the drawn path's points along its arc

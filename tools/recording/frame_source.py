@@ -33,9 +33,15 @@ from typing import Any
 
 import numpy as np
 
-from common.messages import DecodeError
-from services.fusion.frames import RING_SIZE, DecodedFrame, FrameError, FrameFeed, decode_frame
-from tools.recording.depth import RecordedDepth, message_head
+from aeb_radar_camera.common.messages import DecodeError
+from aeb_radar_camera.services.fusion.frames import (
+    RING_SIZE,
+    DecodedFrame,
+    FrameError,
+    FrameFeed,
+    decode_frame,
+)
+from aeb_radar_camera.tools.recording.depth import RecordedDepth, message_head
 
 # Frames kept per camera (their payloads, undecoded), to build rings from: a ring is
 # the newest few received before a moment at most a second or so back.

@@ -21,11 +21,16 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from common.log import add_log_level, setup_logging
-from tools.recording.format import DERIVED_PREFIX, METADATA_NAME, missed_between, parse_topic
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.tools.recording.format import (
+    DERIVED_PREFIX,
+    METADATA_NAME,
+    missed_between,
+    parse_topic,
+)
 
 if TYPE_CHECKING:      # mcap's reader waits for the arguments (`--help` needs no extra)
-    from tools.recording.reader import Recording
+    from aeb_radar_camera.tools.recording.reader import Recording
 
 _PROGRESS_S = 2.0
 
@@ -76,7 +81,7 @@ def _numbered(topic: str) -> bool:
 
 def inspect(rec: "Recording", progress: bool = False) -> RecordingInfo:
     """Everything `aeb info` says of a recording. Raises RecordingError."""
-    from tools.recording.reader import RecordingError
+    from aeb_radar_camera.tools.recording.reader import RecordingError
 
     summaries = rec.channels()
     channels = {t: ChannelInfo(t, s.schema_name or "-", s.message_encoding,
@@ -170,7 +175,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from tools.recording.reader import Recording, RecordingError
+    from aeb_radar_camera.tools.recording.reader import Recording, RecordingError
 
     setup_logging("info", args.log_level)
     try:

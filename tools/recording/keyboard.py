@@ -17,7 +17,7 @@ import tty
 from collections.abc import Callable, Iterator
 from typing import IO
 
-from tools.recording.playback import Playback
+from aeb_radar_camera.tools.recording.playback import Playback
 
 HELP = "keys: space pause/resume, s or right arrow: one message, up/down or +/-: rate, h: help"
 _ARROWS = {b"\x1b[A": "faster", b"\x1b[B": "slower", b"\x1b[C": "step",

@@ -17,8 +17,8 @@ from mcap.exceptions import EndOfFile, InvalidMagic, McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import MCAP0_MAGIC
 
-from common.messages import DecodeError, decode
-from tools.recording.format import (
+from aeb_radar_camera.common.messages import DecodeError, decode
+from aeb_radar_camera.tools.recording.format import (
     DERIVED_PREFIX,
     MESSAGE_ENCODING,
     METADATA_NAME,

@@ -32,13 +32,13 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from common.config.loader import ConfigError
-from common.log import setup_logging
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus, run_until
+from aeb_radar_camera.common.config.loader import ConfigError
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, open_bus, run_until
 
 if TYPE_CHECKING:
-    from tools.recording.recorder import RecordStats
+    from aeb_radar_camera.tools.recording.recorder import RecordStats
 
 
 def summary_text(stats: "RecordStats") -> str:
@@ -109,9 +109,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     # after the arguments: `--help` needs no extra installed
-    from tools.recording.foxglove_views import Converter
-    from tools.recording.recorder import RECORDER_STATUS, Recorder, decision_settings, selection
-    from tools.recording.writer import RecordingWriter
+    from aeb_radar_camera.tools.recording.foxglove_views import Converter
+    from aeb_radar_camera.tools.recording.recorder import (
+        RECORDER_STATUS,
+        Recorder,
+        decision_settings,
+        selection,
+    )
+    from aeb_radar_camera.tools.recording.writer import RecordingWriter
 
     setup_logging("record", args.log_level)
     stop = stop_event_on_signals()
@@ -138,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     sinks: list[Any] = []
     if args.evidence:
-        from tools.recording.evidence import EvidenceCollector
+        from aeb_radar_camera.tools.recording.evidence import EvidenceCollector
 
         sinks.append(EvidenceCollector(Path(args.evidence), args.vehicle,
                                        decision_settings(args.fusion_config)))
@@ -149,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             recorder.start()
             if args.can:
-                from tools.recording.can_reader import CanReader
+                from aeb_radar_camera.tools.recording.can_reader import CanReader
 
                 can_reader = CanReader.from_spec(args.can, args.vehicle, recorder.submit)
                 can_reader.start()

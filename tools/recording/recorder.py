@@ -19,16 +19,21 @@ from typing import Any, Protocol
 import msgspec
 import zenoh
 
-from common.bus import Bus
-from common.clock import wall_ns
-from common.config.fusion import DecisionSettings, FusionConfig
-from common.config.loader import load_config
-from common.keys import KeySpec, QoS
-from common.messages import DecodeError, decode
-from tools.keys import MESSAGE_KEYS
-from tools.recording.format import ChannelType, channel_of_topic, missed_between, parse_topic
-from tools.recording.foxglove_views import Converter, encode_derived
-from tools.recording.writer import WriterStats
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.config.fusion import DecisionSettings, FusionConfig
+from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.keys import KeySpec, QoS
+from aeb_radar_camera.common.messages import DecodeError, decode
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.tools.recording.format import (
+    ChannelType,
+    channel_of_topic,
+    missed_between,
+    parse_topic,
+)
+from aeb_radar_camera.tools.recording.foxglove_views import Converter, encode_derived
+from aeb_radar_camera.tools.recording.writer import WriterStats
 
 QUEUE_CAPACITY = 8192        # samples per subscription Zenoh may hold for its reader
 ALL_KEYS: KeySpec[Any] = KeySpec("all", "**", None, None, None, QoS())

@@ -41,11 +41,11 @@ from typing import TYPE_CHECKING, Any
 
 import msgspec
 
-from common.bus import Bus, TypedPublisher
-from common.clock import mono_ns, wall_ns
-from common.keys import Congestion, KeySpec, QoS
-from common.log import setup_logging
-from common.messages import (
+from aeb_radar_camera.common.bus import Bus, TypedPublisher
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import Congestion, KeySpec, QoS
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     BrakeStatus,
     DecodeError,
@@ -54,16 +54,16 @@ from common.messages import (
     decode,
     encode,
 )
-from common.messages.radar import CAN_ERROR, CanFrame, can_message
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, open_bus
-from tools.keys import MESSAGE_KEYS
-from tools.recording.format import DERIVED_PREFIX, parse_topic
-from tools.recording.keyboard import keyboard
-from tools.recording.playback import Playback, TimeMap
+from aeb_radar_camera.common.messages.radar import CAN_ERROR, CanFrame, can_message
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, open_bus
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.tools.recording.format import DERIVED_PREFIX, parse_topic
+from aeb_radar_camera.tools.recording.keyboard import keyboard
+from aeb_radar_camera.tools.recording.playback import Playback, TimeMap
 
 if TYPE_CHECKING:      # mcap's reader waits for the arguments (`--help` needs no extra)
-    from tools.recording.reader import Record, Recording
+    from aeb_radar_camera.tools.recording.reader import Record, Recording
 
 GENERIC: KeySpec[Any] = KeySpec("replayed", "**", None, None, None, QoS())
 
@@ -171,8 +171,8 @@ class CanOut:
     def pty(cls, stop: threading.Event, path_file: str = "") -> tuple["CanOut", Callable[[], None]]:
         """A pty acting as an slcan adapter (SIMULATION of the wire); waits until a
         service opened it."""
-        from services.radar.ars408.codec import RadarFrame
-        from tools.sim.can_links import SlcanPtyLink
+        from aeb_radar_camera.services.radar.ars408.codec import RadarFrame
+        from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
 
         link = SlcanPtyLink()
         print(f"slcan adapter (simulated wire) on {link.path}: [radar.can] interface = "
@@ -338,7 +338,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from tools.recording.reader import Recording, RecordingError
+    from aeb_radar_camera.tools.recording.reader import Recording, RecordingError
 
     setup_logging("replay", args.log_level)
     stop = stop_event_on_signals()

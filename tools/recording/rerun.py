@@ -30,20 +30,25 @@ from typing import TYPE_CHECKING, Any
 
 import msgspec
 
-from common.config.fusion import FusionConfig
-from common.config.loader import ConfigError, load_config
-from common.config.overrides import add_set_argument
-from common.config.radar import RadarConfig
-from common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
-from common.log import add_log_level, setup_logging
-from common.messages import VerifiedTargets, encode
-from common.resources import DEPLOY
-from tools.recording.compare import Comparison, Difference, check_declared, summary_table
-from tools.recording.format import stack_channel
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import ConfigError, load_config
+from aeb_radar_camera.common.config.overrides import add_set_argument
+from aeb_radar_camera.common.config.radar import RadarConfig
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR_TRACKS
+from aeb_radar_camera.common.log import add_log_level, setup_logging
+from aeb_radar_camera.common.messages import VerifiedTargets, encode
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.recording.compare import (
+    Comparison,
+    Difference,
+    check_declared,
+    summary_table,
+)
+from aeb_radar_camera.tools.recording.format import stack_channel
 
 if TYPE_CHECKING:      # the re-runs' own imports wait for the arguments (`--help`, no extra)
-    from tools.recording.reader import Recording
-    from tools.recording.writer import RecordingWriter
+    from aeb_radar_camera.tools.recording.reader import Recording
+    from aeb_radar_camera.tools.recording.writer import RecordingWriter
 
 
 class Progress:
@@ -108,8 +113,8 @@ def _window(rec: "Recording", args: argparse.Namespace) -> tuple[int, int, int |
 
 def run_fusion(args: argparse.Namespace, rec: "Recording",
                vehicle: str) -> tuple[Comparison, dict[str, Any]]:
-    from tools.recording.foxglove_views import Converter, encode_derived
-    from tools.recording.rerun_fusion import FusionRerun, config_params, normalised
+    from aeb_radar_camera.tools.recording.foxglove_views import Converter, encode_derived
+    from aeb_radar_camera.tools.recording.rerun_fusion import FusionRerun, config_params, normalised
 
     cfg = load_config(args.config or DEPLOY / "fusion.toml", FusionConfig, args.overrides)
     rerun = FusionRerun(cfg, args.instance or None, vehicle)
@@ -192,8 +197,8 @@ def evidence_lines(targets: VerifiedTargets, first_ns: int) -> list[str]:
 
 def run_radar(args: argparse.Namespace, rec: "Recording",
               vehicle: str) -> tuple[Comparison, dict[str, Any]]:
-    from tools.recording.foxglove_views import Converter, encode_derived
-    from tools.recording.rerun_radar import RadarRerun
+    from aeb_radar_camera.tools.recording.foxglove_views import Converter, encode_derived
+    from aeb_radar_camera.tools.recording.rerun_radar import RadarRerun
 
     cfg = load_config(args.config or DEPLOY / "radar.toml", RadarConfig, args.overrides)
     rerun = RadarRerun(cfg.radar, vehicle, exact=args.exact)
@@ -232,7 +237,7 @@ def run_radar(args: argparse.Namespace, rec: "Recording",
 
 
 def _writer(args: argparse.Namespace, metadata: dict[str, str]) -> "RecordingWriter | None":
-    from tools.recording.writer import RecordingWriter
+    from aeb_radar_camera.tools.recording.writer import RecordingWriter
 
     if not args.out:
         return None
@@ -304,8 +309,8 @@ def nothing_compared(args: argparse.Namespace, rec: "Recording", vehicle: str,
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from services.fusion.verifiers import VerifierConfigError
-    from tools.recording.reader import Recording, RecordingError
+    from aeb_radar_camera.services.fusion.verifiers import VerifierConfigError
+    from aeb_radar_camera.tools.recording.reader import Recording, RecordingError
 
     setup_logging("rerun", args.log_level)
     try:

@@ -40,8 +40,8 @@ from typing import Any
 
 import msgspec
 
-from common.config.fusion import FusionConfig
-from common.keys import (
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.keys import (
     CAMERA_DEPTH,
     CAMERA_JPEG,
     EGO_MOTION,
@@ -50,7 +50,7 @@ from common.keys import (
     RADAR_TRACKS,
     VEHICLE_DRIVER,
 )
-from common.messages import (
+from aeb_radar_camera.common.messages import (
     BrakeCommand,
     DecodeError,
     DriverInputs,
@@ -60,12 +60,12 @@ from common.messages import (
     VerifierStatus,
     decode,
 )
-from common.vehicle_state import VehicleState
-from services.fusion.core import CycleResult
-from services.fusion.frames import DecodedFrame, FrameFeed, select_frame
-from services.fusion.main import build_core
-from tools.recording.frame_source import FrameSource, SourcedFrame
-from tools.recording.reader import Record, Recording
+from aeb_radar_camera.common.vehicle_state import VehicleState
+from aeb_radar_camera.services.fusion.core import CycleResult
+from aeb_radar_camera.services.fusion.frames import DecodedFrame, FrameFeed, select_frame
+from aeb_radar_camera.services.fusion.main import build_core
+from aeb_radar_camera.tools.recording.frame_source import FrameSource, SourcedFrame
+from aeb_radar_camera.tools.recording.reader import Record, Recording
 
 # A cycle is re-run once the recording is this far past it: its frames and recorded
 # outputs have arrived by then (the recorder gets them from separate subscriptions).

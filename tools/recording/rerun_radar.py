@@ -20,13 +20,19 @@ from collections.abc import Iterator
 
 import msgspec
 
-from common.config.radar import RadarSettings
-from common.keys import RADAR_CAN, RADAR_TRACKS
-from common.messages import DecodeError, RadarStatus, RadarTracks, RawCanFrames, decode
-from common.messages.radar import can_message
-from services.radar.shell import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, RadarShell
-from tools.recording.compare import Comparison
-from tools.recording.reader import Recording
+from aeb_radar_camera.common.config.radar import RadarSettings
+from aeb_radar_camera.common.keys import RADAR_CAN, RADAR_TRACKS
+from aeb_radar_camera.common.messages import (
+    DecodeError,
+    RadarStatus,
+    RadarTracks,
+    RawCanFrames,
+    decode,
+)
+from aeb_radar_camera.common.messages.radar import can_message
+from aeb_radar_camera.services.radar.shell import HOUSEKEEPING_NS, RECEIVE_TIMEOUT_NS, RadarShell
+from aeb_radar_camera.tools.recording.compare import Comparison
+from aeb_radar_camera.tools.recording.reader import Recording
 
 
 class Collected:

@@ -15,8 +15,8 @@ from typing import IO
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from common.messages import encode
-from tools.recording.format import METADATA_NAME, ChannelType, stack_channel
+from aeb_radar_camera.common.messages import encode
+from aeb_radar_camera.tools.recording.format import METADATA_NAME, ChannelType, stack_channel
 
 CHUNK_BYTES = 1 << 20
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,

@@ -51,10 +51,10 @@ from typing import Any, Protocol
 
 import serial
 
-from common.clock import mono_ns
-from common.log import add_log_level, kv, setup_logging
-from common.service import stop_event_on_signals
-from services.brake.protocol import (
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.log import add_log_level, kv, setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.services.brake.protocol import (
     FAULT_WATCHDOG,
     Ack,
     ActuatorState,
@@ -71,7 +71,7 @@ from services.brake.protocol import (
     encode,
     level_to_wire,
 )
-from tools.sim.pty_pair import PtyPair
+from aeb_radar_camera.tools.sim.pty_pair import PtyPair
 
 ACTUATOR_ACCEPTS = frozenset("CQ")
 HISTORY = 100_000

@@ -5,7 +5,7 @@ Camera config::
 
     [camera.source]
     kind = "synthetic"
-    factory = "tools.sim.camera_source:make_source"
+    factory = "aeb_radar_camera.tools.sim.camera_source:make_source"
 
 The source follows `sim/world` (published by the simulator) on the camera's own bus,
 extrapolates the latest world state to each frame's capture time (objects at their
@@ -28,20 +28,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.clock import wall_ns
-from common.depth_error import D435Noise
-from common.depth_image import to_units
-from services.camera.plugin import PluginContext
-from services.camera.source import Frame, FrameSource, Pacer, SourceConfigError, SourceError
-from tools.keys import SIM_WORLD
-from tools.messages import SimWorld
-from tools.sim.render import Renderer
-from tools.sim.road import Road, RoadView
-from tools.sim.scenario import CameraLook
-from tools.sim.world import Body
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.common.depth_image import to_units
+from aeb_radar_camera.services.camera.plugin import PluginContext
+from aeb_radar_camera.services.camera.source import (
+    Frame,
+    FrameSource,
+    Pacer,
+    SourceConfigError,
+    SourceError,
+)
+from aeb_radar_camera.tools.keys import SIM_WORLD
+from aeb_radar_camera.tools.messages import SimWorld
+from aeb_radar_camera.tools.sim.render import Renderer
+from aeb_radar_camera.tools.sim.road import Road, RoadView
+from aeb_radar_camera.tools.sim.scenario import CameraLook
+from aeb_radar_camera.tools.sim.world import Body
 
 MAX_EXTRAPOLATION_S = 0.25
+PLUGIN = f"{__name__}:make_source"    # as a camera config names it
 
 
 @dataclass(frozen=True)
@@ -177,12 +184,12 @@ def make_source(context: PluginContext) -> SimCameraSource:
     """
     unknown = set(context.options) - {"stale_after_s", "depth", "depth_noise"}
     if unknown:
-        raise SourceConfigError(f"tools.sim.camera_source: unknown options {sorted(unknown)}")
+        raise SourceConfigError(f"{PLUGIN}: unknown options {sorted(unknown)}")
     if context.calibration is None:
-        raise SourceConfigError("tools.sim.camera_source needs the camera's calibration")
+        raise SourceConfigError(f"{PLUGIN} needs the camera's calibration")
     bus = context.bus
     if bus is None:
-        raise SourceConfigError("tools.sim.camera_source needs the camera's bus "
+        raise SourceConfigError(f"{PLUGIN} needs the camera's bus "
                                 "(it follows sim/world)")
     if (context.calibration.width, context.calibration.height) != (context.width,
                                                                     context.height):
@@ -199,6 +206,6 @@ def _flag(options: Mapping[str, object], name: str, default: bool) -> bool:
     """A boolean option. Raises SourceConfigError for anything but true or false."""
     value = options.get(name, default)
     if not isinstance(value, bool):
-        raise SourceConfigError(f"tools.sim.camera_source: option {name} must be true or "
+        raise SourceConfigError(f"{PLUGIN}: option {name} must be true or "
                                 f"false, got {value!r}")
     return value

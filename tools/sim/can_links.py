@@ -7,8 +7,8 @@ daemon in front of a real radar.
 radar behind it. The service opens `link.path` with python-can's ``slcan`` interface
 (use option ``sleep_after_open = 0``: python-can otherwise sleeps 2 s after opening)::
 
-    from services.radar.ars408 import ObjectGeneral, object_cycle_frames
-    from tools.sim.can_links import SlcanPtyLink, replay_log
+    from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, object_cycle_frames
+    from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink, replay_log
 
     with SlcanPtyLink() as link:
         # [radar.can] interface = "slcan", channel = link.path,
@@ -48,9 +48,9 @@ from typing import Self
 
 import can
 
-from services.radar.ars408.codec import RadarFrame
-from services.radar.ports import radar_frame
-from tools.arrivals import Arrivals
+from aeb_radar_camera.services.radar.ars408.codec import RadarFrame
+from aeb_radar_camera.services.radar.ports import radar_frame
+from aeb_radar_camera.tools.arrivals import Arrivals
 
 FrameCallback = Callable[[RadarFrame], None]
 

@@ -19,9 +19,10 @@ Timing follows Euro NCAP's impact points: a crossing target reaches the point 25
 unbraked, gets there; a target ahead is placed so that the ego reaches it. Every threat
 case therefore collides without braking and no no-threat case does (tests/sim).
 
-    python -m tools.sim.families --list
-    python -m tools.sim.families --family CCRs --speed 30 --param offset=-25 --show
-    python -m tools.sim.families --family CPNA-25 --seeds heldout:5 --write out/cases
+    python -m aeb_radar_camera.tools.sim.families --list
+    python -m aeb_radar_camera.tools.sim.families --family CCRs --speed 30 --param offset=-25 --show
+    python -m aeb_radar_camera.tools.sim.families --family CPNA-25 --seeds heldout:5 \
+        --write out/cases
 """
 
 import argparse
@@ -36,8 +37,8 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from tools.messages import Lighting, ObjectKind
-from tools.sim.scenario import (
+from aeb_radar_camera.tools.messages import Lighting, ObjectKind
+from aeb_radar_camera.tools.sim.scenario import (
     DEFAULT_SIZE,
     CameraLook,
     DriverSpec,
@@ -730,7 +731,7 @@ def listing() -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m tools.sim.families",
+    ap = argparse.ArgumentParser(prog="python -m aeb_radar_camera.tools.sim.families",
                                  description="SIMULATION test cases: list the scenario "
                                  "families, show or write cases as scenario TOML files.")
     ap.add_argument("--list", action="store_true", help="the families and their grids")

@@ -7,7 +7,7 @@ Camera config (deploy/camera-sim.toml)::
 
     [camera.source]
     kind = "synthetic"
-    factory = "tools.sim.moving_box:make_source"
+    factory = "aeb_radar_camera.tools.sim.moving_box:make_source"
     options = { distance_m = 10.0, speed_mps = 1.0 }
 """
 
@@ -17,14 +17,20 @@ from collections.abc import Callable
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.clock import wall_ns
-from services.camera.plugin import PluginContext
-from services.camera.source import EndOfStream, Frame, FrameSource, Pacer, SourceConfigError
-from tools.messages import ObjectKind
-from tools.sim.render import Renderer
-from tools.sim.scenario import DEFAULT_SIZE, CameraLook
-from tools.sim.world import Body
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.services.camera.plugin import PluginContext
+from aeb_radar_camera.services.camera.source import (
+    EndOfStream,
+    Frame,
+    FrameSource,
+    Pacer,
+    SourceConfigError,
+)
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.render import Renderer
+from aeb_radar_camera.tools.sim.scenario import DEFAULT_SIZE, CameraLook
+from aeb_radar_camera.tools.sim.world import Body
 
 # The box goes this far to either side of the lane's centre line.
 HALF_SWEEP_M = 3.0

@@ -8,7 +8,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from tools.sim.verdict import Sample, Verdict
+from aeb_radar_camera.tools.sim.verdict import Sample, Verdict
 
 DECISIONS = ["", "NONE", "WARNING", "BRAKE"]
 STATES = ["", "STANDBY", "ARMED", "BRAKING", "FAILSAFE", "FAULT"]

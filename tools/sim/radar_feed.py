@@ -23,9 +23,9 @@ from typing import Protocol, runtime_checkable
 
 import can
 
-from common.clock import mono_ns
-from common.realtime import fifo_for
-from services.radar.ars408 import (
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.realtime import fifo_for
+from aeb_radar_camera.services.radar.ars408 import (
     RMS_CODE_VALUES,
     ClusterGeneral,
     ClusterQuality,
@@ -43,10 +43,10 @@ from services.radar.ars408 import (
     encode,
     object_cycle_frames,
 )
-from services.radar.ports import radar_frame, radar_message
-from tools.sim.radar_model import RadarModel, RadarReturn, ReceivedMotion
-from tools.sim.scenario import RadarLook
-from tools.sim.world import Body
+from aeb_radar_camera.services.radar.ports import radar_frame, radar_message
+from aeb_radar_camera.tools.sim.radar_model import RadarModel, RadarReturn, ReceivedMotion
+from aeb_radar_camera.tools.sim.scenario import RadarLook
+from aeb_radar_camera.tools.sim.world import Body
 
 FIRMWARE = (4, 30, 2)
 STATE_PERIOD_S = 1.0

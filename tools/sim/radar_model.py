@@ -25,9 +25,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tools.messages import ObjectKind
-from tools.sim.scenario import RadarLook
-from tools.sim.world import Body, nearest_point
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.scenario import RadarLook
+from aeb_radar_camera.tools.sim.world import Body, nearest_point
 
 # Field of view of the ARS408-21: near scan 0.2..70 m within +-60 deg (narrowing with
 # range), far scan to 250 m within +-9 deg.

@@ -7,8 +7,8 @@ lockstep loop); deploy/radar.toml sets the same range for deploy/fusion.toml."""
 
 import msgspec
 
-from common.config.fusion import FusionConfig
-from common.config.radar import RadarSettings
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.radar import RadarSettings
 
 
 def radar_for(*configs: FusionConfig | None) -> RadarSettings:

@@ -41,13 +41,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from common.calibration import Calibration
-from common.depth_image import to_units
-from tools.messages import Lighting, ObjectKind
-from tools.sim import sprites
-from tools.sim.road import Road, RoadView
-from tools.sim.scenario import CameraLook
-from tools.sim.world import Body
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_image import to_units
+from aeb_radar_camera.tools.messages import Lighting, ObjectKind
+from aeb_radar_camera.tools.sim import sprites
+from aeb_radar_camera.tools.sim.road import Road, RoadView
+from aeb_radar_camera.tools.sim.scenario import CameraLook
+from aeb_radar_camera.tools.sim.world import Body
 
 MAX_GROUND_M = 250.0
 HAZE_M = 120.0

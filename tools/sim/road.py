@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tools.messages import RoadGeometry
+from aeb_radar_camera.tools.messages import RoadGeometry
 
 
 @dataclass(frozen=True)

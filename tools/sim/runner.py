@@ -21,14 +21,14 @@ from typing import Any, Protocol
 import can
 import msgspec
 
-from common.bus import Bus
-from common.clock import mono_ns, wall_ns
-from common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD, VEHICLE_DRIVER
-from common.messages import BrakeCommand, BrakeStatus, Header
-from tools.keys import SIM_WORLD
-from tools.sim.radar_feed import RadarFeed
-from tools.sim.scenario import Scenario
-from tools.sim.scenario_run import (
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
+from aeb_radar_camera.common.keys import BRAKE_STATUS, EGO_MOTION, FUSION_BRAKE_CMD, VEHICLE_DRIVER
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeStatus, Header
+from aeb_radar_camera.tools.keys import SIM_WORLD
+from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+from aeb_radar_camera.tools.sim.scenario import Scenario
+from aeb_radar_camera.tools.sim.scenario_run import (
     LoopSettings,
     RadarSchedule,
     ScenarioRun,
@@ -36,8 +36,8 @@ from tools.sim.scenario_run import (
     vehicle_messages,
     world_message,
 )
-from tools.sim.verdict import Sample, Verdict
-from tools.sim.world import World
+from aeb_radar_camera.tools.sim.verdict import Sample, Verdict
+from aeb_radar_camera.tools.sim.world import World
 
 _log = logging.getLogger("sim")
 

@@ -15,8 +15,8 @@ from typing import Annotated, Any
 
 import msgspec
 
-from common.config.loader import ConfigError, load_config
-from tools.messages import Lighting, ObjectKind, RoadGeometry
+from aeb_radar_camera.common.config.loader import ConfigError, load_config
+from aeb_radar_camera.tools.messages import Lighting, ObjectKind, RoadGeometry
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 

@@ -12,11 +12,11 @@ import math
 import random
 from dataclasses import dataclass, field
 
-from common.messages import DriverInputs, EgoMotion, Gear, Header
-from tools.messages import SimObject, SimWorld
-from tools.sim.scenario import Scenario, ScenarioKind
-from tools.sim.verdict import Sample, Verdict, judge
-from tools.sim.world import Body, World
+from aeb_radar_camera.common.messages import DriverInputs, EgoMotion, Gear, Header
+from aeb_radar_camera.tools.messages import SimObject, SimWorld
+from aeb_radar_camera.tools.sim.scenario import Scenario, ScenarioKind
+from aeb_radar_camera.tools.sim.verdict import Sample, Verdict, judge
+from aeb_radar_camera.tools.sim.world import Body, World
 
 STOPPED_MPS = 0.01
 # The simulated car's steering (the world keeps the lane; the wheel angle is what a

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.imaging import encode_jpeg
-from tools.messages import ObjectKind
-from tools.sim.render import Light, Renderer
-from tools.sim.scenario import DEFAULT_SIZE, CameraLook
-from tools.sim.world import Body
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import encode_jpeg
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.render import Light, Renderer
+from aeb_radar_camera.tools.sim.scenario import DEFAULT_SIZE, CameraLook
+from aeb_radar_camera.tools.sim.world import Body
 
 # Light at night without the ego's headlights, relative to day.
 NIGHT_AMBIENT = 0.12

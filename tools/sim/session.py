@@ -14,16 +14,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from common.bus import Bus
-from common.config.base import ZenohMode, ZenohSettings
-from common.net import free_port
-from common.resources import DEPLOY
-from tools.launch.supervisor import LinePrinter, Supervisor
-from tools.launch.table import Launch, load_table, resolve_launches
-from tools.sim.radar_feed import RadarFeed
-from tools.sim.runner import SimActuatorView, Simulator
-from tools.sim.scenario import RadarLook
-from tools.sim.stack import (
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.tools.launch.supervisor import LinePrinter, Supervisor
+from aeb_radar_camera.tools.launch.table import Launch, load_table, resolve_launches
+from aeb_radar_camera.tools.sim.radar_feed import RadarFeed
+from aeb_radar_camera.tools.sim.runner import SimActuatorView, Simulator
+from aeb_radar_camera.tools.sim.scenario import RadarLook
+from aeb_radar_camera.tools.sim.stack import (
     FUSION_CONFIG,
     SERVICES,
     TOKENS,
@@ -141,8 +141,8 @@ def closed_loop(out: Path, port: int = 0, camera_fps: float = 30.0, candidate: b
     not come up or never arms, ConfigError for a bad table, BusError / OSError when the
     bus or a pty cannot be opened.
     """
-    from tools.sim.actuator import SimActuator
-    from tools.sim.can_links import SlcanPtyLink
+    from aeb_radar_camera.tools.sim.actuator import SimActuator
+    from aeb_radar_camera.tools.sim.can_links import SlcanPtyLink
 
     run_dir = (out / "run").resolve()   # the table and configs name absolute paths
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -14,10 +14,10 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.config.fusion import FusionConfig
-from common.config.loader import load_config, relocated_text
-from common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
-from tools.sim.radar_reach import radar_for
+from aeb_radar_camera.common.config.fusion import FusionConfig
+from aeb_radar_camera.common.config.loader import load_config, relocated_text
+from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION, EXAMPLE_KEYS
+from aeb_radar_camera.tools.sim.radar_reach import radar_for
 
 CALIBRATION = EXAMPLE_CALIBRATION
 FUSION_CONFIG = DEPLOY / "fusion.toml"
@@ -82,7 +82,8 @@ def write_configs(folder: Path, endpoint: str, actuator_port: str, can_channel: 
         "# SIMULATION: the camera service rendering the simulated world (synthetic plugin).\n"
         f'vehicle = "ego"\n{zenoh}\n[camera]\nname = "front"\n'
         f'calibration = "{CALIBRATION}"\nfps = {camera_fps}\njpeg_quality = 80\n\n'
-        '[camera.source]\nkind = "synthetic"\nfactory = "tools.sim.camera_source:make_source"\n')
+        '[camera.source]\nkind = "synthetic"\n'
+        'factory = "aeb_radar_camera.tools.sim.camera_source:make_source"\n')
     brake = folder / "brake.toml"
     brake.write_text(
         "# The brake service on the simulated actuator's pty (a SIMULATION of the actuator).\n"

@@ -5,7 +5,7 @@ rendered frames as fusion receives them (JPEG q80, decoded to grey on the projec
 path). Real driving images give background ROIs a median density of about 0.16 (issue
 18, KITTI); the roadside scenery of tools/sim/render.py is made to match it.
 
-    python -m tools.sim.texture_density            # both renderings, side by side
+    python -m aeb_radar_camera.tools.sim.texture_density            # both renderings, side by side
 
 A SIMULATION measurement: the frames are rendered.
 """
@@ -16,15 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.imaging import decode_gray, encode_jpeg
-from common.resources import EXAMPLE_CALIBRATION
-from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.verifiers import Observation, create
-from tools.messages import ObjectKind
-from tools.sim.render import Renderer
-from tools.sim.scenario import DEFAULT_SIZE
-from tools.sim.world import Body
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector
+from aeb_radar_camera.services.fusion.verifiers import Observation, create
+from aeb_radar_camera.tools.messages import ObjectKind
+from aeb_radar_camera.tools.sim.render import Renderer
+from aeb_radar_camera.tools.sim.scenario import DEFAULT_SIZE
+from aeb_radar_camera.tools.sim.world import Body
 
 PAPER_COLUMN = ColumnGeometry(height_m=2.2, half_width_m=0.54, padding_px=22)
 RANGES_M = (4.0, 6.0, 8.0, 10.0, 13.0, 16.0, 20.0, 25.0)
@@ -78,7 +78,7 @@ def survey(renderer: Renderer) -> Survey:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.sim.texture_density",
+    parser = argparse.ArgumentParser(prog="python -m aeb_radar_camera.tools.sim.texture_density",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=3)

@@ -5,8 +5,8 @@ false activations in no-threat scenarios.
 
 from dataclasses import dataclass
 
-from tools.sim.scenario import ScenarioKind
-from tools.sim.world import Collision
+from aeb_radar_camera.tools.sim.scenario import ScenarioKind
+from aeb_radar_camera.tools.sim.world import Collision
 
 # The actuator counts as braking above this position (a released actuator may read a
 # percent or two).

@@ -6,8 +6,9 @@ restored as the camera and fusion do. Prints, per scenario and verifier, the sha
 those returns (ghosts left out) the verifier passes: on an obstacle (a threat, a car
 parked beside the path) every one should pass, on a false target none.
 
-    python -m tools.sim.verifier_probe                    # the demo's scenarios
-    python -m tools.sim.verifier_probe --scenarios no_threat_manhole_30kph --verifiers depth
+    python -m aeb_radar_camera.tools.sim.verifier_probe                    # the demo's scenarios
+    python -m aeb_radar_camera.tools.sim.verifier_probe --scenarios no_threat_manhole_30kph \
+        --verifiers depth
 
 A SIMULATION measurement (rendered frames, the radar model's returns).
 """
@@ -17,20 +18,20 @@ import sys
 
 import numpy as np
 
-from common.calibration import Calibration
-from common.clock import wall_ns
-from common.depth_image import encode_depth
-from common.imaging import decode_gray, encode_jpeg
-from common.messages import DepthFrame, Header, encode
-from common.resources import EXAMPLE_CALIBRATION
-from services.fusion.frames import decode_depth_frame
-from services.fusion.roi import ColumnGeometry, ColumnProjector
-from services.fusion.verifiers import Observation, available, create
-from tools.sim.radar_model import RadarModel
-from tools.sim.render import Renderer
-from tools.sim.road import RoadView
-from tools.sim.scenario import DEMO_SCENARIOS, Scenario, pick_scenarios
-from tools.sim.world import World
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.depth_image import encode_depth
+from aeb_radar_camera.common.imaging import decode_gray, encode_jpeg
+from aeb_radar_camera.common.messages import DepthFrame, Header, encode
+from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
+from aeb_radar_camera.services.fusion.frames import decode_depth_frame
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector
+from aeb_radar_camera.services.fusion.verifiers import Observation, available, create
+from aeb_radar_camera.tools.sim.radar_model import RadarModel
+from aeb_radar_camera.tools.sim.render import Renderer
+from aeb_radar_camera.tools.sim.road import RoadView
+from aeb_radar_camera.tools.sim.scenario import DEMO_SCENARIOS, Scenario, pick_scenarios
+from aeb_radar_camera.tools.sim.world import World
 
 LATERAL_M = 4.0             # the path's 1.2 m and crossing targets on their way in
 RADAR_PERIOD_S = 0.074
@@ -81,7 +82,7 @@ def probe(scenario: Scenario, renderer: Renderer, verifiers: list[str],
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.sim.verifier_probe",
+    parser = argparse.ArgumentParser(prog="python -m aeb_radar_camera.tools.sim.verifier_probe",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenarios", default=",".join(DEMO_SCENARIOS),

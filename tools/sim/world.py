@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import msgspec
 import numpy as np
 
-from tools.messages import ObjectKind, SimObject
-from tools.sim.road import Pose, Road
-from tools.sim.scenario import Scenario, SceneObject
+from aeb_radar_camera.tools.messages import ObjectKind, SimObject
+from aeb_radar_camera.tools.sim.road import Pose, Road
+from aeb_radar_camera.tools.sim.scenario import Scenario, SceneObject
 
 
 class Body(SimObject, frozen=True):

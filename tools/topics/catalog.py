@@ -8,9 +8,9 @@ from typing import Any
 import msgspec
 import zenoh
 
-from common.keys import ROOT, KeySpec
-from common.messages.schema import MESSAGE_ENCODING, schema_name
-from tools.keys import MESSAGE_KEYS
+from aeb_radar_camera.common.keys import ROOT, KeySpec
+from aeb_radar_camera.common.messages.schema import MESSAGE_ENCODING, schema_name
+from aeb_radar_camera.tools.keys import MESSAGE_KEYS
 
 
 class Catalog:

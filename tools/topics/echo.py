@@ -25,12 +25,12 @@ from typing import Any
 
 import msgspec
 
-from common.clock import wall_ns
-from common.log import setup_logging
-from common.messages import DecodeError, decode
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, non_negative, open_bus
-from tools.topics.catalog import Catalog
+from aeb_radar_camera.common.clock import wall_ns
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import DecodeError, decode
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, non_negative, open_bus
+from aeb_radar_camera.tools.topics.catalog import Catalog
 
 Sample = tuple[bytes, str, str, int]       # payload, key, encoding, receipt wall ns
 # After this long without a sample, say so (as `ros2 topic echo` says a topic does not

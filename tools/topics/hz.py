@@ -23,13 +23,13 @@ from dataclasses import asdict
 
 import msgspec
 
-from common.clock import mono_ns
-from common.log import setup_logging
-from common.messages import Header
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, non_negative, open_bus, positive
-from tools.topics.catalog import Catalog
-from tools.topics.rates import PeriodStats, RateReport
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import Header
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, non_negative, open_bus, positive
+from aeb_radar_camera.tools.topics.catalog import Catalog
+from aeb_radar_camera.tools.topics.rates import PeriodStats, RateReport
 
 
 class _Stamped(msgspec.Struct):

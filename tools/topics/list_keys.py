@@ -22,12 +22,12 @@ from dataclasses import dataclass, field
 
 import msgspec
 
-from common.clock import mono_ns
-from common.log import setup_logging
-from common.messages import Header
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, non_negative, open_bus
-from tools.topics.catalog import Catalog
+from aeb_radar_camera.common.clock import mono_ns
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.messages import Header
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, non_negative, open_bus
+from aeb_radar_camera.tools.topics.catalog import Catalog
 
 
 class _Stamped(msgspec.Struct):

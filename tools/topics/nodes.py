@@ -15,13 +15,13 @@ import argparse
 import json
 import sys
 
-from common.bus import Bus
-from common.keys import HEALTH
-from common.log import setup_logging
-from common.service import stop_event_on_signals
-from tools.bus import add_bus_args, non_negative, open_bus
-from tools.topics.catalog import Catalog
-from tools.topics.list_keys import Listing
+from aeb_radar_camera.common.bus import Bus
+from aeb_radar_camera.common.keys import HEALTH
+from aeb_radar_camera.common.log import setup_logging
+from aeb_radar_camera.common.service import stop_event_on_signals
+from aeb_radar_camera.tools.bus import add_bus_args, non_negative, open_bus
+from aeb_radar_camera.tools.topics.catalog import Catalog
+from aeb_radar_camera.tools.topics.list_keys import Listing
 
 QUERY_TIMEOUT_S = 2.0
 

@@ -36,7 +36,7 @@ from collections.abc import Callable, Mapping
 
 import cv2
 
-from services.fusion.verifiers.base import (
+from aeb_radar_camera.services.fusion.verifiers.base import (
     Fraction,
     GateResult,
     Observation,

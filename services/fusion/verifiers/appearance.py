@@ -30,9 +30,9 @@ import cv2
 import msgspec
 import numpy as np
 
-from services.fusion.roi import Roi
-from services.fusion.verifiers import hog
-from services.fusion.verifiers.base import (
+from aeb_radar_camera.services.fusion.roi import Roi
+from aeb_radar_camera.services.fusion.verifiers import hog
+from aeb_radar_camera.services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,

@@ -12,8 +12,8 @@ from typing import Annotated, Protocol, TypeVar
 import msgspec
 import numpy as np
 
-from common.calibration import Calibration
-from services.fusion.roi import Roi
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.services.fusion.roi import Roi
 
 ParamValue = float | int | str | bool
 S = TypeVar("S", bound=msgspec.Struct)

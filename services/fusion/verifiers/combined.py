@@ -30,9 +30,9 @@ from typing import Annotated
 
 import msgspec
 
-from common.calibration import Calibration
-from services.fusion.verifiers import appearance, create
-from services.fusion.verifiers.base import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.services.fusion.verifiers import appearance, create
+from aeb_radar_camera.services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,

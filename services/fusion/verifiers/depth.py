@@ -45,9 +45,9 @@ import cv2
 import msgspec
 import numpy as np
 
-from common.calibration import Calibration
-from common.depth_error import D435Noise
-from services.fusion.verifiers.base import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,

@@ -18,7 +18,7 @@ import cv2
 import msgspec
 import numpy as np
 
-from services.fusion.verifiers.base import (
+from aeb_radar_camera.services.fusion.verifiers.base import (
     Fraction,
     GateResult,
     Observation,

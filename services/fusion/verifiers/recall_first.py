@@ -58,10 +58,10 @@ import cv2
 import msgspec
 import numpy as np
 
-from common.calibration import Calibration
-from common.depth_error import D435Noise
-from services.fusion.verifiers.appearance import load_hog_linear
-from services.fusion.verifiers.base import (
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.verifiers.appearance import load_hog_linear
+from aeb_radar_camera.services.fusion.verifiers.base import (
     GateResult,
     Observation,
     ParamValue,
@@ -69,7 +69,7 @@ from services.fusion.verifiers.base import (
     VerifierConfigError,
     parse_params,
 )
-from services.fusion.verifiers.depth import column_depth, ray_maps
+from aeb_radar_camera.services.fusion.verifiers.depth import column_depth, ray_maps
 
 SCORE = "llr"
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]

@@ -2,10 +2,11 @@
 
 Import from here::
 
-    from services.radar.ars408 import ObjectGeneral, encode, decode_frame, object_cycle_frames
+    from aeb_radar_camera.services.radar.ars408 import ObjectGeneral, encode, decode_frame,
+    object_cycle_frames
 """
 
-from services.radar.ars408.codec import (
+from aeb_radar_camera.services.radar.ars408.codec import (
     Columns,
     EncodeError,
     RadarFrame,
@@ -15,7 +16,7 @@ from services.radar.ars408.codec import (
     decode_frame,
     encode,
 )
-from services.radar.ars408.records import (
+from aeb_radar_camera.services.radar.ars408.records import (
     ClusterGeneral,
     ClusterListStatus,
     ClusterQuality,
@@ -29,7 +30,7 @@ from services.radar.ars408.records import (
     Version,
     YawRateInformation,
 )
-from services.radar.ars408.table import (
+from aeb_radar_camera.services.radar.ars408.table import (
     BY_KIND,
     MESSAGES,
     RMS_CODE_VALUES,
@@ -39,7 +40,7 @@ from services.radar.ars408.table import (
     arbitration_id,
     classify,
 )
-from services.radar.ars408.transmissions import (
+from aeb_radar_camera.services.radar.ars408.transmissions import (
     cluster_cycle_frames,
     ego_motion_frames,
     object_cycle_frames,

@@ -15,7 +15,7 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 import numpy.typing as npt
 
-from services.radar.ars408.table import (
+from aeb_radar_camera.services.radar.ars408.table import (
     BY_RECORD,
     MAX_SENSORS,
     SENSOR_ID_STRIDE,

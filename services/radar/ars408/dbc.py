@@ -1,7 +1,7 @@
 """The signal table exported as a DBC file, for CAN tools (cantools, SavvyCAN, Vector,
 Wireshark) and as a cross-check. Generated, never edited by hand:
 
-    python -m services.radar.ars408.dbc --write
+    python -m aeb_radar_camera.services.radar.ars408.dbc --write
 
 A test checks that the shipped file equals what the table renders.
 """
@@ -9,8 +9,8 @@ A test checks that the shipped file equals what the table renders.
 import argparse
 import sys
 
-from common.resources import ARS408_DBC
-from services.radar.ars408.table import MESSAGES, MessageSpec, Signal
+from aeb_radar_camera.common.resources import ARS408_DBC
+from aeb_radar_camera.services.radar.ars408.table import MESSAGES, MessageSpec, Signal
 
 DBC_PATH = ARS408_DBC
 

@@ -14,7 +14,7 @@ import enum
 from dataclasses import dataclass, field
 from typing import Any
 
-from services.radar.ars408 import records
+from aeb_radar_camera.services.radar.ars408 import records
 
 
 class Kind(enum.Enum):

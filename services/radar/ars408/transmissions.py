@@ -7,8 +7,8 @@ Frame order is the radar's: status, N general, then N quality and N extended whe
 import math
 from collections.abc import Sequence
 
-from services.radar.ars408.codec import EncodeError, RadarFrame, encode
-from services.radar.ars408.records import (
+from aeb_radar_camera.services.radar.ars408.codec import EncodeError, RadarFrame, encode
+from aeb_radar_camera.services.radar.ars408.records import (
     ClusterGeneral,
     ClusterListStatus,
     ClusterQuality,

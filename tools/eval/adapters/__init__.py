@@ -7,8 +7,8 @@ which the paper's ROIs are built the same way for every data set.
 
 from pathlib import Path
 
-from tools.eval.adapters import kitti, vod
-from tools.eval.adapters.paper_rois import DatasetFrame
+from aeb_radar_camera.tools.eval.adapters import kitti, vod
+from aeb_radar_camera.tools.eval.adapters.paper_rois import DatasetFrame
 
 KINDS = ("kitti", "vod")
 

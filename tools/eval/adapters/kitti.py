@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.eval.adapters.paper_rois import Box2D, Box3D, DatasetFrame, orthonormal
+from aeb_radar_camera.tools.eval.adapters.paper_rois import Box2D, Box3D, DatasetFrame, orthonormal
 
 DONT_CARE = "DontCare"
 

@@ -27,10 +27,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from common.calibration import Calibration
-from services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
-from tools.eval.records import KIND_BACKGROUND, KIND_OBJECT
-from tools.sim.world import nearest_point
+from aeb_radar_camera.common.calibration import Calibration
+from aeb_radar_camera.services.fusion.roi import ColumnGeometry, ColumnProjector, Roi
+from aeb_radar_camera.tools.eval.records import KIND_BACKGROUND, KIND_OBJECT
+from aeb_radar_camera.tools.sim.world import nearest_point
 
 Box2D = tuple[float, float, float, float]     # x0, y0, x1, y1 in pixels
 
@@ -136,7 +136,7 @@ def orthonormal(r: np.ndarray) -> np.ndarray:
 def scaled(frame: DatasetFrame, focal_px: float) -> Scaled:
     """Resampling that brings the horizontal focal length to `focal_px` (intrinsics of
     the resized image with the same pixel-centre convention as cv2.resize)."""
-    from tools.eval.frames import resized_size
+    from aeb_radar_camera.tools.eval.frames import resized_size
 
     scale = focal_px / float(frame.k[0, 0])
     w, h = resized_size(frame.width, frame.height, scale)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.eval.adapters.kitti import (
+from aeb_radar_camera.tools.eval.adapters.kitti import (
     KittiFormatError,
     find_image,
     image_size,
@@ -25,7 +25,7 @@ from tools.eval.adapters.kitti import (
     read_label_rows,
     read_velodyne,
 )
-from tools.eval.adapters.paper_rois import Box2D, Box3D, DatasetFrame, orthonormal
+from aeb_radar_camera.tools.eval.adapters.paper_rois import Box2D, Box3D, DatasetFrame, orthonormal
 
 RADAR_FIELDS = 7
 CLASSES = ("Car", "Pedestrian", "Cyclist")
