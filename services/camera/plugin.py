@@ -48,6 +48,9 @@ class PluginContext:
 
 
 PluginFactory = Callable[[PluginContext], FrameSource]
+# the repository's folders, installed under the package's name: a factory written with the
+# folder's bare name (as configs did before) is told the name it has
+_OWN_FOLDERS = ("common", "services", "tools")
 
 
 def load_factory(path: str) -> PluginFactory:
@@ -59,8 +62,11 @@ def load_factory(path: str) -> PluginFactory:
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise SourceConfigError(
-            f"synthetic factory {path!r}: cannot import module {module_name!r}: {exc}") from exc
+        package = __name__.split(".")[0]
+        hint = (f" (the stack's own modules are under {package}: "
+                f"'{package}.{path}')" if module_name.split(".")[0] in _OWN_FOLDERS else "")
+        raise SourceConfigError(f"synthetic factory {path!r}: cannot import module "
+                                f"{module_name!r}: {exc}{hint}") from exc
     obj: Any = module
     for part in attr.split("."):
         if not hasattr(obj, part):
