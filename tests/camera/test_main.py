@@ -49,8 +49,7 @@ def run_main(tmp_path, body: str, capsys) -> tuple[int, str]:
          "cannot import module 'aeb_radar_camera.tools.nothing_here'"),
         # a factory named by the repository's folder alone: told the installed name
         (f'[camera]\ncalibration = "{CALIBRATION}"\n[camera.source]\nkind = "synthetic"\n'
-         'factory = "tools.sim.moving_box:make_source"\n',
-         "'aeb_radar_camera.tools.sim.moving_box:make_source'"),
+         'factory = "tools.nothing_here:make"\n', "'aeb_radar_camera.tools.nothing_here:make'"),
     ],
 )
 def test_bad_configuration_exits_2_naming_the_problem(tmp_path, capsys, body, says):
