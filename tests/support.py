@@ -87,7 +87,9 @@ class ServiceProcess:
         return self.proc.poll() is None
 
     def output(self) -> str:
-        self._log.flush()
+        """What the process wrote so far (all of it once stopped)."""
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text(errors="replace")
 
     def signal(self, sig: int) -> None:

@@ -9,6 +9,7 @@
   vehicle id, a remap.
 """
 
+import re
 import subprocess
 import threading
 from pathlib import Path
@@ -83,9 +84,17 @@ def test_fusion_and_brake_on_a_replay_decide_as_recorded(router, tmp_path):
             p.stop()
         actuator.stop()
     live = {c.radar_seq: c for c in commands.messages}
-    assert set(by_seq) <= set(live), "a recorded radar cycle got no command on the replay"
+    # On a loaded host two replayed cycles can be waiting when fusion's radar thread runs:
+    # it decides the newer and sheds the older, counted (services/fusion/shell.py), and
+    # publishes no command for it. Every other recorded cycle gets one.
+    shed = [int(n) for n in re.findall(r"tracks_shed=(\d+)", procs[0].output())]
+    missing = sorted(set(by_seq) - set(live))
+    assert len(missing) <= (shed[-1] if shed else 0), \
+        f"recorded radar cycles {missing} got no command on the replay, {shed[-1:]} shed"
+    assert len(missing) <= len(by_seq) // 10, missing
     mismatched = [(s, by_seq[s].decision.value, live[s].decision.value, live[s].reason)
-                  for s in sorted(by_seq) if by_seq[s].decision != live[s].decision]
+                  for s in sorted(set(by_seq) & set(live))
+                  if by_seq[s].decision != live[s].decision]
     assert not mismatched, mismatched
     assert any(c.decision.value == "BRAKE" for c in live.values())
     assert any(s.state is BrakeState.BRAKING for s in statuses.messages)
