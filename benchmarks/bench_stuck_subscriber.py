@@ -2,7 +2,8 @@
 
 A router, a command stream at fusion's rate on the brake's key (the registry's QoS, or
 the congestion control given), a receiver of those commands as the brake is one (a
-client of the router), camera-sized samples on the camera key, and a **simulated**
+client of the router), camera-sized samples on the camera key (a process of its own:
+`stuck.py --load`), and a **simulated**
 stuck subscriber of ``aeb/<vehicle>/**`` (tools/faults/stuck.py) that is frozen with
 SIGSTOP (or whose callback blocks, `--block`) once it is subscribed. The camera samples
 fill its link's receive buffer within seconds, as a real camera's do; after that the
@@ -18,6 +19,7 @@ stuck subscriber's receive queue stopped growing, then one JSON line. Exit code 
 
 import argparse
 import dataclasses
+import itertools
 import json
 import signal
 import subprocess
@@ -27,19 +29,14 @@ import time
 
 from aeb_radar_camera.common.bus import Bus
 from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
-from aeb_radar_camera.common.keys import CAMERA_JPEG, FUSION_BRAKE_CMD, Congestion
+from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, Congestion
 from aeb_radar_camera.common.net import free_port, port_open
-from aeb_radar_camera.tools.faults.stuck import receive_queue_bytes
+from aeb_radar_camera.tools.faults.stuck import wait_filled
 from benchmarks.processes import stop_processes
 
 VEHICLE = "ego"
 # a BrakeCommand's size on the bus (benchmarks/floor_relay.py command_size: ~200 B)
 COMMAND_BYTES = 200
-# a camera frame (docs/camera.md: 60 KB JPEG at 30 Hz); larger and faster here so that
-# the stuck subscriber's buffer fills in seconds on any host
-BULK_BYTES = 256_000
-BULK_HZ = 50.0
-FILL_STABLE_S = 1.0     # the receive queue unchanged this long: nothing more gets in
 
 
 class Stream:
@@ -68,18 +65,11 @@ class Stream:
             self.stop.wait(next_t - time.monotonic())
 
 
-def bulk(bus: Bus, stop: threading.Event) -> None:
-    pub = bus.publisher(CAMERA_JPEG, camera="front")
-    payload = bytes(BULK_BYTES)
-    while not stop.wait(1 / BULK_HZ):
-        pub.put_bytes(payload)
-
-
 def widest_gap_ms(arrivals: list[int], t0: int, t1: int) -> float:
     """The widest interval between consecutive arrivals in [t0, t1], its ends included
     (no arrival at all: the whole window)."""
     inside = [t0, *[t for t in arrivals if t0 <= t <= t1], t1]
-    return max(b - a for a, b in zip(inside, inside[1:], strict=False)) / 1e6
+    return max(b - a for a, b in itertools.pairwise(inside)) / 1e6
 
 
 def longest_put_ms(puts: list[tuple[int, int]], t0: int, t1: int) -> float:
@@ -89,21 +79,6 @@ def longest_put_ms(puts: list[tuple[int, int]], t0: int, t1: int) -> float:
 def client(endpoint: str) -> Bus:
     return Bus.open(ZenohSettings(mode=ZenohMode.CLIENT, connect=(endpoint,)), VEHICLE,
                     "bench")
-
-
-def wait_filled(pid: int, timeout_s: float) -> tuple[int, float]:
-    """(bytes, seconds) once the receive queue of `pid` stopped growing for
-    FILL_STABLE_S. Raises TimeoutError."""
-    t0 = time.monotonic()
-    last, since = -1, t0
-    while time.monotonic() - t0 < timeout_s:
-        now_bytes = receive_queue_bytes(pid)
-        if now_bytes != last:
-            last, since = now_bytes, time.monotonic()
-        elif now_bytes > 0 and time.monotonic() - since >= FILL_STABLE_S:
-            return now_bytes, since - t0
-        time.sleep(0.05)
-    raise TimeoutError(f"receive queue of {pid} still growing after {timeout_s} s")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -123,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     router = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.common.router",
                                "--listen", endpoint], stdout=subprocess.DEVNULL)
     stuck: subprocess.Popen[str] | None = None
+    load: subprocess.Popen[bytes] | None = None
     try:
         deadline = time.monotonic() + 30
         while not port_open(port):
@@ -137,29 +113,26 @@ def main(argv: list[str] | None = None) -> int:
         if stuck.stdout.readline().strip() != "ready":
             print("error: the stuck subscriber did not start", file=sys.stderr)
             return 1
-        with client(endpoint) as rx_bus, client(endpoint) as tx_bus, \
-                client(endpoint) as bulk_bus:
+        with client(endpoint) as rx_bus, client(endpoint) as tx_bus:
             arrivals: list[int] = []
             sub = rx_bus.subscribe_raw(FUSION_BRAKE_CMD,
                                        lambda p, k, t: arrivals.append(t), instance="primary")
             stream = Stream(tx_bus, Congestion(args.congestion) if args.congestion else None,
                             args.period_ms / 1000)
-            stop_bulk = threading.Event()
-            bulker = threading.Thread(target=bulk, args=(bulk_bus, stop_bulk), daemon=True)
             stream.thread.start()
-            bulker.start()
             time.sleep(args.baseline_s)       # the measurement's own duration
             t_freeze = time.monotonic_ns()
             if not args.block:
                 stuck.send_signal(signal.SIGSTOP)
+            # the load from a process of its own: it takes no time of this one's receiver
+            load = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.faults.stuck",
+                                     "--connect", endpoint, "--load"], stdout=subprocess.DEVNULL)
             filled, fill_s = wait_filled(stuck.pid, 60.0)
             t_full = time.monotonic_ns()
             time.sleep(args.observe_s)        # the measurement's own duration
             t_end = time.monotonic_ns()
-            stop_bulk.set()
             stream.stop.set()
             stream.thread.join(10)
-            bulker.join(10)
             sub.undeclare()
             base_gap = widest_gap_ms(arrivals, t_freeze - int(args.baseline_s * 0.8e9),
                                      t_freeze)
@@ -172,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if stuck is not None and stuck.poll() is None:
             stuck.send_signal(signal.SIGCONT)
-        stop_processes([stuck, router])
+        stop_processes([load, stuck, router])
     mode = "callback blocks" if args.block else "SIGSTOP"
     print(f"command key {stream.qos.congestion.value} {stream.qos.priority.value}"
           f"{' express' if stream.qos.express else ''}, period {args.period_ms:.0f} ms, "

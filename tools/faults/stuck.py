@@ -4,12 +4,16 @@ disk hangs, a process frozen by a debugger). docs/security.md says what it can d
 
     python -m aeb_radar_camera.tools.faults.stuck --connect tcp/127.0.0.1:7447 \
         [--expr 'aeb/ego/**'] [--block]
+    python -m aeb_radar_camera.tools.faults.stuck --connect tcp/127.0.0.1:7447 --load
 
 It prints one line, ``ready``, once subscribed. Without `--block` the caller freezes it
 with SIGSTOP; with `--block` its callback blocks on the first sample until SIGTERM (a
 subscriber whose callback never returns: Zenoh's reader for its link waits with it).
 Either way the kernel's receive buffer of its link fills and then the router's queue to
-it: `receive_queue_bytes(pid)` tells a caller how much waits unread.
+it: `receive_queue_bytes(pid)` tells a caller how much waits unread. `--load` is the
+other half of the fault: camera-sized samples on the camera key (`LOAD_BYTES` at
+`LOAD_HZ`, more than a real camera's so that the link fills within seconds) until
+SIGTERM, from a process of its own so that the load takes nobody else's interpreter.
 
 Exit code 0 on SIGTERM; 1 when the bus cannot be opened.
 """
@@ -18,13 +22,20 @@ import argparse
 import os
 import sys
 import threading
+import time
 from pathlib import Path
 
 from aeb_radar_camera.common.bus import Bus, BusError
 from aeb_radar_camera.common.config.base import ZenohMode, ZenohSettings
+from aeb_radar_camera.common.keys import CAMERA_JPEG
 from aeb_radar_camera.common.service import stop_event_on_signals
 
 _SOCKET = "socket:["
+# a receive queue unchanged this long while samples keep coming: the link is full
+FILL_STABLE_S = 1.0
+# the load: a camera frame is 60 KB at 30 Hz (docs/camera.md)
+LOAD_BYTES = 256_000
+LOAD_HZ = 50.0
 
 
 def socket_inodes(pid: int) -> set[int]:
@@ -77,6 +88,36 @@ def receive_queue_bytes(pid: int) -> int:
     return total
 
 
+def publish_load(bus: Bus, stop: threading.Event, size: int = LOAD_BYTES,
+                 hz: float = LOAD_HZ) -> int:
+    """Camera-sized samples on the front camera's key until `stop`; returns how many."""
+    pub = bus.publisher(CAMERA_JPEG, camera="front")
+    payload = bytes(size)
+    sent = 0
+    while not stop.wait(1 / hz):
+        pub.put_bytes(payload)
+        sent += 1
+    return sent
+
+
+def wait_filled(pid: int, timeout_s: float, stable_s: float = FILL_STABLE_S,
+                poll_s: float = 0.05) -> tuple[int, float]:
+    """(bytes, seconds taken) once the receive queues of a frozen process `pid` hold
+    something and have not changed for `stable_s`: nothing more gets in, and what the
+    router sends it now waits in the router. Raises TimeoutError."""
+    t0 = time.monotonic()
+    last, since = -1, t0
+    while time.monotonic() - t0 < timeout_s:
+        now_bytes = receive_queue_bytes(pid)
+        if now_bytes != last:
+            last, since = now_bytes, time.monotonic()
+        elif now_bytes > 0 and time.monotonic() - since >= stable_s:
+            return now_bytes, since - t0
+        time.sleep(poll_s)
+    raise TimeoutError(f"the receive queue of process {pid} did not fill in {timeout_s} s "
+                       f"(last {last} bytes)")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m aeb_radar_camera.tools.faults.stuck", description=__doc__,
@@ -87,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--expr", default="", help="key expression (default: aeb/<vehicle>/**)")
     parser.add_argument("--block", action="store_true",
                         help="block in the callback on the first sample until SIGTERM")
+    parser.add_argument("--load", action="store_true",
+                        help="publish the load that fills a stuck subscriber's link instead")
     args = parser.parse_args(argv)
     stop = stop_event_on_signals()
     settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=tuple(args.connect),
@@ -101,6 +144,10 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         with Bus.open(settings, args.vehicle, "stuck") as bus:
+            if args.load:
+                print("ready", flush=True)
+                publish_load(bus, stop)
+                return 0
             sub = bus.subscribe_expr(expr, on_sample)
             print("ready", flush=True)
             stop.wait()
