@@ -11,10 +11,11 @@ router can deliver nothing more to it.
 
     python -m benchmarks.bench_stuck_subscriber [--congestion BLOCK|DROP] [--observe-s 8]
 
-Prints the widest gap between two commands the receiver got and the longest `put` of the
-command publisher, before the freeze and from the freeze until `--observe-s` after the
-stuck subscriber's receive queue stopped growing, then one JSON line. Exit code 0 when it ran,
-1 when a helper process did not start.
+Prints the widest gap between two commands the receiver got, how many it never got (by
+sequence number) and the longest `put` of the command publisher, before the freeze and
+from the freeze until `--observe-s` after the stuck subscriber's receive queue stopped
+growing, then one JSON line. Exit code 0 when it ran, 1 when a helper process did not
+start.
 """
 
 import argparse
@@ -55,11 +56,13 @@ class Stream:
         self.thread = threading.Thread(target=self._run, name="commands", daemon=True)
 
     def _run(self) -> None:
-        payload = bytes(COMMAND_BYTES)
+        seq = 0
         next_t = time.monotonic()
         while not self.stop.is_set():
             t0 = time.monotonic_ns()
-            self.pub.put_bytes(payload)
+            # the sequence number first: the receiver tells a lost command from a late one
+            self.pub.put_bytes(seq.to_bytes(8, "big") + bytes(COMMAND_BYTES - 8))
+            seq += 1
             self.puts.append((t0, time.monotonic_ns() - t0))
             next_t = max(next_t + self.period_s, time.monotonic())
             self.stop.wait(next_t - time.monotonic())
@@ -115,8 +118,11 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         with client(endpoint) as rx_bus, client(endpoint) as tx_bus:
             arrivals: list[int] = []
+            seqs: list[int] = []
             sub = rx_bus.subscribe_raw(FUSION_BRAKE_CMD,
-                                       lambda p, k, t: arrivals.append(t), instance="primary")
+                                       lambda p, k, t: (arrivals.append(t),
+                                                      seqs.append(int.from_bytes(p[:8], "big"))),
+                                       instance="primary")
             stream = Stream(tx_bus, Congestion(args.congestion) if args.congestion else None,
                             args.period_ms / 1000)
             stream.thread.start()
@@ -142,6 +148,8 @@ def main(argv: list[str] | None = None) -> int:
             gap = widest_gap_ms(arrivals, t_freeze, t_end)
             put = longest_put_ms(stream.puts, t_freeze, t_end)
             got = sum(1 for t in arrivals if t_full <= t <= t_end)
+            during = [q for t, q in zip(arrivals, seqs, strict=True) if t_freeze <= t <= t_end]
+            lost = (max(during) - min(during) + 1 - len(set(during))) if during else 0
     finally:
         if stuck is not None and stuck.poll() is None:
             stuck.send_signal(signal.SIGCONT)
@@ -153,12 +161,13 @@ def main(argv: list[str] | None = None) -> int:
           f"after {fill_s:.1f} s")
     print(f"  before: widest gap {base_gap:.1f} ms, longest put {base_put:.1f} ms")
     print(f"  from the freeze to {args.observe_s:.0f} s after its queue was full: widest gap "
-          f"{gap:.1f} ms, longest put {put:.1f} ms; {got} commands received after the fill")
+          f"{gap:.1f} ms, longest put {put:.1f} ms; {got} commands received after the fill, "
+          f"{lost} lost from the freeze on")
     print(json.dumps({"congestion": stream.qos.congestion.value, "mode": mode,
                       "period_ms": args.period_ms, "unread_bytes": filled,
                       "fill_s": round(fill_s, 2), "baseline_gap_ms": round(base_gap, 1),
                       "baseline_put_ms": round(base_put, 1), "gap_ms": round(gap, 1),
-                      "put_ms": round(put, 1), "received": got}))
+                      "put_ms": round(put, 1), "received": got, "lost": lost}))
     return 0
 
 
