@@ -9,10 +9,16 @@
   fusion again once it is alone;
 - `track flood`: well-formed radar tracks on radar/front/tracks as fast as the harness
   can publish them: fusion commands at most once per `min_cycle_interval_s`, the brake
-  never loses its deadline and follows the real stream right after.
+  never loses its deadline and follows the real stream right after;
+- `stuck subscriber`: a process subscribed to every key of the vehicle
+  (tools/faults/stuck.py) frozen with SIGSTOP until a second camera's worth of samples
+  (on a camera key no service reads) have filled its link, then for longer than Zenoh's
+  `wait_before_close` (5 s): the brake keeps getting fusion's commands within its
+  deadline (no key waits for its slowest subscriber).
 """
 
 import itertools
+import signal
 import subprocess
 import sys
 import threading
@@ -25,6 +31,7 @@ from aeb_radar_camera.common.messages import BrakeState, Header, OutputMode, Rad
 from aeb_radar_camera.common.resources import EXAMPLE_KEYS
 from aeb_radar_camera.tools.faults.catalogue import MS, Context, Fault, Outcome, _fusion_seqs
 from aeb_radar_camera.tools.faults.robust import CONFIG_EXIT_BOUND_MS, run_dir
+from aeb_radar_camera.tools.faults.stuck import wait_filled
 
 # a /dev path that is not a pty: a real actuator's port (absent here)
 REAL_PORT = "/dev/ttyACM-aeb-faults"
@@ -214,6 +221,75 @@ class TrackFlood(Fault):
             detail += f"; FAILSAFE ({len(failsafe)} statuses, {failsafe[0].msg.reason}; {grew})"
         return Outcome(ok and response <= FLOOD_RECOVER_BOUND_MS, response, detail,
                        lost=1 if failsafe else 0, bound_ms=FLOOD_RECOVER_BOUND_MS)
+
+
+# longer than Zenoh's wait_before_close (5 s): what a BLOCK key would stall for
+STUCK_OBSERVE_S = 6.0
+STUCK_LOAD_BYTES = 64_000
+STUCK_LOAD_HZ = 30.0
+STUCK_FILL_TIMEOUT_S = 60.0
+
+
+class StuckSubscriber(Fault):
+    name = "stuck subscriber"
+    required = ("a subscriber of every key frozen: the brake gets fusion's commands within "
+                "its deadline throughout, no FAILSAFE")
+
+    def inject(self, ctx: Context) -> Outcome:
+        obs = ctx.observer
+        argv = [sys.executable, "-m", "aeb_radar_camera.tools.faults.stuck",
+                "--connect", ctx.loop.endpoint, "--vehicle", ctx.vehicle]
+        proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                text=True)
+        load: subprocess.Popen[bytes] | None = None
+        try:
+            assert proc.stdout is not None
+            if proc.stdout.readline().strip() != "ready":
+                return Outcome(False, None, "the stuck subscriber did not start")
+            mark = obs.status.mark()
+            t0 = mono_ns()
+            proc.send_signal(signal.SIGSTOP)
+            # one more camera's worth: the simulated stack runs without real-time
+            # priorities, and more load starves it on a loaded 2-core host
+            load = subprocess.Popen([*argv, "--load", "--load-bytes", str(STUCK_LOAD_BYTES),
+                                     "--load-hz", str(STUCK_LOAD_HZ)],
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            try:
+                filled, fill_s = wait_filled(proc.pid, STUCK_FILL_TIMEOUT_S)
+            except TimeoutError as exc:
+                return Outcome(False, None, str(exc))
+            t_full = mono_ns()
+            end = obs.status.wait(
+                lambda s: s.header.pub_mono_ns > t_full + int(STUCK_OBSERVE_S * 1e9), mark,
+                STUCK_OBSERVE_S + 30.0)
+        finally:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGCONT)
+            for p in (load, proc):
+                if p is None:
+                    continue
+                p.terminate()
+                try:
+                    p.wait(10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+        if end is None:
+            return Outcome(False, None, "no brake status after the subscriber's link filled",
+                           lost=1)
+        window = [s.msg for s in obs.status.since(mark)
+                  if t0 <= s.msg.header.pub_mono_ns <= end.msg.header.pub_mono_ns]
+        # the brake's receipts of fusion's commands from the freeze on (its status also
+        # goes out on every command): the widest gap between two
+        receipts = sorted({s.last_cmd_rx_mono_ns for s in window} | {t0})
+        widest = max(b - a for a, b in itertools.pairwise(receipts)) / MS
+        failsafe = [s for s in window if s.state is BrakeState.FAILSAFE]
+        detail = (f"{filled / 1e6:.1f} MB unread after {fill_s:.1f} s, then "
+                  f"{STUCK_OBSERVE_S:g} s: widest gap between the brake's commands")
+        if failsafe:
+            detail += f"; FAILSAFE ({failsafe[0].reason})"
+        return Outcome(not failsafe and widest <= ctx.bounds.failsafe_ms, widest, detail,
+                       bound_ms=ctx.bounds.failsafe_ms)
 
 
 SIDE_VEHICLE = "faults-brake"        # keys of its own: the stack never sees this brake
