@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             # the load from a process of its own: it takes no time of this one's receiver
             load = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.faults.stuck",
                                      "--connect", endpoint, "--load"], stdout=subprocess.DEVNULL)
-            filled, fill_s = wait_filled(stuck.pid, 60.0)
+            filled, fill_s = wait_filled(stuck.pid, 60.0, router=router.pid)
             t_full = time.monotonic_ns()
             time.sleep(args.observe_s)        # the measurement's own duration
             t_end = time.monotonic_ns()

@@ -10,7 +10,8 @@ It prints one line, ``ready``, once subscribed. Without `--block` the caller fre
 with SIGSTOP; with `--block` its callback blocks on the first sample until SIGTERM (a
 subscriber whose callback never returns: Zenoh's reader for its link waits with it).
 Either way the kernel's receive buffer of its link fills and then the router's queue to
-it: `receive_queue_bytes(pid)` tells a caller how much waits unread. `--load` is the
+it: `receive_queue_bytes(pid)` tells a caller how much waits unread, and
+`send_queue_bytes_to(router, pid)` how much waits in the router's kernel for it. `--load` is the
 other half of the fault: camera-sized samples on the key of a camera named `load`, which
 no service reads (`LOAD_BYTES` at `LOAD_HZ`, more than a real camera's so that the link
 fills within seconds whatever else runs) until SIGTERM, from a process of its own so that
@@ -23,11 +24,13 @@ import argparse
 import ctypes
 import fcntl
 import os
+import socket
 import struct
 import sys
 import termios
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from aeb_radar_camera.common.bus import Bus, BusError
@@ -56,22 +59,19 @@ def _pidfd_getfd(pidfd: int, fd: int) -> int:
     return dup
 
 
-def receive_queue_bytes(pid: int) -> int:
-    """Bytes received by the kernel that process `pid` has not read, summed over its
-    sockets (0 when it is gone). Each socket is borrowed with pidfd_getfd and asked with
-    FIONREAD: microseconds, where /proc/net/tcp walks the host's whole connection table
-    (some 13 ms on the test VM, costly at a polling rate). Raises OSError when the
-    process's descriptors may not be borrowed (another user's process without root)."""
+def _sockets(pid: int) -> Iterator[socket.socket]:
+    """Duplicates of the sockets process `pid` holds (pidfd_getfd), each closed once the
+    caller moves on; none when it is gone. Raises OSError when the process's descriptors
+    may not be borrowed (another user's process without root)."""
     try:
         pidfd = os.pidfd_open(pid)
     except ProcessLookupError:
-        return 0
-    total = 0
+        return
     try:
         try:
             names = list(Path(f"/proc/{pid}/fd").iterdir())
         except OSError:
-            return 0
+            return
         for name in names:
             try:
                 if not os.readlink(name).startswith(_SOCKET):
@@ -79,15 +79,43 @@ def receive_queue_bytes(pid: int) -> int:
                 dup = _pidfd_getfd(pidfd, int(name.name))
             except (OSError, ValueError):
                 continue    # closed meanwhile
-            try:
-                total += struct.unpack("i", fcntl.ioctl(dup, termios.FIONREAD, b"\0" * 4))[0]
-            except OSError:
-                pass        # a listening socket has no receive queue
-            finally:
-                os.close(dup)
+            with socket.socket(fileno=dup) as sock:
+                yield sock
     finally:
         os.close(pidfd)
-    return total
+
+
+def _queued(sock: socket.socket, request: int) -> int:
+    try:
+        return int(struct.unpack("i", fcntl.ioctl(sock.fileno(), request, b"\0" * 4))[0])
+    except OSError:
+        return 0            # a listening socket has no queues
+
+
+def _name(sock: socket.socket, peer: bool) -> object:
+    """The socket's own or its peer's address (None for other than TCP/IP)."""
+    if sock.family not in (socket.AF_INET, socket.AF_INET6):
+        return None
+    try:
+        return sock.getpeername() if peer else sock.getsockname()
+    except OSError:
+        return None
+
+
+def receive_queue_bytes(pid: int) -> int:
+    """Bytes received by the kernel that process `pid` has not read, over its sockets
+    (FIONREAD on each: microseconds, where /proc/net/tcp walks the host's whole
+    connection table, some 13 ms on the test VM). Raises OSError (see `_sockets`)."""
+    return sum(_queued(s, termios.FIONREAD) for s in _sockets(pid))
+
+
+def send_queue_bytes_to(sender: int, receiver: int) -> int:
+    """Bytes process `sender` has written to its TCP connections with process
+    `receiver` that the receiver's kernel has not taken yet (TIOCOUTQ). Raises OSError
+    (see `_sockets`)."""
+    ends = {_name(s, peer=False) for s in _sockets(receiver)} - {None}
+    return sum(_queued(s, termios.TIOCOUTQ) for s in _sockets(sender)
+               if _name(s, peer=True) in ends)
 
 
 def publish_load(bus: Bus, stop: threading.Event, size: int = LOAD_BYTES,
@@ -102,19 +130,21 @@ def publish_load(bus: Bus, stop: threading.Event, size: int = LOAD_BYTES,
     return sent
 
 
-def wait_filled(pid: int, timeout_s: float, stable_s: float = FILL_STABLE_S,
-                poll_s: float = 0.05) -> tuple[int, float]:
-    """(bytes, seconds taken) once the receive queues of a frozen process `pid` hold
-    something and have not changed for `stable_s`: nothing more gets in, and what the
-    router sends it now waits in the router. Raises TimeoutError."""
+def wait_filled(pid: int, timeout_s: float, router: int | None = None,
+                stable_s: float = FILL_STABLE_S, poll_s: float = 0.05) -> tuple[int, float]:
+    """(bytes, seconds taken) once the receive queues of a frozen process `pid` (and,
+    given the `router`'s pid, the router's send queue to it) hold something and have not
+    changed for `stable_s`: nothing more gets in, and what the router sends it now waits
+    in the router's own queue. Raises TimeoutError."""
     t0 = time.monotonic()
-    last, since = -1, t0
+    last, since = (-1, -1), t0
     while time.monotonic() - t0 < timeout_s:
-        now_bytes = receive_queue_bytes(pid)
-        if now_bytes != last:
-            last, since = now_bytes, time.monotonic()
-        elif now_bytes > 0 and time.monotonic() - since >= stable_s:
-            return now_bytes, since - t0
+        now = (receive_queue_bytes(pid),
+               send_queue_bytes_to(router, pid) if router is not None else 0)
+        if now != last:
+            last, since = now, time.monotonic()
+        elif now[0] > 0 and time.monotonic() - since >= stable_s:
+            return sum(now), since - t0
         time.sleep(poll_s)
     raise TimeoutError(f"the receive queue of process {pid} did not fill in {timeout_s} s "
                        f"(last {last} bytes)")
