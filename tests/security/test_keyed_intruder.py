@@ -30,8 +30,8 @@ PERIOD_MS = 20.0
 
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[BrakeRig]:
-    # nothing here subscribes to the commands: a slow subscriber of the BLOCK key would
-    # slow the router's delivery to the brake (docs/security.md). The brake runs as
+    # nothing here subscribes to the commands: a flood's callbacks would take this
+    # process's CPU from the simulated actuator it runs. The brake runs as
     # deployed (deploy/brake.toml): SCHED_FIFO 20 for its command path and Zenoh's I/O
     # threads, so that other load on the host does not starve it (refused without
     # CAP_SYS_NICE: then it runs normally and says `realtime_refused`)
