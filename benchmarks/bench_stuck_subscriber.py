@@ -93,13 +93,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--period-ms", type=float, default=75.0)
     parser.add_argument("--baseline-s", type=float, default=2.0)
     parser.add_argument("--observe-s", type=float, default=8.0)
+    parser.add_argument("--router-config", default="",
+                        help="a Zenoh JSON5 file for the router (e.g. other drop waits)")
     parser.add_argument("--block", action="store_true",
                         help="a callback that blocks instead of SIGSTOP")
     args = parser.parse_args(argv)
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     router = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.common.router",
-                               "--listen", endpoint], stdout=subprocess.DEVNULL)
+                               "--listen", endpoint,
+                               *(["--config-file", args.router_config]
+                                 if args.router_config else [])], stdout=subprocess.DEVNULL)
     stuck: subprocess.Popen[str] | None = None
     load: subprocess.Popen[bytes] | None = None
     try:
@@ -119,10 +123,12 @@ def main(argv: list[str] | None = None) -> int:
         with client(endpoint) as rx_bus, client(endpoint) as tx_bus:
             arrivals: list[int] = []
             seqs: list[int] = []
-            sub = rx_bus.subscribe_raw(FUSION_BRAKE_CMD,
-                                       lambda p, k, t: (arrivals.append(t),
-                                                      seqs.append(int.from_bytes(p[:8], "big"))),
-                                       instance="primary")
+
+            def on_command(payload: bytes, key: str, t_ns: int) -> None:
+                arrivals.append(t_ns)
+                seqs.append(int.from_bytes(payload[:8], "big"))
+
+            sub = rx_bus.subscribe_raw(FUSION_BRAKE_CMD, on_command, instance="primary")
             stream = Stream(tx_bus, Congestion(args.congestion) if args.congestion else None,
                             args.period_ms / 1000)
             stream.thread.start()
