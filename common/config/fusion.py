@@ -177,11 +177,23 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     standstill_mps: Positive = 0.3
     standstill_hold_s: NonNegative = 2.0
     standstill_level_pct: Annotated[float, msgspec.Meta(ge=0, le=100)] = 50.0
+    # A threat the camera cannot tell yet (the verifier says unverifiable: too little
+    # depth to see anything at the range, and the track's evidence sum holds no
+    # confirmation): true, it is a WARNING up to the full stage and brakes at full level
+    # from it, the full stage's deceleration bound raised to cannot_tell_decel_mps2 (its
+    # TTC bound kept); false, it follows `unverifiable_policy`. The radar's false targets
+    # at speed are decided where depth is still too sparse to tell: this brakes for them
+    # only when the stop really needs it, while a threat the camera confirms keeps every
+    # stage.
+    cannot_tell_full_only: bool = False
+    cannot_tell_decel_mps2: Positive = 5.5
 
     def __post_init__(self) -> None:
         if not self.warning_decel_mps2 <= self.partial_decel_mps2 <= self.full_decel_mps2:
             raise ValueError("warning_decel_mps2 <= partial_decel_mps2 <= full_decel_mps2 "
                              "required")
+        if self.cannot_tell_decel_mps2 < self.full_decel_mps2:
+            raise ValueError("cannot_tell_decel_mps2 must be at least full_decel_mps2")
         if not self.warning_ttc_s >= self.partial_ttc_s >= self.full_ttc_s:
             raise ValueError("warning_ttc_s >= partial_ttc_s >= full_ttc_s required")
         if self.partial_level_pct > self.full_level_pct:

@@ -60,6 +60,9 @@ from aeb_radar_camera.services.fusion.roi import ColumnProjector
 from aeb_radar_camera.services.fusion.verifiers import Verifier
 
 _NO_ROI: tuple[int, ...] = ()
+# In gate_detail: the verifier could not tell this frame and the track's evidence holds
+# no confirmation (`[fusion.decision.kinematic] cannot_tell_full_only` then applies).
+CANNOT_TELL_KEY = "cannot_tell"
 
 
 @dataclass(frozen=True, slots=True)
@@ -333,8 +336,11 @@ class FusionCore:
             total = self.evidence.add(t.track_id, detail[LLR_KEY], radar_stamp_ns,
                                       (t.x_m, t.y_m))
             detail = {**detail, EVIDENCE_KEY: total}
+            # A frame that cannot tell leaves a track the evidence has confirmed
+            # confirmed: one frame of sparse depth does not undo it.
             verification = (Verification.REJECTED if self.evidence.vetoed(total)
                             else Verification.UNAVAILABLE if result.unverifiable
+                            and total <= 0.0
                             else Verification.VERIFIED)
         elif result is not None and result.unverifiable:
             verification = Verification.UNAVAILABLE
@@ -347,12 +353,20 @@ class FusionCore:
                 verification = (Verification.REJECTED if self.evidence.vetoed(carried)
                                 else Verification.VERIFIED if carried > 0 else verification)
         density = result.score if result is not None else None
+        cannot_tell = (verification is Verification.UNAVAILABLE and result is not None
+                       and result.unverifiable)
+        if cannot_tell:
+            detail = {**detail, CANNOT_TELL_KEY: 1.0}
         if verification is Verification.UNAVAILABLE and decision is not Decision.NONE:
-            why = (_reasons(views, j) if result is None or not result.unverifiable
+            why = (_reasons(views, j) if not cannot_tell
                    else "camera cannot tell: " + ", ".join(
-                       k for k, v in detail.items() if k.startswith("depth_") and v))
+                       name for name, v in detail.items() if name.startswith("depth_") and v))
             reason = f"{reason}; {why}"
-        decision, reason = decide(decision, reason, verification, self.rule.policy)
+        rule = self.rule
+        if cannot_tell and isinstance(rule, KinematicRule) and rule.cannot_tell_full_only:
+            decision, reason = rule.cannot_tell(k, decision, reason)
+        else:
+            decision, reason = decide(decision, reason, verification, rule.policy)
         score_name = result.score_name if result is not None else ""
         if verification is Verification.REJECTED:
             reason = f"{reason}; {score_name} {density:.4f}"

@@ -480,6 +480,29 @@ class KinematicRule:
             return Decision.WARNING, f"warning: {figures}"
         return Decision.BRAKE, f"{stage} brake: {figures}"
 
+    @property
+    def cannot_tell_full_only(self) -> bool:
+        return self.k.cannot_tell_full_only
+
+    def cannot_tell(self, kin: Kinematics, threat: Decision, reason: str
+                    ) -> tuple[Decision, str]:
+        """A threat the camera cannot tell yet (`cannot_tell_full_only`): WARNING up to
+        the full stage with its deceleration bound raised to `cannot_tell_decel_mps2`,
+        BRAKE (at the full stage's level) from it. A radar false target at speed is
+        decided where depth is too sparse to see anything; braking for it only when the
+        stop really needs it keeps the partial brake for what the camera confirms."""
+        if threat is Decision.NONE:
+            return threat, reason
+        k = self.k
+        need = kin.required_decel_mps2 or 0.0
+        ttc = kin.ttc_s if kin.ttc_s is not None else math.inf
+        bounds = f"{k.cannot_tell_decel_mps2:g} m/s^2 or TTC {k.full_ttc_s:g} s"
+        if threat is Decision.BRAKE and (need >= k.cannot_tell_decel_mps2
+                                         or ttc < k.full_ttc_s):
+            return Decision.BRAKE, f"camera cannot tell, full stage ({bounds}): {reason}"
+        return Decision.WARNING, (f"camera cannot tell, warning until the full stage "
+                                  f"({bounds}): {reason}")
+
     def level(self, kin: Kinematics) -> float | None:
         """The brake level of a track's stage (None below the partial stage)."""
         if not self.motion_ok:

@@ -12,6 +12,8 @@ from aeb_radar_camera.common.messages import Decision
 from aeb_radar_camera.common.resources import DEPLOY, EXAMPLE_CALIBRATION
 from aeb_radar_camera.tools.grid.camera import SceneCamera
 from aeb_radar_camera.tools.grid.lockstep import LockstepResult, LoopConfig, run_scenario
+from aeb_radar_camera.tools.sim.families import FAMILIES
+from aeb_radar_camera.tools.sim.families import Case as FamilyCase
 from aeb_radar_camera.tools.sim.plot import plot_timeline
 from aeb_radar_camera.tools.sim.scenario import Scenario, find_scenario, load_scenario
 
@@ -77,6 +79,22 @@ def test_a_false_target_brakes_the_papers_gate_and_not_the_default(scenes):
     assert not v.passed and v.false_activations == 1 and v.first_brake_t_s is not None
     assert paper.cycles[0].targets.verifier == "edge_density"
     assert {c.command.instance for c in paper.cycles} == {"paper"}
+
+
+def test_a_far_false_target_at_50_kph_is_a_warning_the_camera_cannot_tell_not_a_brake(
+        scenes):
+    # A metal plate 40 m ahead at 50 km/h: the kinematic rule's stages begin 55 m ahead,
+    # where the D435's depth is too sparse to tell; the threat is a WARNING until the
+    # stop would need the full brake, and by then depth sees through the column.
+    fam = FAMILIES["plate"]
+    speed, params = next((v, p) for v, p in fam.grid()
+                         if v == 50.0 and dict(p)["range_m"] == 40)
+    r = run_scenario(FamilyCase("plate", speed, params, 0).scenario(), DEFAULT, scenes, 0)
+    assert r.verdict.brake_activations == 0, r.verdict
+    told = [t for c in r.cycles for t in c.targets.targets if t.gate_detail.get("cannot_tell")]
+    assert told and {t.decision for t in told} <= {Decision.WARNING, Decision.NONE}
+    assert any("camera cannot tell, warning until the full stage" in c.command.reason
+               for c in r.cycles)
 
 
 def test_a_candidate_in_shadow_mode_is_recorded_per_cycle_and_never_brakes(scenes):

@@ -187,7 +187,8 @@ def evidence_lines(targets: VerifiedTargets, first_ns: int) -> list[str]:
         if "evidence_llr" not in d:
             continue
         why = ",".join(k for k, v in d.items()
-                       if v and (k.startswith("depth_") or k == "appearance_veto"))
+                       if v and (k.startswith("depth_") or k in ("appearance_veto",
+                                                              "cannot_tell")))
         out.append(f"t={(targets.header.stamp_ns - first_ns) / 1e9:8.3f} s  track "
                    f"{t.track_id:<4} {t.range_m:5.1f} m  llr {d.get('llr', 0.0):+.2f}  sum "
                    f"{d['evidence_llr']:+.2f}  {why or '-'}  {t.verification.value}  "

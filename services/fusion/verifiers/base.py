@@ -55,9 +55,11 @@ class GateResult:
     says how it got there.
 
     `unverifiable`: the verifier found too little evidence either way (e.g. too few depth
-    returns); the threat then follows the decision's `unverifiable_policy`, as when no
-    frame is usable. Only a verifier configured to say so sets it (`recall_first` with
-    `missing = "unverifiable"`); `verified` is then False."""
+    returns); unless the track's summed evidence confirms it, the camera cannot tell: the
+    threat follows the kinematic rule's `cannot_tell_full_only` when set, else the
+    decision's `unverifiable_policy`, as when no frame is usable. Only a verifier
+    configured to say so sets it (`recall_first` with `missing = "unverifiable"`);
+    `verified` is then False."""
 
     score: float
     verified: bool

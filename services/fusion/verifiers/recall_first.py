@@ -43,7 +43,10 @@ The score is the frame's log-likelihood ratio of "an obstacle stands there" (`ll
 verified iff llr >= 0. Fusion adds the frames' llr up per track (`[fusion.evidence]`), so
 that one frame neither brakes nor vetoes. Missing evidence (sparse or missing depth, no
 confident appearance) confirms the threat (`missing = "confirm"`) or, with `missing =
-"unverifiable"`, makes it unverifiable: the decision's `unverifiable_policy` applies.
+"unverifiable"` (deploy/fusion.toml), makes it unverifiable: fusion then takes the
+track's evidence so far, and a track without a confirmation is one the camera cannot tell
+yet - the kinematic rule's `cannot_tell_full_only` brakes for it from the full stage only
+(else the decision's `unverifiable_policy` applies).
 
 Where it stops: a structure that really stands at the range (a wall, a guard rail, a
 pole) is confirmed - keeping those out of the brake is the corridor's job; a false target
