@@ -14,8 +14,9 @@ is deleted after `delete_after_misses` consecutive misses (tentative tracks afte
 association cost (`radar_id_bonus`) but never overrides the gate: the radar swaps IDs.
 
 A confirmed track that no detection matched, with a detection that no track took where
-the track is (inside the gate on position alone, `reacquire_chi2`), takes that
-detection's state and keeps its ID: a target that changes its motion abruptly (a cyclist
+the track is (inside the gate on position alone, `reacquire_chi2`, with a velocity at
+most `reacquire_max_dv_mps` from the track's), takes that detection's state and keeps
+its ID: a target that changes its motion abruptly (a cyclist
 waiting beside the road who sets off across it) falls out of the 4-d gate on velocity,
 and a new ID would throw away everything known of it (its confirmation here; in fusion
 its camera evidence and the cycles of sideways motion a crossing prediction needs).
@@ -284,8 +285,10 @@ class KalmanTracker:
         """(track rows, detection rows) re-acquired after a manoeuvre: a confirmed track
         that no detection matched this cycle (`rows` are the matched tracks, `drows`
         their detections) and a detection no track took, inside the gate on position
-        alone (`reacquire_chi2`, 2 degrees of freedom; the distance cap), by greedy
-        nearest neighbour. None when `reacquire_chi2` is 0."""
+        alone (`reacquire_chi2`, 2 degrees of freedom; the distance cap) whose velocity
+        differs by at most `reacquire_max_dv_mps` (a larger jump within one cycle is
+        another object: a car ahead does not stop dead, a post beside it does not
+        move), by greedy nearest neighbour. None when `reacquire_chi2` is 0."""
         chi2 = self.s.reacquire_chi2
         if chi2 <= 0.0 or not len(self) or not len(det):
             return _EMPTY, _EMPTY
@@ -301,7 +304,9 @@ class KalmanTracker:
         dp = det.floats[POS].take(di, axis=1) - self.state[POS].take(ti, axis=1)
         s_pp = (self.state[VAR_P] + self._r_p).take(ti, axis=1)
         d2 = (dp * dp / s_pp).sum(axis=0)
-        inside = ((d2 <= chi2) & ((dp * dp).sum(axis=0) <= self._cap**2)).nonzero()[0]
+        dv = det.floats[VEL].take(di, axis=1) - self.state[VEL].take(ti, axis=1)
+        inside = ((d2 <= chi2) & ((dp * dp).sum(axis=0) <= self._cap**2)
+                  & ((dv * dv).sum(axis=0) <= self.s.reacquire_max_dv_mps**2)).nonzero()[0]
         if len(inside) == 0:
             return _EMPTY, _EMPTY
         return greedy_pairs(ti.take(inside), di.take(inside), d2.take(inside))

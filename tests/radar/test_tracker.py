@@ -135,7 +135,7 @@ def test_a_target_that_sets_off_keeps_its_track_and_takes_its_new_velocity():
     assert [t.track_id for t in published[11]] == [before[0].track_id]
 
 
-def test_re_acquisition_off_or_far_away_starts_a_new_track():
+def test_re_acquisition_off_far_away_or_far_off_in_velocity_starts_a_new_track():
     off = run(setting_off(), settings(tracker=TrackerSettings(reacquire_chi2=0.0)))
     first = confirmed(off[7])[0].track_id
     assert [t.track_id for t in confirmed(off[8])] == [first]     # coasting, not updated
@@ -144,6 +144,13 @@ def test_re_acquisition_off_or_far_away_starts_a_new_track():
     # A detection 2.5 m away (beyond the position gate, inside the distance cap) is
     # another object.
     cycles = [[(15.0, 0.0, 0.0, 0.0)]] * 6 + [[(15.0, 2.5, 0.0, 3.0)]]
+    published = run(cycles)
+    old = confirmed(published[5])[0].track_id
+    assert {(t.track_id == old, t.misses) for t in published[6]} == {(True, 1), (False, 0)}
+    # Where the track is, but 12 m/s off its velocity: a post beside a car ahead whose
+    # own return was missed, not the car stopping dead.
+    cycles = [[(15.0 + 1.5 * DT * k, 0.0, 1.5, 0.0)] for k in range(6)]
+    cycles.append([(15.0 + 1.5 * DT * 6, 0.8, -10.5, 0.0)])
     published = run(cycles)
     old = confirmed(published[5])[0].track_id
     assert {(t.track_id == old, t.misses) for t in published[6]} == {(True, 1), (False, 0)}

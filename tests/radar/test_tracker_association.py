@@ -181,9 +181,11 @@ class TextbookTracker:
             s_pp = np.diag(tr["p"])[:2] + np.diag(self.r)[:2]
             for j in range(len(det)):
                 e = z[j][:2] - tr["x"][:2]
+                dv = z[j][2:] - tr["x"][2:]
                 d2 = float((e * e / s_pp).sum())
                 if j not in used_d and d2 <= s.reacquire_chi2 \
-                        and e @ e <= s.gate_max_distance_m**2:
+                        and e @ e <= s.gate_max_distance_m**2 \
+                        and dv @ dv <= s.reacquire_max_dv_mps**2:
                     again.append((d2, i, j))
         for _, i, j in sorted(again):
             if i in used_t or j in used_d:
