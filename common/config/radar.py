@@ -109,6 +109,14 @@ class TrackerSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     vel_y_std_mps: PositiveFloat = 1.0
     gate_chi2: PositiveFloat = 13.28           # 99 % for 4 degrees of freedom
     gate_max_distance_m: PositiveFloat = 3.0   # hard cap, whatever the covariance
+    # A confirmed track without a match re-acquires an unmatched detection inside this
+    # position-only gate (99 % for 2 degrees of freedom) with the detection's velocity,
+    # keeping its ID (a target that set off or stopped abruptly); 0: off
+    reacquire_chi2: NonNegFloat = 9.21
+    # ... whose velocity differs by at most this from the track's: a pedestrian or a
+    # cyclist setting off from a standstill (up to 20 km/h); a larger jump within one
+    # cycle is another object (a post beside a car ahead whose own return was missed)
+    reacquire_max_dv_mps: PositiveFloat = 6.0
     radar_id_bonus: NonNegFloat = 3.0          # cost reduction when the radar's ID matches
     drop_receding: bool = False                # do not publish tracks moving away
     receding_min_mps: NonNegFloat = 0.5        # range rate above this = receding

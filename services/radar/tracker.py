@@ -13,6 +13,14 @@ is deleted after `delete_after_misses` consecutive misses (tentative tracks afte
 `delete_tentative_after_misses`). In object mode the radar's object ID lowers the
 association cost (`radar_id_bonus`) but never overrides the gate: the radar swaps IDs.
 
+A confirmed track that no detection matched, with a detection that no track took where
+the track is (inside the gate on position alone, `reacquire_chi2`, with a velocity at
+most `reacquire_max_dv_mps` from the track's), takes that detection's state and keeps
+its ID: a target that changes its motion abruptly (a cyclist
+waiting beside the road who sets off across it) falls out of the 4-d gate on velocity,
+and a new ID would throw away everything known of it (its confirmation here; in fusion
+its camera evidence and the cycles of sideways motion a crossing prediction needs).
+
 With a constant-velocity model, white-acceleration noise per axis and diagonal
 measurement and initial noise, x and y never correlate: the 4x4 covariance is two 2x2
 blocks [[var_p, cov_pv], [cov_pv, var_v]], one per axis, and every step is a closed-form
@@ -162,6 +170,7 @@ class KalmanTracker:
         self.next_id = 1
         self.last_t: float | None = None
         self.resets = 0
+        self.resumed = 0             # tracks re-acquired after a manoeuvre (reacquire)
         self._clear()
 
     def _clear(self) -> None:
@@ -207,6 +216,10 @@ class KalmanTracker:
         if len(self):
             rows, drows = self.associate(det)
             self._update(rows, det, drows)
+            again, dagain = self.reacquire(det, rows, drows)
+            if len(again):
+                self._restart(again, det, dagain)
+                rows, drows = np.concatenate([rows, again]), np.concatenate([drows, dagain])
             self._count(rows)
         else:
             drows = _EMPTY
@@ -267,6 +280,49 @@ class KalmanTracker:
             same = (self.meta[META_RADAR_ID].take(ti) == rid) & (rid >= 0)
             cost = cost - self.s.radar_id_bonus * same
         return greedy_pairs(ti, di, cost)
+
+    def reacquire(self, det: Detections, rows: I, drows: I) -> tuple[I, I]:
+        """(track rows, detection rows) re-acquired after a manoeuvre: a confirmed track
+        that no detection matched this cycle (`rows` are the matched tracks, `drows`
+        their detections) and a detection no track took, inside the gate on position
+        alone (`reacquire_chi2`, 2 degrees of freedom; the distance cap) whose velocity
+        differs by at most `reacquire_max_dv_mps` (a larger jump within one cycle is
+        another object: a car ahead does not stop dead, a post beside it does not
+        move), by greedy nearest neighbour. None when `reacquire_chi2` is 0."""
+        chi2 = self.s.reacquire_chi2
+        if chi2 <= 0.0 or not len(self) or not len(det):
+            return _EMPTY, _EMPTY
+        lost = self.meta[CONFIRMED].astype(np.bool_)
+        lost[rows] = False
+        free = np.ones(len(det), dtype=np.bool_)
+        free[drows] = False
+        t_rows, d_rows = lost.nonzero()[0], free.nonzero()[0]
+        if not len(t_rows) or not len(d_rows):
+            return _EMPTY, _EMPTY
+        pt, pd = _every_pair(len(t_rows), len(d_rows))
+        ti, di = t_rows.take(pt), d_rows.take(pd)
+        dp = det.floats[POS].take(di, axis=1) - self.state[POS].take(ti, axis=1)
+        s_pp = (self.state[VAR_P] + self._r_p).take(ti, axis=1)
+        d2 = (dp * dp / s_pp).sum(axis=0)
+        dv = det.floats[VEL].take(di, axis=1) - self.state[VEL].take(ti, axis=1)
+        inside = ((d2 <= chi2) & ((dp * dp).sum(axis=0) <= self._cap**2)
+                  & ((dv * dv).sum(axis=0) <= self.s.reacquire_max_dv_mps**2)).nonzero()[0]
+        if len(inside) == 0:
+            return _EMPTY, _EMPTY
+        return greedy_pairs(ti.take(inside), di.take(inside), d2.take(inside))
+
+    def _restart(self, rows: I, det: Detections, drows: I) -> None:
+        """Tracks `rows` take detections `drows` as a new track would (state measured,
+        covariance P0) and keep their ID, hits and confirmation: the ARS408 measures
+        velocity, so a detection where the track is, whose velocity the 4-d gate
+        refuses, is the same object changing its motion (a cyclist setting off across
+        the road), and what was learnt of the object under its ID (consumers key their
+        history on it) must not start again with a new one."""
+        z = det.floats.take(drows, axis=1)
+        self.state[MEASURED][:, rows] = z[MEASURED]
+        self.state[COV][:, rows] = self._p0
+        self.meta[META_RADAR_ID:][:, rows] = det.ints[_DET_META].take(drows, axis=1)
+        self.resumed += len(rows)
 
     def _update(self, rows: I, det: Detections, drows: I) -> None:
         """Kalman update of tracks `rows` with detections `drows`, after `associate`,

@@ -111,6 +111,51 @@ def test_crossing_target_kept_through_one_missed_detection():
     assert published[19][0].track_id == before.track_id
 
 
+def setting_off(k_start: int = 8, cycles: int = 12):
+    """A cyclist waiting 3.8 m beside the path (closing at the ego's 8 m/s) who sets off
+    across it at 4.2 m/s at cycle `k_start`: the first detection of the new motion lies
+    where the track is, with a velocity the 4-d gate refuses."""
+    out = []
+    y = -3.8
+    for k in range(cycles):
+        vy = 4.2 if k >= k_start else 0.0
+        if k > k_start:
+            y += vy * DT
+        out.append([(20.0 - 8.0 * DT * k, y, -8.0, vy)])
+    return out
+
+
+def test_a_target_that_sets_off_keeps_its_track_and_takes_its_new_velocity():
+    published = run(setting_off())
+    before = confirmed(published[7])
+    assert len(before) == 1
+    [now] = confirmed(published[8])
+    assert now.track_id == before[0].track_id and now.misses == 0 and now.hits == 9
+    assert now.vy_mps == pytest.approx(4.2, abs=0.3)       # measured, not filtered away
+    assert [t.track_id for t in published[11]] == [before[0].track_id]
+
+
+def test_re_acquisition_off_far_away_or_far_off_in_velocity_starts_a_new_track():
+    off = run(setting_off(), settings(tracker=TrackerSettings(reacquire_chi2=0.0)))
+    first = confirmed(off[7])[0].track_id
+    assert [t.track_id for t in confirmed(off[8])] == [first]     # coasting, not updated
+    assert confirmed(off[8])[0].misses == 1
+    assert any(t.track_id != first and not t.confirmed for t in off[8])
+    # A detection 2.5 m away (beyond the position gate, inside the distance cap) is
+    # another object.
+    cycles = [[(15.0, 0.0, 0.0, 0.0)]] * 6 + [[(15.0, 2.5, 0.0, 3.0)]]
+    published = run(cycles)
+    old = confirmed(published[5])[0].track_id
+    assert {(t.track_id == old, t.misses) for t in published[6]} == {(True, 1), (False, 0)}
+    # Where the track is, but 12 m/s off its velocity: a post beside a car ahead whose
+    # own return was missed, not the car stopping dead.
+    cycles = [[(15.0 + 1.5 * DT * k, 0.0, 1.5, 0.0)] for k in range(6)]
+    cycles.append([(15.0 + 1.5 * DT * 6, 0.8, -10.5, 0.0)])
+    published = run(cycles)
+    old = confirmed(published[5])[0].track_id
+    assert {(t.track_id == old, t.misses) for t in published[6]} == {(True, 1), (False, 0)}
+
+
 def test_track_deleted_after_the_configured_misses():
     cycles = [[(10.0, 0.0, 0.0, 0.0)]] * 5 + [[]] * 4
     s = settings(tracker=TrackerSettings(delete_after_misses=3))

@@ -128,6 +128,7 @@ class TextbookTracker:
         self.next_id = 1
         self.last_t: float | None = None
         self.contested = 0          # cycles where a track or a detection had two candidates
+        self.resumed = 0            # tracks re-acquired after a manoeuvre
 
     def step(self, det: Detections, t: float) -> None:
         s = self.s
@@ -171,6 +172,29 @@ class TextbookTracker:
             tr["x"] = tr["x"] + gain @ (z[j] - tr["x"])
             tr["p"] = (np.eye(4) - gain) @ tr["p"]
             tr["rid"] = int(rid[j])
+        # A confirmed track without a match re-acquires a free detection inside the
+        # position-only gate: it restarts from the detection, keeping its ID and hits.
+        again = []
+        for i, tr in enumerate(self.tracks):
+            if i in used_t or not tr["confirmed"] or s.reacquire_chi2 <= 0:
+                continue
+            s_pp = np.diag(tr["p"])[:2] + np.diag(self.r)[:2]
+            for j in range(len(det)):
+                e = z[j][:2] - tr["x"][:2]
+                dv = z[j][2:] - tr["x"][2:]
+                d2 = float((e * e / s_pp).sum())
+                if j not in used_d and d2 <= s.reacquire_chi2 \
+                        and e @ e <= s.gate_max_distance_m**2 \
+                        and dv @ dv <= s.reacquire_max_dv_mps**2:
+                    again.append((d2, i, j))
+        for _, i, j in sorted(again):
+            if i in used_t or j in used_d:
+                continue
+            used_t.add(i)
+            used_d.add(j)
+            tr = self.tracks[i]
+            tr["x"], tr["p"], tr["rid"] = z[j].copy(), self.r.copy(), int(rid[j])
+            self.resumed += 1
         for i, tr in enumerate(self.tracks):
             tr["hits"], tr["misses"] = ((tr["hits"] + 1, 0) if i in used_t
                                         else (0, tr["misses"] + 1))
@@ -188,7 +212,8 @@ class TextbookTracker:
 @pytest.mark.parametrize(("n_targets", "bonus"), [(4, 3.0), (4, 0.0), (120, 3.0)])
 def test_the_tracker_tracks_as_the_textbook_does(n_targets, bonus):
     """Noisy targets close enough to contest detections, dropouts, swapped radar IDs,
-    ghosts, a cycle with nothing and a gap that restarts the tracker."""
+    ghosts, targets whose velocity jumps (re-acquired), a cycle with nothing and a gap
+    that restarts the tracker."""
     rng = np.random.default_rng(n_targets + int(bonus))
     s = TrackerSettings(radar_id_bonus=bonus)
     tracker, textbook = KalmanTracker(s), TextbookTracker(s)
@@ -203,6 +228,8 @@ def test_the_tracker_tracks_as_the_textbook_does(n_targets, bonus):
         x[:, :2] += x[:, 2:] * 0.075 * (k % 30)
         seen = rng.random(n_targets) > 0.1               # dropouts
         meas = x[seen] + rng.normal(0, [0.2, 0.2, 0.1, 0.1], (int(seen.sum()), 4))
+        if k in (20, 21):
+            meas[:, 3] += 4.0            # every target sets off sideways (re-acquired)
         ids = np.flatnonzero(seen)
         swap = rng.random(len(ids)) < 0.1                # the radar swaps IDs now and then
         ids[swap] = (ids[swap] + 1) % n_targets
@@ -226,4 +253,5 @@ def test_the_tracker_tracks_as_the_textbook_does(n_targets, bonus):
                                                                         abs=1e-9)
             assert [g.x_var_m2, g.y_var_m2] == pytest.approx(np.diag(w["p"])[:2], rel=1e-9)
     assert tracker.resets == 1 and textbook.contested > 10
+    assert tracker.resumed == textbook.resumed > 0
     assert sum(t.confirmed for t in tracker.tracks()) >= n_targets // 2
