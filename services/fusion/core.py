@@ -47,7 +47,12 @@ from aeb_radar_camera.services.fusion.decision import (
     decide,
     severity,
 )
-from aeb_radar_camera.services.fusion.evidence import EVIDENCE_KEY, LLR_KEY, TrackEvidence
+from aeb_radar_camera.services.fusion.evidence import (
+    CANNOT_TELL_KEY,
+    EVIDENCE_KEY,
+    LLR_KEY,
+    TrackEvidence,
+)
 from aeb_radar_camera.services.fusion.frames import (
     EXPECTED_CHANGE_SPAN,
     FROZEN_REASON,
@@ -60,9 +65,6 @@ from aeb_radar_camera.services.fusion.roi import ColumnProjector
 from aeb_radar_camera.services.fusion.verifiers import Verifier
 
 _NO_ROI: tuple[int, ...] = ()
-# In gate_detail: the verifier could not tell this frame and the track's evidence holds
-# no confirmation (`[fusion.decision.kinematic] cannot_tell_full_only` then applies).
-CANNOT_TELL_KEY = "cannot_tell"
 
 
 @dataclass(frozen=True, slots=True)

@@ -14,6 +14,9 @@ from aeb_radar_camera.common.config.fusion import EvidenceSettings
 
 LLR_KEY = "llr"                 # a verifier's per-frame value, in its GateResult.detail
 EVIDENCE_KEY = "evidence_llr"   # the track's sum after this frame, in gate_detail
+# In gate_detail: the verifier could not tell this frame and the track's evidence holds
+# no confirmation (`[fusion.decision.kinematic] cannot_tell_full_only` then applies).
+CANNOT_TELL_KEY = "cannot_tell"
 
 
 class TrackEvidence:

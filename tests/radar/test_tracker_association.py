@@ -117,6 +117,16 @@ def test_update_equals_the_textbook_kalman_update():
                 [p_new[a, a], p_new[a, a + 1], p_new[a + 1, a + 1]], rel=1e-9, abs=1e-15)
 
 
+def _claim(pairs, used_t, used_d):
+    """(track, detection) of `pairs` ((cost, track, detection)), cheapest first, each track
+    and detection taken once (`used_t` / `used_d` updated)."""
+    for _, i, j in sorted(pairs):
+        if i not in used_t and j not in used_d:
+            used_t.add(i)
+            used_d.add(j)
+            yield i, j
+
+
 class TextbookTracker:
     """The tracker's rules with 4x4 matrices, one track at a time ([x, y, vx, vy])."""
 
@@ -161,12 +171,9 @@ class TextbookTracker:
                     pairs.append((d2 - s.radar_id_bonus * same, i, j))
         tracks_in, dets_in = [i for _, i, _ in pairs], [j for _, _, j in pairs]
         self.contested += len(set(tracks_in)) < len(pairs) or len(set(dets_in)) < len(pairs)
-        used_t, used_d = set(), set()
-        for _, i, j in sorted(pairs):
-            if i in used_t or j in used_d:
-                continue
-            used_t.add(i)
-            used_d.add(j)
+        used_t: set[int] = set()
+        used_d: set[int] = set()
+        for i, j in _claim(pairs, used_t, used_d):
             tr = self.tracks[i]
             gain = tr["p"] @ np.linalg.inv(tr["p"] + self.r)
             tr["x"] = tr["x"] + gain @ (z[j] - tr["x"])
@@ -187,11 +194,7 @@ class TextbookTracker:
                         and e @ e <= s.gate_max_distance_m**2 \
                         and dv @ dv <= s.reacquire_max_dv_mps**2:
                     again.append((d2, i, j))
-        for _, i, j in sorted(again):
-            if i in used_t or j in used_d:
-                continue
-            used_t.add(i)
-            used_d.add(j)
+        for i, j in _claim(again, used_t, used_d):
             tr = self.tracks[i]
             tr["x"], tr["p"], tr["rid"] = z[j].copy(), self.r.copy(), int(rid[j])
             self.resumed += 1

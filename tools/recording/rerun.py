@@ -38,6 +38,7 @@ from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR
 from aeb_radar_camera.common.log import add_log_level, setup_logging
 from aeb_radar_camera.common.messages import VerifiedTargets, encode
 from aeb_radar_camera.common.resources import DEPLOY
+from aeb_radar_camera.services.fusion.evidence import CANNOT_TELL_KEY, EVIDENCE_KEY, LLR_KEY
 from aeb_radar_camera.tools.recording.compare import (
     Comparison,
     Difference,
@@ -184,14 +185,14 @@ def evidence_lines(targets: VerifiedTargets, first_ns: int) -> list[str]:
     out = []
     for t in targets.targets:
         d = t.gate_detail
-        if "evidence_llr" not in d:
+        if EVIDENCE_KEY not in d:
             continue
         why = ",".join(k for k, v in d.items()
                        if v and (k.startswith("depth_") or k in ("appearance_veto",
-                                                              "cannot_tell")))
+                                                              CANNOT_TELL_KEY)))
         out.append(f"t={(targets.header.stamp_ns - first_ns) / 1e9:8.3f} s  track "
-                   f"{t.track_id:<4} {t.range_m:5.1f} m  llr {d.get('llr', 0.0):+.2f}  sum "
-                   f"{d['evidence_llr']:+.2f}  {why or '-'}  {t.verification.value}  "
+                   f"{t.track_id:<4} {t.range_m:5.1f} m  llr {d.get(LLR_KEY, 0.0):+.2f}  sum "
+                   f"{d[EVIDENCE_KEY]:+.2f}  {why or '-'}  {t.verification.value}  "
                    f"{t.decision.value}")
     return out
 
