@@ -84,6 +84,57 @@ def test_sparse_or_missing_depth_confirms_or_follows_the_policy():
         "depth_sparse"
 
 
+def scan_lines(depth: np.ndarray, every: int = 7) -> np.ndarray:
+    """Only every `every`-th row keeps its depth, as a lidar's scan lines projected into
+    the image do (about 14 % of the pixels)."""
+    out = np.zeros_like(depth)
+    out[::every] = depth[::every]
+    return out
+
+
+@pytest.mark.parametrize("x", [6.0, 12.0, 20.0])
+def test_sparse_scan_lines_everywhere_still_tell(x):
+    """Density is judged against the sensor's own cover in those rows: a lidar's lines
+    are few pixels but no holes, so the box is confirmed and the road seen through."""
+    with_box = CHECK.verify(observe(scan_lines(render_depth(CAL, boxes=(box(x, 1.0),))), x,
+                                    projector=WIDE))
+    road = CHECK.verify(observe(scan_lines(render_depth(CAL)), x, projector=WIDE))
+    assert outcome(with_box) == "depth_confirms", with_box
+    assert outcome(road) == "depth_sees_through", road
+    assert road.detail["row_cover"] < 0.2
+
+
+def test_a_column_of_holes_in_a_dense_frame_cannot_tell():
+    """The same share of returns as the scan lines, but only in the column while the
+    rest of the frame is dense: the sensor failed there (a black or shiny obstacle it
+    cannot match), and what it does see beyond must not veto."""
+    x = 12.0
+    obs = observe(render_depth(CAL), x, projector=WIDE)
+    assert obs.depth_m is not None
+    depth = obs.depth_m.copy()
+    cols = slice(obs.column.x - 20, obs.column.x + obs.column.w + 20)
+    window = depth[:, cols].copy()
+    depth[:, cols] = 0.0
+    depth[::7, cols] = window[::7]
+    got = CHECK.verify(observe(depth, x, projector=WIDE))
+    assert outcome(got) == "depth_sparse" and got.verified, got
+    assert got.detail["row_cover"] > 0.4       # the sky above the horizon has no return
+
+
+def test_where_the_camera_does_not_see_the_radars_point_it_cannot_tell():
+    """A target at the image's edge: the window about the radar's point lies mostly
+    outside the image, and what the part in view shows beyond it is not evidence that
+    nothing stands at the point."""
+    x = 5.0
+    edge = [y for y in np.arange(-8.0, 0.0, 0.05)
+            if WIDE.boxes(np.array([[x, y]]))[0] is not None]
+    got = CHECK.verify(observe(render_depth(CAL), x, edge[0], projector=WIDE))
+    assert outcome(got) == "depth_sparse" and got.verified, got
+    assert got.detail["in_view"] < 0.5
+    inside = CHECK.verify(observe(render_depth(CAL), x, edge[0] + 1.0, projector=WIDE))
+    assert outcome(inside) == "depth_sees_through" and inside.detail["in_view"] > 0.99
+
+
 class Look:
     """An appearance cue that answers a fixed probability."""
 

@@ -58,7 +58,7 @@ from aeb_radar_camera.services.fusion.verifiers.base import (
 SCORE = "depth_share"        # hits / band pixels with a return
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
 # Depth at or below this (metres) is "no return" (0); also the strictness of "nearer".
-_NO_RETURN = 1e-6
+NO_RETURN_M = 1e-6
 
 
 class DepthParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -187,7 +187,7 @@ class DepthConsistency:
                            p.max_height_m - col.camera_z_m)
         n_hit = cv2.countNonZero(cv2.bitwise_and(cv2.bitwise_and(col.returns, at), high))
         near = cv2.countNonZero(cv2.bitwise_and(
-            col.returns, cv2.inRange(col.dist, -np.inf, expected - tol - _NO_RETURN)))
+            col.returns, cv2.inRange(col.dist, -np.inf, expected - tol - NO_RETURN_M)))
         score = n_hit / n_returns if n_returns >= p.min_returns else 0.0
         return GateResult(score, score >= p.tau,
                           {"returns": float(n_returns), "hits": float(n_hit),
@@ -237,7 +237,7 @@ def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
     # ground, i.e. rise / run within [(min - cz) / r, (max - cz) / r].
     band = cv2.inRange(maps.slope[r0:r1, c0:c1], (band_min_m - cz) / expected,
                        (band_max_m - cz) / expected)
-    returns = cv2.bitwise_and(band, cv2.inRange(d, _NO_RETURN, np.inf))
+    returns = cv2.bitwise_and(band, cv2.inRange(d, NO_RETURN_M, np.inf))
     dist = cv2.multiply(d, maps.run[r0:r1, c0:c1])
     lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
     return ColumnDepth(dist, lift, band, returns, expected, cz)

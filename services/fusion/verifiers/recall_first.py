@@ -24,8 +24,17 @@ not as a share of the whole 0.3-2.2 m column, so a 0.4 m box, or the thin frame 
 bicycle, is seen where most of the column looks past it.
 
 Per frame, in this order (`detail` says which with a 1: `depth_<...>`, `appearance_veto`):
-    depth_sparse       fewer than `min_returns` band pixels with a return, or fewer than
-                       `min_density` of the band: depth cannot tell
+    depth_sparse       less than `min_in_view` of the window about the radar's point
+                       (`lateral_m` either side of it at its range) lies in the image
+                       (`in_view`: the camera does not see where the radar does), or
+                       fewer than `min_returns` band pixels with a return, or a share of
+                       the band with a return below `min_density` times the share the
+                       sensor returns across the whole frame in the window's rows
+                       (`row_cover`): depth cannot tell. Relative to the sensor's own
+                       cover, so that a dense D435 column that is mostly holes (a black,
+                       shiny or close obstacle it cannot match) cannot tell, while a
+                       lidar's projected scan lines, 10-20 % of the pixels everywhere,
+                       can.
     depth_confirms     at least `confirm_px` pixels at the range, covering at least
                        `confirm_area_m2` there (0.02 m2: a 14 cm square; a pixel spans
                        r / focal_px metres): a surface stands there, never vetoed,
@@ -54,6 +63,7 @@ with something standing behind it within `extent_m` is confirmed; without depth,
 without appearance weights, nothing is ever vetoed.
 """
 
+import weakref
 from collections.abc import Mapping
 from typing import Annotated, Literal
 
@@ -72,7 +82,7 @@ from aeb_radar_camera.services.fusion.verifiers.base import (
     VerifierConfigError,
     parse_params,
 )
-from aeb_radar_camera.services.fusion.verifiers.depth import column_depth, ray_maps
+from aeb_radar_camera.services.fusion.verifiers.depth import NO_RETURN_M, column_depth, ray_maps
 
 SCORE = "llr"
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
@@ -102,7 +112,9 @@ class RecallFirstParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     # is seen at the near edge of a 0.6 m body), so "nothing stands there" must hold
     # across the object's possible extent, not beside it.
     lateral_m: Metres = 0.5
+    min_in_view: Share = 0.5
     min_returns: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 12
+    # Of the sensor's own cover in the window's rows (depth_sparse in the docstring).
     min_density: Share = 0.3
     confirm_px: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 4
     confirm_area_m2: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.02
@@ -135,6 +147,9 @@ class RecallFirst:
         self.look = look
         self.model = D435Noise(focal_px=p.focal_px, baseline_m=p.baseline_m,
                                subpixel=p.subpixel, hole_rate=0.0)
+        # The last depth image's returns per row, cumulated: every track of a frame
+        # shares one image, so the frame is counted once, not once per track.
+        self._rows: tuple[weakref.ref[np.ndarray], np.ndarray] | None = None
 
     def params(self) -> dict[str, ParamValue]:
         return msgspec.structs.asdict(self.p)
@@ -145,6 +160,34 @@ class RecallFirst:
 
     def tolerance_m(self, distance_m: float) -> float:
         return float(self.p.k_sigma * self.model.rms_m(distance_m) + self.p.margin_m)
+
+    def row_cover(self, depth: np.ndarray, r0: int, r1: int) -> float:
+        """The share of the pixels of rows r0..r1 (the whole frame's width) with a
+        return."""
+        rows = self._rows
+        if rows is None or rows[0]() is not depth:
+            counts = np.count_nonzero(depth > NO_RETURN_M, axis=1)
+            rows = (weakref.ref(depth), np.concatenate(([0], np.cumsum(counts))))
+            self._rows = rows
+        r0, r1 = max(r0, 0), min(r1, depth.shape[0])
+        if r1 <= r0:
+            return 0.0
+        return float(rows[1][r1] - rows[1][r0]) / ((r1 - r0) * depth.shape[1])
+
+    def in_view_share(self, cal: Calibration, xy_m: tuple[float, float],
+                      distance_m: float) -> float:
+        """The share of the window about the radar's point `xy_m` (`lateral_m` either
+        side at `distance_m`, at least `min_width_px`) within the image's columns."""
+        p = self.p
+        height = (p.band_min_m + p.max_height_m) / 2.0
+        uv, in_front = cal.project(np.array([[xy_m[0], xy_m[1], height]]))
+        if not in_front[0]:
+            return 0.0
+        u = float(uv[0, 0])
+        half = max(p.min_width_px / 2.0,
+                   p.lateral_m * float(cal.k[0, 0]) / max(distance_m, 0.1))
+        seen = min(u + half, float(cal.width)) - max(u - half, 0.0)
+        return min(max(seen / (2.0 * half), 0.0), 1.0)
 
     def depth_evidence(self, obs: Observation) -> tuple[str, dict[str, float]]:
         """The depth outcome of one observation (one of the module's names) and its
@@ -171,7 +214,12 @@ class RecallFirst:
         detail = {"band_px": float(n_band), "returns": float(n_ret), "at_px": float(n_at),
                   "near_px": float(n_near), "through_px": float(n_through),
                   "expected_m": r, "tol_m": tol, "floor_m": detail_floor}
-        if n_ret < p.min_returns or n_ret < p.min_density * n_band:
+        detail["in_view"] = in_view = self.in_view_share(obs.calibration, obs.xy_m, r)
+        if in_view < p.min_in_view:
+            return SPARSE, detail
+        detail["row_cover"] = cover = self.row_cover(obs.depth_m, obs.roi.y,
+                                                     obs.roi.y + obs.roi.h)
+        if n_ret < p.min_returns or n_ret < p.min_density * cover * n_band:
             return SPARSE, detail
         # The surface the pixels at the range cover there (a pixel spans r / f metres).
         detail["at_area_m2"] = area = n_at * (r / p.focal_px) ** 2
