@@ -2,6 +2,7 @@
 pixel scale, both kinds of negatives, depth for the verifiers that use it."""
 
 from collections.abc import Mapping
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -9,7 +10,14 @@ import pytest
 from aeb_radar_camera.services.fusion import verifiers
 from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation, ParamValue
 from aeb_radar_camera.tools.eval.adapters import detect, frame_ids, kitti
-from aeb_radar_camera.tools.eval.adapters.paper_rois import scaled
+from aeb_radar_camera.tools.eval.adapters.paper_rois import (
+    Candidate,
+    PaperRoiSettings,
+    ground_plane,
+    object_candidates,
+    scaled,
+    standing_in_column,
+)
 from aeb_radar_camera.tools.eval.dataset_rois import DatasetSettings, dataset_records
 from aeb_radar_camera.tools.eval.frames import load_gray
 from aeb_radar_camera.tools.eval.scoring import Scorer, VerifierSpec, default_specs
@@ -112,6 +120,36 @@ def test_kitti_negatives_background_rows_and_lidar_structure(kitti_split):
     wall_u = (KITTI_P2[0, 0] * 6.0 / 9.0 + KITTI_P2[0, 2] + 0.5) * sc.sx - 0.5
     assert lidar[0].roi[0] < wall_u < lidar[0].roi[0] + lidar[0].roi[2]
     assert lidar[0].range_m == pytest.approx(np.hypot(6.0, 9.0), abs=0.3)
+
+
+def test_a_background_column_on_the_wall_is_a_background_with_something_standing(
+        kitti_split):
+    """A background ROI is an empty scene only where no lidar stands in its column at or
+    before its range: moved onto the unlabelled wall, it is a real structure."""
+    frame = kitti.read_frame(kitti_split, "000000")
+    sc = scaled(frame, FOCAL)
+    assert frame.lidar is not None
+    plane = ground_plane(frame.lidar, np.random.default_rng(0))
+    assert plane is not None
+    s = PaperRoiSettings()
+    car = next(c for c in object_candidates(frame, sc, s) if c.obj_class == "Car")
+
+    def moved(range_m: float, x_over_z: float) -> Candidate:
+        """The car's ROI moved to look along x / z = `x_over_z` (camera frame)."""
+        u = (KITTI_P2[0, 0] * x_over_z + KITTI_P2[0, 2] + 0.5) * sc.sx - 0.5
+        col = car.column
+        shift = round(u - (col.x + col.w / 2))
+        return replace(car, kind="background", roi=car.roi._replace(x=car.roi.x + shift),
+                       column=col._replace(x=col.x + shift), range_m=range_m)
+    # The wall (6 m right, 9-14 m ahead: 10.8-15.2 m away) at a 12 m range: standing;
+    # at 8 m it lies beyond the range; between the pedestrian and the car only road.
+    on_wall, short, road = moved(12.0, 0.6), moved(8.0, 0.6), moved(12.0, -0.2)
+    assert standing_in_column(frame, sc, [on_wall, short, road], frame.lidar, plane,
+                              s) == [True, False, False]
+    recs, _, _ = kitti_records(kitti_split)
+    kinds = {r.kind for r in recs}
+    assert "background" in kinds and kinds <= {"object", "background",
+                                              "background_standing", "lidar"}
 
 
 def depth_probe(params: Mapping[str, ParamValue]) -> verifiers.Verifier:

@@ -27,7 +27,9 @@ def test_run_on_a_recording_and_a_data_set_in_two_processes(inputs, tmp_path, ca
     assert "4 tasks on 2 local processes" in text.err and "4/4 tasks" in text.err
     records = read_records(out)
     assert {r.source for r in records} == {"recording", "kitti"}
-    assert {r.kind for r in records} == {"track", "background", "object", "lidar"}
+    # Background ROIs on the fixture's unlabelled wall hold lidar standing at their range.
+    assert {r.kind for r in records} == {"track", "background", "background_standing",
+                                         "object", "lidar"}
     run = json.loads((out / "run.json").read_text())
     assert run["workers"] == 2 and run["counters"]["frames"] == 3
     assert set(run["verifiers"]) == {s.name for s in default_specs()}
@@ -35,17 +37,21 @@ def test_run_on_a_recording_and_a_data_set_in_two_processes(inputs, tmp_path, ca
         r.truth == "YES" for r in records)
     report = json.loads((out / "report.json").read_text())
     ev = report["verifiers"]["edge_density"]
-    # Real structures (the lidar ROIs) are reported apart, not as negatives.
+    # Real structures (the lidar ROIs, background on the wall) are reported apart, not
+    # as negatives.
     assert ev["n"] + ev["real_structure"]["n"] == len(records)
-    assert ev["real_structure"]["n"] == sum(r.kind == "lidar" for r in records)
+    assert ev["real_structure"]["n"] == sum(r.kind in ("lidar", "background_standing")
+                                            for r in records)
     assert ev["ci"][0] <= ev["auc"] <= ev["ci"][1]
     # The negatives named for what stands there: the ghost track and the background ROIs
-    # are empty scene, the lidar ROIs real structures.
+    # are empty scene, the lidar ROIs and the background on the wall real structures.
     kinds = {k["kind"]: k for k in ev["negative_kinds"]}
     assert set(kinds) == {"empty scene", "real structure"}
     assert set(kinds["empty scene"]["members"]) == {"background", "track on no object"}
-    assert set(kinds["real structure"]["members"]) == {"lidar structure"}
-    assert "real structures (lidar structure" in text.out
+    assert set(kinds["real structure"]["members"]) == {
+        "lidar structure", "background, lidar standing at its range"}
+    assert "real structures (background, lidar standing at its range 1, lidar structure 3" \
+        in text.out
     assert "Table III: edge_density" in text.out and "Table II" in text.out
     for png in ("roc.png", "confusion.png", "density.png", "timing.png"):
         assert (out / png).read_bytes()[:4] == b"\x89PNG"

@@ -82,6 +82,8 @@ def test_simulator_false_targets_and_radar_returns_by_what_they_are():
     assert negative_category(track("", truth=None)) == "labelled NO"   # a person's NO
     assert negative_category(rec(0, 0.1, "radar", "NO")) == "real structure"
     assert negative_category(rec(0, 0.1, "background", "NO")) == "empty scene"
+    # A background ROI with lidar standing at its range is what stands there.
+    assert negative_category(rec(0, 0.1, "background_standing", "NO")) == "real structure"
 
 
 def test_the_sweep_runs_over_each_verifiers_own_score_range():

@@ -92,7 +92,8 @@ def _add_report(p: argparse.ArgumentParser, sources: bool = True) -> None:
     p.add_argument("--boot", type=int, default=2000, help="bootstrap samples")
     p.add_argument("--structures-as-negatives", action="store_true",
                    help="count real structures (lidar structure, radar returns on no "
-                        "labelled object, a guard rail) as negatives, i.e. as false passes "
+                        "labelled object, background with lidar standing at its range, a "
+                        "guard rail) as negatives, i.e. as false passes "
                         "where they pass (default: reported apart)")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--held-out", metavar="WEIGHTS",

@@ -6,7 +6,7 @@ noise, tools/eval/depth.py) for verifiers that use depth.
 """
 
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from aeb_radar_camera.tools.eval.adapters.paper_rois import (
     object_candidates,
     point_candidates,
     scaled,
+    standing_in_column,
 )
 from aeb_radar_camera.tools.eval.depth import project_depth
 from aeb_radar_camera.tools.eval.frames import (
@@ -32,7 +33,13 @@ from aeb_radar_camera.tools.eval.frames import (
     source_digest,
 )
 from aeb_radar_camera.tools.eval.options import DEPTH_MODES
-from aeb_radar_camera.tools.eval.records import KIND_LIDAR, KIND_RADAR, FrameRef, RoiRecord
+from aeb_radar_camera.tools.eval.records import (
+    KIND_BACKGROUND_STANDING,
+    KIND_LIDAR,
+    KIND_RADAR,
+    FrameRef,
+    RoiRecord,
+)
 from aeb_radar_camera.tools.eval.scoring import Scorer, lighting
 
 
@@ -88,9 +95,13 @@ def dataset_records(kind: str, root: Path, frame_ids: list[str], s: DatasetSetti
         _bump(counters, "frames")
         rng = np.random.default_rng(frame_seed(s.seed, frame_id))
         positives = object_candidates(frame, sc, p)
-        candidates: list[Candidate] = positives + background_candidates(frame, sc,
-                                                                        positives, p, rng)
+        background = background_candidates(frame, sc, positives, p, rng)
         plane = ground_plane(frame.lidar, rng) if frame.lidar is not None else None
+        if frame.lidar is not None and plane is not None:
+            stands = standing_in_column(frame, sc, background, frame.lidar, plane, p)
+            background = [replace(c, kind=KIND_BACKGROUND_STANDING) if st else c
+                          for c, st in zip(background, stands, strict=True)]
+        candidates: list[Candidate] = positives + background
         if frame.lidar is not None:
             if plane is None:
                 _bump(counters, "no_ground_plane")

@@ -19,6 +19,9 @@ RUN_FILE = "run.json"
 KIND_TRACK = "track"            # a radar track of a recording
 KIND_OBJECT = "object"          # a labelled object of a data set (positive)
 KIND_BACKGROUND = "background"  # same size, same rows, no labelled object (negative)
+# A background ROI whose column holds lidar points standing above the ground at or
+# before its range: something unlabelled stands there (a hedge, a wall, a post).
+KIND_BACKGROUND_STANDING = "background_standing"
 KIND_LIDAR = "lidar"            # lidar structure on no labelled object (negative)
 KIND_RADAR = "radar"            # radar returns on no labelled object (negative)
 

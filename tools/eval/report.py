@@ -9,7 +9,8 @@ PNG.
 Negatives are named for what stands there (`negative_category`): an empty scene (a
 background ROI, a radar track on nothing), something flat on the road (a plate, a
 manhole cover), something overhead (a sign), or a real structure (the lidar's and the
-radar's returns on no labelled object: walls, poles, fences, trees, a guard rail). A car
+radar's returns on no labelled object: walls, poles, fences, trees, a guard rail; a
+background ROI whose column holds lidar points standing at its range). A car
 must not hit a real structure: keeping it out of the brake decision is the corridor's
 job, not the camera's, so real structures are reported apart (the share the verifier
 confirms) and never counted as false passes in the headline figures.
@@ -28,6 +29,7 @@ from aeb_radar_camera.tools.eval.labels import AMBIGUOUS, NO, YES
 from aeb_radar_camera.tools.eval.options import PAPER_SWEEP
 from aeb_radar_camera.tools.eval.records import (
     KIND_BACKGROUND,
+    KIND_BACKGROUND_STANDING,
     KIND_LIDAR,
     KIND_RADAR,
     KIND_TRACK,
@@ -110,7 +112,7 @@ def negative_category(r: RoiRecord) -> str:
     LABELLED_NO (a person said NO; what is there is not known) or OTHER."""
     if r.kind == KIND_BACKGROUND:
         return EMPTY_SCENE
-    if r.kind in (KIND_LIDAR, KIND_RADAR):
+    if r.kind in (KIND_LIDAR, KIND_RADAR, KIND_BACKGROUND_STANDING):
         return REAL_STRUCTURE
     if r.kind == KIND_TRACK:
         if r.obj_class in CATEGORY_OF_CLASS:
@@ -125,7 +127,9 @@ def negative_member(r: RoiRecord) -> str:
     """The ROI kind within its category (how the ROI was made)."""
     if r.kind == KIND_TRACK:
         return f"track on {r.obj_class or 'no object'}" if r.truth is not None else "track"
-    return {KIND_LIDAR: "lidar structure", KIND_RADAR: "radar returns"}.get(r.kind, r.kind)
+    return {KIND_LIDAR: "lidar structure", KIND_RADAR: "radar returns",
+            KIND_BACKGROUND_STANDING: "background, lidar standing at its range"
+            }.get(r.kind, r.kind)
 
 
 def sweep_taus(verifier: str, scores: np.ndarray, truth: np.ndarray, tau: float | None,

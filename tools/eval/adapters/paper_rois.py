@@ -8,7 +8,11 @@ ColumnProjector, in the image resampled so that its focal length is the paper's 
 
 Negatives, two kinds:
 - background: ROIs of a positive's size at the same image rows, placed at random where
-  they overlap no labelled object (any class, DontCare regions included);
+  they overlap no labelled object (any class, DontCare regions included); where the data
+  has lidar, one whose column holds at least `lidar_min_points` points standing
+  `structure_min_height_m` to `structure_max_height_m` above the ground and no farther
+  than `standing_tolerance_m` beyond its range is a background with something standing
+  there (`standing_in_column`: a hedge, a wall, a post), not an empty scene;
 - points (lidar structure, radar returns): clusters of sensor points 3-25 m away that lie
   at least `clearance_m` from every labelled box and outside DontCare regions, each one a
   column at the cluster's nearest point - the paper's kind of negative, a sensor target
@@ -83,6 +87,9 @@ class PaperRoiSettings:
     structure_max_height_m: float = 2.0
     cluster_cell_m: float = 0.9
     lidar_min_points: int = 5
+    # A background column's points up to this far beyond its range stand "at" it (the
+    # lidar's own range error is centimetres; this is the obstacle's depth).
+    standing_tolerance_m: float = 1.0
     radar_min_points: int = 1
     radar_cell_m: float = 0.5
 
@@ -252,6 +259,33 @@ def background_candidates(frame: DatasetFrame, sc: Scaled, positives: list[Candi
                           Roi(roi.x + dx, roi.y + dy, pos.column.w, pos.column.h),
                           pos.range_m, "", "NO", calibration=pos.calibration, xy_m=pos.xy_m)
                 for k, roi in enumerate(got)]
+    return out
+
+
+def standing_in_column(frame: DatasetFrame, sc: Scaled, candidates: list[Candidate],
+                       points: np.ndarray, plane: tuple[float, float, float],
+                       s: PaperRoiSettings) -> list[bool]:
+    """Per candidate: do at least `lidar_min_points` of `points` (sensor frame) project
+    into its column box's columns within its ROI's rows, stand `structure_min_height_m`
+    to `structure_max_height_m` above the ground plane, and lie no farther from the
+    camera than its range + `standing_tolerance_m`?"""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    cx, cy = camera_xy(frame)
+    height = p[:, 2] - (plane[0] * p[:, 0] + plane[1] * p[:, 1] + plane[2])
+    dist = np.hypot(p[:, 0] - cx, p[:, 1] - cy)
+    cam = p @ frame.r.T + frame.t
+    ahead = cam[:, 2] > 0.1
+    z = np.where(ahead, cam[:, 2], np.inf)
+    u = (sc.k[0, 0] * cam[:, 0] + sc.k[0, 2] * cam[:, 2]) / z
+    v = (sc.k[1, 1] * cam[:, 1] + sc.k[1, 2] * cam[:, 2]) / z
+    standing = (ahead & (height >= s.structure_min_height_m)
+                & (height <= s.structure_max_height_m))
+    out = []
+    for c in candidates:
+        inside = (standing & (u >= c.column.x) & (u < c.column.x + c.column.w)
+                  & (v >= c.roi.y) & (v < c.roi.y + c.roi.h)
+                  & (dist <= c.range_m + s.standing_tolerance_m))
+        out.append(int(np.count_nonzero(inside)) >= s.lidar_min_points)
     return out
 
 
