@@ -120,6 +120,9 @@ class RadarStatus(msgspec.Struct, frozen=True, kw_only=True):
     meas_counter_gaps: int = 0         # cycles the radar counted that never arrived
     tracker_resets: int = 0            # gaps or time jumps that restarted the tracker
     ego_motion_frames_sent: int = 0    # 0x300 / 0x301 frames written to this radar
+    # Confirmed tracks that lost their detection and took a free one near them (a
+    # target that sets off sideways keeps its id and evidence: tracker `reacquire_chi2`).
+    tracks_resumed: int = 0
 
 
 class CanFrame(msgspec.Struct, frozen=True, array_like=True, kw_only=True):

@@ -301,4 +301,5 @@ class RadarCore:
             bus_reopens=bus_reopens, rejected={**bus_rejected, **self.rejected.snapshot()},
             sensor_id=self.sensor.sensor_id, meas_counter_gaps=self.meas_counter_gaps,
             tracker_resets=self.tracker.resets, ego_motion_frames_sent=ego_motion_frames_sent,
+            tracks_resumed=self.tracker.resumed,
         )

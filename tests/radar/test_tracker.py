@@ -11,6 +11,8 @@ from aeb_radar_camera.common.config.radar import (
     RadarSettings,
     TrackerSettings,
 )
+from aeb_radar_camera.common.messages import Header
+from aeb_radar_camera.common.messages.radar import BusState
 from aeb_radar_camera.services.radar.ars408 import (
     ClusterGeneral,
     ObjectGeneral,
@@ -40,9 +42,9 @@ def cluster(i, x, y, vx=0.0, vy=0.0, rcs=10.0):
     return ClusterGeneral(i, q(x, 0.2), q(y, 0.2), q(vx, 0.25), q(vy, 0.25), 0, q(rcs, 0.5))
 
 
-def run(cycles, s=None, t0=100.0):
-    """Each cycle a list of (x, y, vx, vy) in cluster mode; returns the published tracks
-    per cycle."""
+def run_core(cycles, s=None, t0=100.0):
+    """Each cycle a list of (x, y, vx, vy) in cluster mode; returns the core and the
+    published tracks per cycle."""
     s = s or settings()
     core = RadarCore(s.sensors[0], s)
     out = []
@@ -51,7 +53,11 @@ def run(cycles, s=None, t0=100.0):
         results = feed(core, [(f, t0 + k * DT) for f in frames])
         assert len(results) == 1 and results[0].complete
         out.append(results[0].tracks)
-    return out
+    return core, out
+
+
+def run(cycles, s=None, t0=100.0):
+    return run_core(cycles, s, t0)[1]
 
 
 def confirmed(tracks):
@@ -133,6 +139,15 @@ def test_a_target_that_sets_off_keeps_its_track_and_takes_its_new_velocity():
     assert now.track_id == before[0].track_id and now.misses == 0 and now.hits == 9
     assert now.vy_mps == pytest.approx(4.2, abs=0.3)       # measured, not filtered away
     assert [t.track_id for t in published[11]] == [before[0].track_id]
+
+
+def test_the_radar_status_counts_the_re_acquired_tracks():
+    for reacquire, expected in ((TrackerSettings().reacquire_chi2, 1), (0.0, 0)):
+        core, _ = run_core(setting_off(), settings(tracker=TrackerSettings(
+            reacquire_chi2=reacquire)))
+        status = core.status(Header(0, "radar", 0, 0), BusState.ACTIVE,
+                             0, "replay", "", 0.0, 0, {}, 0)
+        assert status.tracks_resumed == expected
 
 
 def test_re_acquisition_off_far_away_or_far_off_in_velocity_starts_a_new_track():
