@@ -262,6 +262,18 @@ def background_candidates(frame: DatasetFrame, sc: Scaled, positives: list[Candi
     return out
 
 
+def image_points(frame: DatasetFrame, sc: Scaled, points: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel columns u, rows v (at the evaluation's scale) of sensor-frame points (N, 3),
+    and whether each lies ahead of the camera (u, v of the others are meaningless)."""
+    cam = points @ frame.r.T + frame.t
+    ahead = cam[:, 2] > 0.1
+    z = np.where(ahead, cam[:, 2], np.inf)
+    u = (sc.k[0, 0] * cam[:, 0] + sc.k[0, 2] * cam[:, 2]) / z
+    v = (sc.k[1, 1] * cam[:, 1] + sc.k[1, 2] * cam[:, 2]) / z
+    return u, v, ahead
+
+
 def standing_in_column(frame: DatasetFrame, sc: Scaled, candidates: list[Candidate],
                        points: np.ndarray, plane: tuple[float, float, float],
                        s: PaperRoiSettings) -> list[bool]:
@@ -273,11 +285,7 @@ def standing_in_column(frame: DatasetFrame, sc: Scaled, candidates: list[Candida
     cx, cy = camera_xy(frame)
     height = p[:, 2] - (plane[0] * p[:, 0] + plane[1] * p[:, 1] + plane[2])
     dist = np.hypot(p[:, 0] - cx, p[:, 1] - cy)
-    cam = p @ frame.r.T + frame.t
-    ahead = cam[:, 2] > 0.1
-    z = np.where(ahead, cam[:, 2], np.inf)
-    u = (sc.k[0, 0] * cam[:, 0] + sc.k[0, 2] * cam[:, 2]) / z
-    v = (sc.k[1, 1] * cam[:, 1] + sc.k[1, 2] * cam[:, 2]) / z
+    u, v, ahead = image_points(frame, sc, p)
     standing = (ahead & (height >= s.structure_min_height_m)
                 & (height <= s.structure_max_height_m))
     out = []
@@ -334,11 +342,8 @@ def point_candidates(frame: DatasetFrame, sc: Scaled, points: np.ndarray, kind: 
         keep &= height >= min_height_m
     if max_height_m is not None:
         keep &= height <= max_height_m
-    cam = p @ frame.r.T + frame.t
-    z = np.where(cam[:, 2] > 0.1, cam[:, 2], np.inf)
-    u = (sc.k[0, 0] * cam[:, 0] + sc.k[0, 2] * cam[:, 2]) / z
-    v = (sc.k[1, 1] * cam[:, 1] + sc.k[1, 2] * cam[:, 2]) / z
-    keep &= (cam[:, 2] > 0.1) & (u >= 0) & (u < sc.width) & (v >= 0) & (v < sc.height)
+    u, v, ahead = image_points(frame, sc, p)
+    keep &= ahead & (u >= 0) & (u < sc.width) & (v >= 0) & (v < sc.height)
     for box in frame.boxes:
         keep &= footprint_distance(p[:, :2], box.footprint) >= s.clearance_m
     for b in frame.dontcare:
