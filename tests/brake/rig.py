@@ -135,8 +135,8 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
     [brake] fields; nested tables as `serial={...}`, `actuator={...}`, `realtime={...}`.
     `secure`: the secure profile (TLS router with access control; this process observes as the
     monitor, which may read everything and write nothing). `watch_commands` false: this
-    process does not subscribe to the commands (a flood test: a slow subscriber of a
-    BLOCK key slows the router's delivery to every subscriber).
+    process does not subscribe to the commands (a flood test: a flood's callbacks would
+    take this process's CPU from the simulated actuator it runs).
     `realtime={"priority": p}`: the brake, the router and the publishers at SCHED_FIFO p,
     as deployed (fusion and router at the brake's priority)."""
     nested = {k: brake.pop(k) for k in ("serial", "actuator", "realtime") if k in brake}
