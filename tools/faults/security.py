@@ -246,15 +246,20 @@ class StuckSubscriber(Fault):
                 "--connect", ctx.loop.endpoint, "--vehicle", ctx.vehicle]
         proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                 text=True)
-        load: subprocess.Popen[bytes] | None = None
+        load: subprocess.Popen[str] | None = None
         try:
             assert proc.stdout is not None
             if proc.stdout.readline().strip() != "ready":
                 return Outcome(False, None, "the stuck subscriber did not start")
             mark = obs.status.mark()
             proc.send_signal(signal.SIGSTOP)
-            load = subprocess.Popen([*argv, "--load"], stdout=subprocess.DEVNULL,
-                                    stderr=subprocess.DEVNULL)
+            load = subprocess.Popen([*argv, "--load"], stdout=subprocess.PIPE,
+                                    stderr=subprocess.DEVNULL, text=True)
+            assert load.stdout is not None
+            # judged only once the load runs: before it, the stack's own traffic alone
+            # would leave the frozen process's queues unchanged and look full
+            if load.stdout.readline().strip() != "ready":
+                return Outcome(False, None, "the load did not start")
             try:
                 filled, fill_s = wait_filled(proc.pid, STUCK_FILL_TIMEOUT_S,
                                              router=_router_pid(ctx))
