@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
                                *(["--config-file", args.router_config]
                                  if args.router_config else [])], stdout=subprocess.DEVNULL)
     stuck: subprocess.Popen[str] | None = None
-    load: subprocess.Popen[bytes] | None = None
+    load: subprocess.Popen[str] | None = None
     try:
         deadline = time.monotonic() + 30
         while not port_open(port):
@@ -138,7 +138,14 @@ def main(argv: list[str] | None = None) -> int:
                 stuck.send_signal(signal.SIGSTOP)
             # the load from a process of its own: it takes no time of this one's receiver
             load = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.faults.stuck",
-                                     "--connect", endpoint, "--load"], stdout=subprocess.DEVNULL)
+                                     "--connect", endpoint, "--load"], stdout=subprocess.PIPE,
+                                    text=True)
+            assert load.stdout is not None
+            # the queues judged full only once the load runs (the commands alone would
+            # leave them unchanged)
+            if load.stdout.readline().strip() != "ready":
+                print("error: the load did not start", file=sys.stderr)
+                return 1
             filled, fill_s = wait_filled(stuck.pid, 60.0, router=router.pid)
             t_full = time.monotonic_ns()
             time.sleep(args.observe_s)        # the measurement's own duration
