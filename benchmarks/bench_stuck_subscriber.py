@@ -113,13 +113,6 @@ def main(argv: list[str] | None = None) -> int:
                 print("error: the router did not start", file=sys.stderr)
                 return 1
             time.sleep(0.05)
-        stuck = subprocess.Popen([sys.executable, "-m", "aeb_radar_camera.tools.faults.stuck",
-                                  "--connect", endpoint, *(["--block"] if args.block else [])],
-                                 stdout=subprocess.PIPE, text=True)
-        assert stuck.stdout is not None
-        if stuck.stdout.readline().strip() != "ready":
-            print("error: the stuck subscriber did not start", file=sys.stderr)
-            return 1
         with client(endpoint) as rx_bus, client(endpoint) as tx_bus:
             arrivals: list[int] = []
             seqs: list[int] = []
@@ -132,6 +125,15 @@ def main(argv: list[str] | None = None) -> int:
             stream = Stream(tx_bus, Congestion(args.congestion) if args.congestion else None,
                             args.period_ms / 1000)
             stream.thread.start()
+            # ready once the commands reach it
+            stuck = subprocess.Popen([sys.executable, "-m",
+                                      "aeb_radar_camera.tools.faults.stuck", "--connect",
+                                      endpoint, *(["--block"] if args.block else [])],
+                                     stdout=subprocess.PIPE, text=True)
+            assert stuck.stdout is not None
+            if stuck.stdout.readline().strip() != "ready":
+                print("error: the stuck subscriber did not start", file=sys.stderr)
+                return 1
             time.sleep(args.baseline_s)       # the measurement's own duration
             t_freeze = time.monotonic_ns()
             if not args.block:

@@ -6,7 +6,9 @@ disk hangs, a process frozen by a debugger). docs/security.md says what it can d
         [--expr 'aeb/ego/**'] [--block]
     python -m aeb_radar_camera.tools.faults.stuck --connect tcp/127.0.0.1:7447 --load
 
-It prints one line, ``ready``, once subscribed. Without `--block` the caller freezes it
+It prints one line, ``ready``, once the first sample has arrived (the router then routes
+the keys to it: a process frozen right after declaring its subscriber may not have sent
+the declaration yet). Without `--block` the caller freezes it
 with SIGSTOP; with `--block` its callback blocks on the first sample until SIGTERM (a
 subscriber whose callback never returns: Zenoh's reader for its link waits with it).
 Either way the kernel's receive buffer of its link fills and then the router's queue to
@@ -17,7 +19,8 @@ no service reads (`LOAD_BYTES` at `LOAD_HZ`, more than a real camera's so that t
 fills within seconds whatever else runs) until SIGTERM, from a process of its own so that
 the load takes nobody else's interpreter.
 
-Exit code 0 on SIGTERM; 1 when the bus cannot be opened.
+Exit code 0 on SIGTERM; 1 when the bus cannot be opened or no sample arrives within
+`FIRST_SAMPLE_TIMEOUT_S`.
 """
 
 import argparse
@@ -47,6 +50,7 @@ FILL_STABLE_S = 1.0
 LOAD_CAMERA = "load"
 LOAD_BYTES = 256_000
 LOAD_HZ = 50.0
+FIRST_SAMPLE_TIMEOUT_S = 60.0
 
 
 def _pidfd_getfd(pidfd: int, fd: int) -> int:
@@ -169,11 +173,11 @@ def main(argv: list[str] | None = None) -> int:
     settings = ZenohSettings(mode=ZenohMode.CLIENT, connect=tuple(args.connect),
                              config_file=args.zenoh_config)
     expr = args.expr or f"aeb/{args.vehicle}/**"
-    blocked = threading.Event()
+    first = threading.Event()
 
     def on_sample(payload: bytes, key: str, encoding: str, t_ns: int) -> None:
+        first.set()
         if args.block:
-            blocked.set()
             stop.wait()     # Zenoh's reader of this link waits here: nothing more is read
 
     try:
@@ -183,6 +187,14 @@ def main(argv: list[str] | None = None) -> int:
                 publish_load(bus, stop, args.load_bytes, args.load_hz)
                 return 0
             sub = bus.subscribe_expr(expr, on_sample)
+            deadline = time.monotonic() + FIRST_SAMPLE_TIMEOUT_S
+            while not first.wait(0.1):
+                if stop.is_set():
+                    return 0
+                if time.monotonic() > deadline:
+                    print(f"error: no sample on {expr} in {FIRST_SAMPLE_TIMEOUT_S:g} s",
+                          file=sys.stderr)
+                    return 1
             print("ready", flush=True)
             stop.wait()
             sub.undeclare()
