@@ -44,8 +44,11 @@ def test_quick_mode_every_fault_answered_within_bound(tmp_path):
         again, info2 = harness.run(tmp_path / "again", 1, "quick", log,
                                    only=[r.fault for r in missed])
         context = f"{context}\nagain:\n{log.getvalue()[-3000:]}"
-        assert [r.fault for r in again] == [r.fault for r in missed], context
-        for first, second in zip(missed, again, strict=True):
+        # (`only` matches parts of names: "frozen camera" runs "noisy frozen camera" too)
+        by_name = {r.fault: r for r in again}
+        assert {r.fault for r in missed} <= set(by_name), context
+        for first in missed:
+            second = by_name[first.fault]
             assert second.outcomes and second.outcomes[0].ok, (
                 f"{first.fault}: {first.outcomes[0].detail}, again: "
                 f"{second.outcomes[0].detail if second.outcomes else 'not injected'}{context}")
