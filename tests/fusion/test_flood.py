@@ -134,7 +134,13 @@ def test_a_track_flood_gets_one_command_per_cycle_interval(router, tmp_path: Pat
     window = 500 * MS
     busiest = max(bisect.bisect_right(stamps, t + window) - i for i, t in enumerate(stamps))
     assert busiest <= window // (50 * MS) + 2, (busiest, stamps)
+    # one sequence number per command published, none for a shed cycle (that would skip
+    # thousands): in order, and at most a few missing here. The key is DROP: a command
+    # may be dropped on the way when a thread on it is starved on a loaded host (the
+    # brake's deadline covers one); with a number per shed cycle most would be missing.
     seqs = [m.header.seq for m in commands.messages]
-    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))       # contiguous commands
+    assert seqs == sorted(set(seqs)), seqs
+    missing = seqs[-1] - seqs[0] + 1 - len(seqs)
+    assert missing <= max(2, len(seqs) // 10), (missing, seqs)
     # counted: those the radar thread left for a newer one (Zenoh's ring drops more)
     assert shed and shed[-1] > 0
