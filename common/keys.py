@@ -47,8 +47,20 @@ class Priority(enum.Enum):
 
 
 class Congestion(enum.Enum):
-    BLOCK = "BLOCK"   # never dropped: the publisher waits
-    DROP = "DROP"     # dropped when the link is congested
+    """What a publisher (and every router on the way) does with a sample when the queue
+    towards one of its subscribers is full.
+
+    Every key of the registry is DROP. A BLOCK sample waits for the slowest subscriber:
+    Zenoh holds the router's reader of the publisher's link (and with it every sample of
+    that publisher, of every key and priority) for up to its `wait_before_close` (5 s),
+    so any process that subscribes and stops reading (a paused `aeb echo`, a frozen
+    recorder) would stop fusion's commands reaching the brake. Dropped, a sample is lost
+    for that one subscriber only; the consumers' deadlines cover a lost sample. BLOCK is
+    for tools that replay a recording as fast as its readers take it (`aeb replay`).
+    """
+
+    BLOCK = "BLOCK"   # never dropped: the publisher waits (see above)
+    DROP = "DROP"     # dropped for a subscriber whose queue is full (after 1 ms)
 
 
 @dataclass(frozen=True)
@@ -116,11 +128,11 @@ RADAR_CYCLE_S = 0.075
 RADAR_TRACKS: KeySpec[RadarTracks] = KeySpec(
     "radar_tracks", "radar/{sensor}/tracks", RadarTracks,
     rate_hz=1 / RADAR_CYCLE_S, max_age_s=2 * RADAR_CYCLE_S + 0.01,
-    qos=QoS(Priority.DATA_HIGH, Congestion.BLOCK, express=True),
+    qos=QoS(Priority.DATA_HIGH, Congestion.DROP, express=True),
 )
 RADAR_STATUS: KeySpec[RadarStatus] = KeySpec(
     "radar_status", "radar/{sensor}/status", RadarStatus,
-    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.BLOCK),
+    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.DROP),
     rate_is_minimum=True,      # 1 Hz and on every change
 )
 CAMERA_JPEG: KeySpec[CompressedFrame] = KeySpec(
@@ -135,21 +147,21 @@ CAMERA_DEPTH: KeySpec[DepthFrame] = KeySpec(
 )
 CAMERA_INFO: KeySpec[CameraInfo] = KeySpec(
     "camera_info", "camera/{camera}/info", CameraInfo,
-    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.BLOCK),
+    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.DROP),
 )
 FUSION_TARGETS: KeySpec[VerifiedTargets] = KeySpec(
     "fusion_targets", "fusion/{instance}/targets", VerifiedTargets,
     rate_hz=1 / RADAR_CYCLE_S, max_age_s=2 * RADAR_CYCLE_S + 0.01,
-    qos=QoS(Priority.DATA_HIGH, Congestion.BLOCK),
+    qos=QoS(Priority.DATA_HIGH, Congestion.DROP),
 )
 FUSION_BRAKE_CMD: KeySpec[BrakeCommand] = KeySpec(
     "fusion_brake_cmd", "fusion/{instance}/brake_cmd", BrakeCommand,
     rate_hz=1 / RADAR_CYCLE_S, max_age_s=0.2,
-    qos=QoS(Priority.REAL_TIME, Congestion.BLOCK, express=True),
+    qos=QoS(Priority.REAL_TIME, Congestion.DROP, express=True),
 )
 BRAKE_STATUS: KeySpec[BrakeStatus] = KeySpec(
     "brake_status", "brake/status", BrakeStatus,
-    rate_hz=10.0, max_age_s=0.3, qos=QoS(Priority.INTERACTIVE_HIGH, Congestion.BLOCK),
+    rate_hz=10.0, max_age_s=0.3, qos=QoS(Priority.INTERACTIVE_HIGH, Congestion.DROP),
     rate_is_minimum=True,      # at least 10 Hz, also on every command (13.3 Hz)
 )
 # The vehicle's own state (docs/vehicle.md): the newest sample is all that counts, so
@@ -168,7 +180,7 @@ VEHICLE_DRIVER: KeySpec[DriverInputs] = KeySpec(
 )
 VEHICLE_STATUS: KeySpec[VehicleStatus] = KeySpec(
     "vehicle_status", "vehicle/gateway/{gateway}/status", VehicleStatus,
-    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.BLOCK),
+    rate_hz=1.0, max_age_s=3.0, qos=QoS(Priority.DATA, Congestion.DROP),
     rate_is_minimum=True,      # 1 Hz and on every change
 )
 # The radar's raw CAN frames, per bus, for recordings that re-run the radar. Dropped
@@ -178,6 +190,8 @@ RADAR_CAN: KeySpec[RawCanFrames] = KeySpec(
     rate_hz=1 / RADAR_CYCLE_S, max_age_s=2 * RADAR_CYCLE_S + 0.01,
     qos=QoS(Priority.DATA, Congestion.DROP),
 )
+# Liveliness tokens (Bus.declare_health): Zenoh's own declarations, sent with the QoS
+# Zenoh gives them; this QoS is not used.
 HEALTH: KeySpec[Any] = KeySpec(
     "health", "health/{service}/{instance}", None,
     rate_hz=None, max_age_s=None, qos=QoS(),

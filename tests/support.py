@@ -112,6 +112,14 @@ def python_module(module: str, *args: str) -> list[str]:
     return [sys.executable, "-m", module, *args]
 
 
+_ROUTER_PIDS: dict[str, int] = {}
+
+
+def router_pid(endpoint: str) -> int:
+    """The process id of the running `router_process` at `endpoint`. Raises KeyError."""
+    return _ROUTER_PIDS[endpoint]
+
+
 @contextmanager
 def router_process(log_dir: Path, port: int | None = None,
                    realtime_priority: int = 0) -> Iterator[str]:
@@ -128,8 +136,10 @@ def router_process(log_dir: Path, port: int | None = None,
                  "router port")
         if not proc.alive():
             raise RuntimeError(f"router exited:\n{proc.output()}")
+        _ROUTER_PIDS[endpoint] = proc.pid
         yield endpoint
     finally:
+        _ROUTER_PIDS.pop(endpoint, None)
         proc.stop()
 
 

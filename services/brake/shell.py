@@ -6,7 +6,7 @@
   thread), the oldest dropped when it is full: a flood of commands costs the brake only
   what it handles, and the newest command waits at most QUEUE_CAPACITY handlings, never
   the backlog of the flood (`command_queue_full` counts the times the thread found the
-  ring full, i.e. dropped older samples);
+  ring full, i.e. dropped older samples; `command_samples` counts those it handled);
 - the timer thread (`brake-timer`, one real-time priority above the command path): wakes
   at the core's next due time (deadline expiry, hold end, heartbeat, acknowledgement
   timeout) and at least every TIMER_PERIOD_S, so that silence is detected without any
@@ -118,6 +118,10 @@ class BrakeShell:
         self._last_status_ns = 0
         self._publish_at_ns: int | None = None   # a status is owed at this time
         self._publish_lock = threading.Lock()    # taken before _lock, never inside it
+        # command samples handled (under the lock, so that a status never shows one
+        # not yet classified): each is a command followed (`commands`), a rejection
+        # (`rejected`), or `command_failed`
+        self.command_samples = 0
         self.cmd_to_serial_us: float | None = None
         self.radar_to_serial_us: float | None = None
         self._timer = threading.Thread(target=self._timer_loop, name="brake-timer", daemon=True)
@@ -199,6 +203,7 @@ class BrakeShell:
     def on_command(self, payload: bytes, key: str, rx_mono_ns: int) -> None:
         """The command thread: validate, decide and write to the serial line at once."""
         with self._lock:
+            self.command_samples += 1
             before = (self.core.state, self.core.command_state)
             out = self.core.on_command(payload, key, rx_mono_ns, wall_ns())
             if out is not None:
@@ -391,6 +396,8 @@ class BrakeShell:
             actuator_position_pct=v.actuator_position_pct, actuator_state=v.actuator_state,
             actuator_connected=v.actuator_connected, cmd_to_serial_us=self.cmd_to_serial_us,
             radar_to_serial_us=self.radar_to_serial_us, rejected=v.rejected,
-            counters=saturated({**v.counters, **self.errors}), state_since_mono_ns=v.since_ns,
+            counters=saturated({**v.counters, **self.errors,
+                                "command_samples": self.command_samples}),
+            state_since_mono_ns=v.since_ns,
             last_cmd_rx_mono_ns=v.last_cmd_rx_ns, command_state=v.command_state,
         )

@@ -135,8 +135,8 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
     [brake] fields; nested tables as `serial={...}`, `actuator={...}`, `realtime={...}`.
     `secure`: the secure profile (TLS router with access control; this process observes as the
     monitor, which may read everything and write nothing). `watch_commands` false: this
-    process does not subscribe to the commands (a flood test: a slow subscriber of a
-    BLOCK key slows the router's delivery to every subscriber).
+    process does not subscribe to the commands (a flood test: a flood's callbacks would
+    take this process's CPU from the simulated actuator it runs).
     `realtime={"priority": p}`: the brake, the router and the publishers at SCHED_FIFO p,
     as deployed (fusion and router at the brake's priority)."""
     nested = {k: brake.pop(k) for k in ("serial", "actuator", "realtime") if k in brake}
@@ -184,6 +184,49 @@ def brake_rig(log_dir: Path, secure: bool = False, watch_commands: bool = True,
         # the test may have replaced the process (a restart): the one running now
         assert rig.brake.alive(), f"brake process died:\n{rig.brake.output()}"
         rig.brake.stop()
+
+
+@dataclass(frozen=True)
+class Received:
+    """What the brake took off its command ring between two of its statuses, and what it
+    made of it: every sample a command followed, a refusal (by reason) or a failure."""
+
+    samples: int
+    followed: int
+    refused: dict[str, int]
+    failed: int
+
+    @property
+    def accounted(self) -> int:
+        return self.followed + sum(self.refused.values()) + self.failed
+
+
+def received(before: BrakeStatus, after: BrakeStatus) -> Received:
+    def grew(key: str) -> int:
+        return after.counters.get(key, 0) - before.counters.get(key, 0)
+
+    return Received(grew("command_samples"), grew("commands"),
+                    {k: v - before.rejected.get(k, 0) for k, v in after.rejected.items()
+                     if v != before.rejected.get(k, 0)},
+                    grew("command_failed"))
+
+
+def wait_settled(rig: BrakeRig, count: Callable[[BrakeStatus], int], after_ns: int,
+                 start: int, quiet_s: float = 1.0, timeout_s: float = 60.0,
+                 what: str = "") -> tuple[int, BrakeStatus]:
+    """(index, status) of the first status from `start` on, published `quiet_s` or more
+    after `after_ns` (this host's monotonic clock), over whose last `quiet_s` `count` has
+    not changed: a sender that finished at `after_ns` has nothing more on its way to the
+    brake (what a queue on the way dropped never comes). Raises TimeoutError."""
+    last = [-1, 0]
+
+    def quiet(s: BrakeStatus) -> bool:
+        n, t = count(s), s.header.pub_mono_ns
+        if n != last[0]:
+            last[0], last[1] = n, t
+        return t - max(last[1], after_ns) >= quiet_s * 1e9
+
+    return rig.wait_status(quiet, start, timeout_s, what or f"no change for {quiet_s:g} s")
 
 
 def last_command_before(rig: BrakeRig, t_ns: int) -> BrakeCommand | None:

@@ -2,8 +2,9 @@
 the brake service and a fusion-like publisher holding the instance's key, as their own
 processes on loopback; the SIMULATED attacker (tools/faults/intruder.py) publishes unsigned
 commands with sequence numbers ahead, 2**62, forged MACs, replays of the real commands
-and a flood. Every one is refused and counted, the brake never moves, and the real
-fusion stays in command."""
+and a flood. Every one that reaches the brake is refused and counted (the keys are DROP:
+a full queue on the way may drop some), the brake never moves, and the real fusion stays
+in command."""
 
 import json
 import time
@@ -13,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from aeb_radar_camera.common.messages import BrakeState, BrakeStatus
-from tests.brake.rig import BrakeRig, brake_rig
+from tests.brake.rig import BrakeRig, brake_rig, received, wait_settled
 from tests.brake.secure import OPENSSL
 from tests.support import ServiceProcess, python_module, wait_for
 
@@ -44,6 +45,12 @@ def unsigned_count(sent: dict[str, int]) -> int:
     return sent["ahead"] + sent["jump"] // 2 + (sent["flood"] + 1) // 2
 
 
+def intruders_refusals(s: BrakeStatus) -> int:
+    """Refusals only an intruder's commands get here (a real command the loaded host
+    delayed is `too_old` too)."""
+    return sum(v for k, v in s.rejected.items() if k != "too_old")
+
+
 def test_an_intruder_is_refused_counted_and_the_real_fusion_stays_in_command(rig):
     start = len(rig.status)
     fusion = rig.publisher(level=0.0, name="fusion")     # signs with the instance's key
@@ -52,33 +59,44 @@ def test_an_intruder_is_refused_counted_and_the_real_fusion_stays_in_command(rig
         _, before = rig.wait_status(lambda s: True, len(rig.status))
         t0 = time.monotonic_ns()
         sent = finished(intruder(rig, "--flood-s", "1.0"))
-        t1 = time.monotonic_ns()
-        total = sum(sent.values())
-
-        def refused(s: BrakeStatus) -> int:
-            return sum(s.rejected.values()) - sum(before.rejected.values())
-
-        i, after = rig.wait_status(lambda s: refused(s) >= total, len(rig.status), 30,
-                                   f"{total} refusals")
+        t_sent = time.monotonic_ns()
+        # the key is DROP: what a full queue on the way dropped never reaches the brake,
+        # so what the brake took (`command_samples`) is judged, once nothing more comes
+        i, after = wait_settled(rig, intruders_refusals, t_sent, len(rig.status),
+                                what="the intruder's refusals settled")
         t1 = after.header.pub_mono_ns
         # the real fusion still in command: its commands are followed after the attack
         _, later = rig.wait_status(lambda s: s.last_cmd_seq > after.last_cmd_seq + 5, i)
         statuses = rig.status.since(start)
     finally:
         fusion.stop()
-    grew = {k: after.rejected.get(k, 0) - before.rejected.get(k, 0) for k in after.rejected}
+    got = received(before, after)
+    grew = got.refused
+    total = sum(sent.values())
+    print(f"\nintruder: sent {sent}; the brake took {got.samples} commands, followed "
+          f"{got.followed}, refused {grew}")
     assert sent["ahead"] == 3 and sent["jump"] == 4 and sent["replay"] > 10
     assert sent["flood"] > 500          # 1 s at 1 kHz
     unsigned = unsigned_count(sent)
-    forged = sum(sent.values()) - sent["replay"] - unsigned
-    # every attack command refused and counted; Zenoh delivers all on loopback (BLOCK)
-    assert grew.get("unauthenticated", 0) == unsigned, grew
-    assert grew.get("bad_mac", 0) == forged, grew
-    # every replay refused; on a loaded host a real command delayed beyond max_age_ms is
-    # too_old as well (the real fusion still in command: asserted below)
+    forged = total - sent["replay"] - unsigned
+    # every command the brake took is counted: followed (the real fusion's, signed) or
+    # refused with its reason
+    assert got.failed == 0 and got.samples == got.accounted, got
+    assert set(grew) <= {"unauthenticated", "bad_mac", "too_old", "duplicate",
+                         "old_sequence"}, grew
+    # never more refusals of a kind than the intruder sent of it; most reach the brake
+    assert 0 < grew.get("unauthenticated", 0) <= unsigned, (grew, unsigned)
+    assert 0 < grew.get("bad_mac", 0) <= forged, (grew, forged)
+    assert grew["unauthenticated"] + grew["bad_mac"] > 0.5 * (unsigned + forged), (grew, sent)
+    # the replays refused (too_old, or duplicate / old_sequence when they arrive early);
+    # a real command delayed beyond max_age_ms on a loaded host is too_old as well
     assert grew.get("too_old", 0) + grew.get("duplicate", 0) + grew.get(
-        "old_sequence", 0) >= sent["replay"], grew
+        "old_sequence", 0) > 0.5 * sent["replay"], grew
+    # no intruder's BRAKE 100 % reached the actuator; the brake followed the real fusion's
+    # session throughout (no other stream taken up)
     assert set(r.cmd.level_pct for r in rig.sim.commands_since(t0)) == {0}
+    for counter in ("stream_restarts", "seq_resyncs", "seq_conflicts_opened"):
+        assert after.counters.get(counter, 0) == before.counters.get(counter, 0), counter
     window = [s for s in statuses if t0 <= s.header.pub_mono_ns <= t1]
     assert window and all(s.state is BrakeState.ARMED for s in window), \
         {s.state for s in window}
@@ -121,9 +139,8 @@ def test_secure_profile_an_intruder_with_the_candidates_or_the_primarys_certific
                 rig, *common, "--zenoh-config", str(rig.secure.client("fusion")),
                 name="intruder-stolen-cert"))
             total = sum(sent_stolen.values())
-            _, after = rig.wait_status(
-                lambda s: sum(s.rejected.values()) - sum(before.rejected.values()) >= total,
-                i, 30, f"{total} refusals")
+            _, after = wait_settled(rig, intruders_refusals, time.monotonic_ns(), i,
+                                    what="the intruder's refusals settled")
             _, later = rig.wait_status(lambda s: s.last_cmd_seq > after.last_cmd_seq + 5,
                                        len(rig.status), 30)
             t1 = time.monotonic_ns()
@@ -135,10 +152,17 @@ def test_secure_profile_an_intruder_with_the_candidates_or_the_primarys_certific
     assert {k: v for k, v in quiet.rejected.items() if k != "too_old"} == \
         {k: v for k, v in before.rejected.items() if k != "too_old"}, \
         "the candidate's commands reached the brake"
-    grew = {k: after.rejected.get(k, 0) - before.rejected.get(k, 0) for k in after.rejected}
-    # blind: the key id is guessed too (unknown_key); never a valid MAC
-    assert grew.get("unauthenticated", 0) + grew.get("unknown_key", 0) == total, grew
-    assert grew["unauthenticated"] == unsigned_count(sent_stolen)
+    got = received(before, after)
+    grew = got.refused
+    unsigned = unsigned_count(sent_stolen)
+    # every command the brake took counted; blind: the key id is guessed too
+    # (unknown_key), never a valid MAC; most of what was sent reaches the brake (the key
+    # is DROP: a full queue on the way may drop some)
+    assert got.failed == 0 and got.samples == got.accounted, got
+    assert set(grew) <= {"unauthenticated", "unknown_key", "too_old"}, grew
+    assert 0 < grew.get("unauthenticated", 0) <= unsigned, (grew, unsigned)
+    assert 0 < grew.get("unknown_key", 0) <= total - unsigned, (grew, total)
+    assert grew["unauthenticated"] + grew["unknown_key"] > 0.5 * total, (grew, total)
     assert set(r.cmd.level_pct for r in rig.sim.commands_since(t0)) == {0}
     window = [s for s in statuses if t0 <= s.header.pub_mono_ns <= t1]
     assert window and all(s.state is BrakeState.ARMED for s in window)

@@ -1,6 +1,13 @@
 import pytest
 
-from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, HEALTH, RADAR_TRACKS, REGISTRY
+from aeb_radar_camera.common.keys import (
+    FUSION_BRAKE_CMD,
+    HEALTH,
+    RADAR_TRACKS,
+    REGISTRY,
+    Congestion,
+    Priority,
+)
 
 
 def test_keys_live_under_the_vehicle_prefix():
@@ -41,3 +48,11 @@ def test_registry_has_every_key_of_the_design_with_rates_and_ages():
         if spec.msg_type is not None:
             assert spec.rate_hz and spec.max_age_s, spec.name
     assert FUSION_BRAKE_CMD.qos.express
+
+
+def test_no_key_of_the_registry_waits_for_its_slowest_subscriber():
+    # BLOCK would let any process that subscribes and stops reading hold the publisher's
+    # whole link at the router for seconds (tests/security/test_stuck_subscriber.py)
+    assert {name: spec.qos.congestion for name, spec in REGISTRY.items()
+            if spec.qos.congestion is not Congestion.DROP} == {}
+    assert FUSION_BRAKE_CMD.qos.priority is Priority.REAL_TIME

