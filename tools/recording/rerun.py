@@ -39,6 +39,7 @@ from aeb_radar_camera.common.log import add_log_level, setup_logging
 from aeb_radar_camera.common.messages import VerifiedTargets, encode
 from aeb_radar_camera.common.resources import DEPLOY
 from aeb_radar_camera.services.fusion.evidence import CANNOT_TELL_KEY, EVIDENCE_KEY, LLR_KEY
+from aeb_radar_camera.services.fusion.verifiers.recall_first import APPEARANCE_VETO
 from aeb_radar_camera.tools.recording.compare import (
     Comparison,
     Difference,
@@ -188,8 +189,8 @@ def evidence_lines(targets: VerifiedTargets, first_ns: int) -> list[str]:
         if EVIDENCE_KEY not in d:
             continue
         why = ",".join(k for k, v in d.items()
-                       if v and (k.startswith("depth_") or k in ("appearance_veto",
-                                                              CANNOT_TELL_KEY)))
+                       if v and (k.startswith("depth_")
+                                 or k in (APPEARANCE_VETO, CANNOT_TELL_KEY)))
         out.append(f"t={(targets.header.stamp_ns - first_ns) / 1e9:8.3f} s  track "
                    f"{t.track_id:<4} {t.range_m:5.1f} m  llr {d.get(LLR_KEY, 0.0):+.2f}  sum "
                    f"{d[EVIDENCE_KEY]:+.2f}  {why or '-'}  {t.verification.value}  "
