@@ -17,6 +17,8 @@ EVIDENCE_KEY = "evidence_llr"   # the track's sum after this frame, in gate_deta
 # In gate_detail: the verifier could not tell this frame and the track's evidence holds
 # no confirmation (`[fusion.decision.kinematic] cannot_tell_full_only` then applies).
 CANNOT_TELL_KEY = "cannot_tell"
+# In gate_detail: the camera's appearance model vetoed this frame's confirmation.
+APPEARANCE_VETO = "appearance_veto"
 
 
 class TrackEvidence:

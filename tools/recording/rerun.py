@@ -38,8 +38,12 @@ from aeb_radar_camera.common.keys import FUSION_BRAKE_CMD, FUSION_TARGETS, RADAR
 from aeb_radar_camera.common.log import add_log_level, setup_logging
 from aeb_radar_camera.common.messages import VerifiedTargets, encode
 from aeb_radar_camera.common.resources import DEPLOY
-from aeb_radar_camera.services.fusion.evidence import CANNOT_TELL_KEY, EVIDENCE_KEY, LLR_KEY
-from aeb_radar_camera.services.fusion.verifiers.recall_first import APPEARANCE_VETO
+from aeb_radar_camera.services.fusion.evidence import (
+    APPEARANCE_VETO,
+    CANNOT_TELL_KEY,
+    EVIDENCE_KEY,
+    LLR_KEY,
+)
 from aeb_radar_camera.tools.recording.compare import (
     Comparison,
     Difference,

@@ -73,6 +73,7 @@ import numpy as np
 
 from aeb_radar_camera.common.calibration import Calibration
 from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.services.fusion.evidence import APPEARANCE_VETO
 from aeb_radar_camera.services.fusion.verifiers.appearance import load_hog_linear
 from aeb_radar_camera.services.fusion.verifiers.base import (
     GateResult,
@@ -93,7 +94,6 @@ Llr = Annotated[float, msgspec.Meta(ge=-20, le=20)]
 SPARSE, CONFIRMS, THROUGH, AMBIGUOUS, MISSING = (
     "depth_sparse", "depth_confirms", "depth_sees_through", "depth_ambiguous",
     "depth_missing")
-APPEARANCE_VETO = "appearance_veto"
 
 
 class RecallFirstParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
