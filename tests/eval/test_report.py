@@ -160,3 +160,29 @@ def test_strata_classes_and_what_is_left_out():
     assert {s["name"]: s["n"] for s in ev["strata"]["lighting"]} == {"day": 12}
     assert {c["class"]: c["n"] for c in ev["recall_by_class"]} == {"Car": 3, "Pedestrian": 3}
     assert result["labels"] == {"YES": 6, "NO": 12, "ambiguous": 1}
+
+
+def test_what_the_verifier_could_not_tell_is_counted_apart_and_said():
+    """A verifier's "cannot tell" (GateResult.unverifiable) is scored as not verified,
+    and the report says how many of each kind it was; a verifier that told every ROI
+    gets no such line."""
+    def told(r, cannot):
+        s = r.scores["v"]
+        return msgspec.structs.replace(r, scores={**r.scores, "v": Score(
+            s.score, False if cannot else s.verified, cannot_tell=cannot)})
+
+    records = [told(r, r.id in ("r0", "r1", "r10", "r20")) for r in RECORDS]
+    labels = {r.id: r.truth for r in records}
+    ev = evaluate(records, labels, "v", {}, ReportSettings(n_boot=200))
+    assert ev["cannot_tell"] == {"yes": 2, "no": 1, "real_structure": 1}
+    assert ev["operating"]["fn"] == 2          # not verified: counted as a miss here
+    by_class = {row["class"]: row["cannot_tell"] for row in ev["recall_by_class"]}
+    assert by_class == {"Pedestrian": 1, "Car": 1}
+    kinds = {k["kind"]: k for k in ev["negative_kinds"]}
+    assert kinds["empty scene"]["cannot_tell_rate"] == pytest.approx(1 / 6)
+    text = tables.negative_kinds_table(ev)
+    assert "v: could not tell 2 of 8 objects and 1 of 6 negatives (1 real structures" in text
+    plain = evaluate(RECORDS, {r.id: r.truth for r in RECORDS}, "v", {},
+                     ReportSettings(n_boot=200))
+    assert plain["cannot_tell"] == {"yes": 0, "no": 0, "real_structure": 0}
+    assert "could not tell" not in tables.negative_kinds_table(plain)

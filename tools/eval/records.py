@@ -47,12 +47,15 @@ class FrameRef(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class Score(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """One verifier on one ROI: `score` None when not applicable (it needs depth the data
     does not have); `us` the time verify() took; `score_name` what the score is
-    (e.g. "edge_density"; "" in sets written before verifiers said)."""
+    (e.g. "edge_density"; "" in sets written before verifiers said); `cannot_tell` the
+    verifier said it could not tell (GateResult.unverifiable; `verified` is then False,
+    and fusion's decision, not the check, settles what happens)."""
 
     score: float | None
     verified: bool | None
     us: float = 0.0
     score_name: str = ""        # what the score is, as the verifier says (GateResult)
+    cannot_tell: bool = False
 
 
 class RoiRecord(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -90,6 +90,7 @@ class Labelled:
     scores: np.ndarray
     verdicts: np.ndarray
     truth: np.ndarray
+    cannot_tell: np.ndarray      # the verifier said it could not tell (not verified)
     counts: dict[str, int] = field(default_factory=dict)
 
 
@@ -198,7 +199,8 @@ def select(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str) 
     scores = np.array([r.scores[verifier].score for r in kept], dtype=np.float64)
     verdicts = np.array([bool(r.scores[verifier].verified) for r in kept], dtype=bool)
     truth = np.array([labels[r.id] == YES for r in kept], dtype=bool)
-    return Labelled(kept, scores, verdicts, truth, counts)
+    cannot = np.array([r.scores[verifier].cannot_tell for r in kept], dtype=bool)
+    return Labelled(kept, scores, verdicts, truth, cannot, counts)
 
 
 def _group_keys(records: Sequence[RoiRecord], how: str) -> list[str] | None:
@@ -253,7 +255,8 @@ def _strata(sel: Labelled, key: Callable[[RoiRecord], str], tau: float | None,
 
 def _subset(sel: Labelled, keep: np.ndarray) -> Labelled:
     return Labelled([r for r, k in zip(sel.records, keep, strict=True) if k],
-                    sel.scores[keep], sel.verdicts[keep], sel.truth[keep], dict(sel.counts))
+                    sel.scores[keep], sel.verdicts[keep], sel.truth[keep],
+                    sel.cannot_tell[keep], dict(sel.counts))
 
 
 def _structures(sel: Labelled, mask: np.ndarray, tau: float | None) -> dict[str, Any]:
@@ -296,6 +299,9 @@ def evaluate(records: Sequence[RoiRecord], labels: dict[str, str], verifier: str
     out["ci_group"] = s.ci_group
     out.update(auc_block(sel.scores, sel.truth, groups, s))
     out["operating"] = metrics.confusion(sel.verdicts, sel.truth).as_dict()
+    out["cannot_tell"] = {"yes": int((sel.cannot_tell & sel.truth).sum()),
+                          "no": int((sel.cannot_tell & ~sel.truth).sum()),
+                          "real_structure": int((every.cannot_tell & structure).sum())}
     if tau is not None:
         out["at_tau"] = metrics.at_threshold(sel.scores, sel.truth, tau).as_dict()
     if out["auc"] is not None:
@@ -351,6 +357,7 @@ def _recall_by_class(sel: Labelled, tau: float | None) -> list[dict[str, Any]]:
     for name, idx in sorted(by.items()):
         row: dict[str, Any] = {"class": name, "n": len(idx),
                                "recall_operating": float(sel.verdicts[idx].mean()),
+                               "cannot_tell": int(sel.cannot_tell[idx].sum()),
                                "median_score": float(np.median(sel.scores[idx]))}
         if tau is not None:
             row["recall_tau"] = float((sel.scores[idx] >= tau).mean())
@@ -390,6 +397,7 @@ def _negative_kinds(sel: Labelled, groups: list[str] | None, tau: float | None,
             curve = metrics.roc(sel.scores[idx], sel.truth[idx])
             row["roc"] = {"fpr": curve.fpr.tolist(), "tpr": curve.tpr.tolist()}
         row["pass_rate_operating"] = float(sel.verdicts[neg].mean())
+        row["cannot_tell_rate"] = float(sel.cannot_tell[neg].mean())
         row["operating"] = metrics.confusion(sel.verdicts[idx], sel.truth[idx]).as_dict()
         if tau is not None:
             row["pass_rate_tau"] = float((sel.scores[neg] >= tau).mean())

@@ -110,7 +110,7 @@ class Scorer:
             result = v.verify(obs)
             us = (time.perf_counter_ns() - t0) / 1000.0
             out[label] = Score(float(result.score), bool(result.verified), us,
-                               result.score_name)
+                               result.score_name, bool(result.unverifiable))
         return out
 
     def density(self, obs: Observation, scores: dict[str, Score]) -> float:

@@ -59,6 +59,18 @@ def structures_line(ev: dict[str, Any]) -> str:
             f"{st['confirmed_operating']:.3f} at the operating point{tau}; {counted}")
 
 
+def cannot_tell_line(ev: dict[str, Any]) -> str:
+    """What the verifier could not tell: scored as not verified above; in fusion the
+    decision's cannot-tell rule settles them ("" when it told every ROI)."""
+    ct = ev.get("cannot_tell") or {}
+    if not any(ct.values()):
+        return ""
+    return (f"{ev['verifier']}: could not tell {ct['yes']} of {ev['n_yes']} objects and "
+            f"{ct['no']} of {ev['n_no']} negatives ({ct['real_structure']} real structures "
+            "apart): scored as not verified here; in fusion a track the check cannot tell "
+            "is the decision's (docs/fusion.md, \"Where the camera cannot tell yet\")")
+
+
 def table_iii(ev: dict[str, Any]) -> str:
     """Confusion matrices and ratios at the deployed and the Youden-optimal thresholds."""
     cols: list[tuple[str, dict[str, Any]]] = []
@@ -149,26 +161,27 @@ def negative_kinds_table(ev: dict[str, Any]) -> str:
         name = _kind_name(row) + (": passing = confirmed" if row.get("real_structure")
                                   else "")
         rows.append([name, str(row["n_no"]), _auc_text(row),
-                     num(row["pass_rate_operating"]),
+                     num(row["pass_rate_operating"]), num(row.get("cannot_tell_rate")),
                      num(row.get("pass_rate_tau")), num(row["median_score"])])
     tau = f"τ={ev['tau']:.3f}" if ev.get("tau") is not None else "τ"
     text = (f"{ev['verifier']}: all YES against each kind of NO "
             f"({round(100 * ev.get('level', 0.95))}% CI by {ev['ci_group']})\n\n"
             + _md(["negatives", "n", "AUC [CI]", "pass rate at operating point",
-                   f"pass rate at {tau}", "median score"], rows))
-    line = structures_line(ev)
-    return text + ("\n\n" + line if line else "")
+                   "cannot tell", f"pass rate at {tau}", "median score"], rows))
+    lines = [line for line in (structures_line(ev), cannot_tell_line(ev)) if line]
+    return text + "".join("\n\n" + line for line in lines)
 
 
 def class_table(ev: dict[str, Any]) -> str:
     """Recall per object class."""
     rows = [[row["class"], str(row["n"]), num(row["recall_operating"]),
-             num(row.get("recall_tau")), num(row["median_score"])]
+             str(row.get("cannot_tell", 0)), num(row.get("recall_tau")),
+             num(row["median_score"])]
             for row in ev["recall_by_class"]]
     tau = f"τ={ev['tau']:.3f}" if ev.get("tau") is not None else "τ"
     return (f"{ev['verifier']}: recall per object class\n\n"
-            + _md(["class", "n", "recall at operating point", f"recall at {tau}",
-                   "median score"], rows))
+            + _md(["class", "n", "recall at operating point", "cannot tell",
+                   f"recall at {tau}", "median score"], rows))
 
 
 def compare_table(evs: Sequence[dict[str, Any]]) -> str:
@@ -188,7 +201,8 @@ def compare_table(evs: Sequence[dict[str, Any]]) -> str:
                      num(y.get("tau"), 4), num(y.get("recall")), num(y.get("fpr")),
                      "-" if t is None else f"{t['mean']:.0f}"]
                     + [_auc_text(by_kind[k]) if k in by_kind else "-" for k in kinds])
-    structures = [line for ev in evs if (line := structures_line(ev))]
+    structures = [line for ev in evs for line in (structures_line(ev), cannot_tell_line(ev))
+                  if line]
     return ("Verifiers side by side on the same ROIs (recall, precision, FPR at each "
             "verifier's own operating point; @Y: at its Youden-optimal threshold; n/a: "
             "ROIs it cannot judge, e.g. no depth; the negatives are those a camera may "
