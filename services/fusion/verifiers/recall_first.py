@@ -276,11 +276,11 @@ def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray,
            min_share: float) -> dict[str, float]:
     """Where the pixels `at` the range stand sideways (ground y, left positive: `at_y_min_m`,
     `at_y_max_m`), where the window lies at the range (`window_y_min_m`,
-    `window_y_max_m`), and whether every column of the window beyond the at-pixels' on the
-    low-y side (`through_low_y`) or the high-y side (`through_high_y`) sees through: 1 iff
-    there is such a column and each has a return in at least `min_share` of its band
-    pixels (at least one) and none `standing` (at or nearer than the range). Holes or
-    too few returns cannot tell: 0."""
+    `window_y_max_m`), and whether every column of the window beyond the at-pixels'
+    columns on the low-y side (`through_low_y`) or the high-y side (`through_high_y`)
+    sees through: 1 iff there is such a column and each has a return in at least
+    `min_share` of its band pixels (at least one) and none `standing` (at or nearer than
+    the range). Holes or too few returns cannot tell: 0."""
     ys = col.across[at > 0]
     band = col.band > 0
     window = col.ray_across[band]
