@@ -23,9 +23,10 @@ X = 10.0
 EDGE = 1.2                       # the radar point's distance from the path's centre
 
 
-def beside(side: float) -> tuple[float, ...]:
+def beside(side: float) -> tuple[float, float, float, float, float, float]:
     """A 0.5 m wide object standing 0.3 m outside the ego's 1.8 m width on `side`."""
-    return (X, X + 0.6, *sorted((side * EDGE, side * (EDGE + 0.5))), 0.0, 1.7)
+    lo, hi = sorted((side * EDGE, side * (EDGE + 0.5)))
+    return (X, X + 0.6, lo, hi, 0.0, 1.7)
 
 
 # Across the path's edge: its inner side 0.8 m from the centre, inside half_width_m.
