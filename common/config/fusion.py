@@ -124,6 +124,11 @@ class PathSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     half_width_m: NonNegative = 0.9
     margin_m: NonNegative = 0.3
+    # An object the point test puts in the path (its radar point within the margin) is
+    # beside it when the camera's depth shows all of it farther than half_width_m +
+    # camera_margin_m from the path's centre and the path's side of it empty
+    # (KinematicRule.beside_path).
+    camera_margin_m: NonNegative = 0.2
     length_m: Positive = 80.0
     min_yaw_speed_mps: NonNegative = 3.0
     wheelbase_m: Positive | None = None

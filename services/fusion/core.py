@@ -48,6 +48,7 @@ from aeb_radar_camera.services.fusion.decision import (
     severity,
 )
 from aeb_radar_camera.services.fusion.evidence import (
+    BESIDE_PATH,
     CANNOT_TELL_KEY,
     EVIDENCE_KEY,
     LLR_KEY,
@@ -63,8 +64,14 @@ from aeb_radar_camera.services.fusion.frames import (
 )
 from aeb_radar_camera.services.fusion.roi import ColumnProjector
 from aeb_radar_camera.services.fusion.verifiers import Verifier
+from aeb_radar_camera.services.fusion.verifiers.base import GateResult
 
 _NO_ROI: tuple[int, ...] = ()
+# A track the camera showed beside the path stays beside it while no frame shows it for
+# this long (an object passed close beside the ego leaves the image a few metres before
+# the ego reaches it), unless its radar point comes this much nearer the path's centre.
+BESIDE_CARRY_S = 0.5
+BESIDE_CARRY_M = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,6 +149,10 @@ class FusionCore:
                          else None)
         self._gathers = self.evidence is not None and bool(
             getattr(verifier, "gives_llr", False))
+        # Per track, the last frame that showed its object beside the path: (radar stamp,
+        # the radar point's offset from the path then, the reason).
+        self._beside: dict[int, tuple[int, float, str]] = {}
+        self.beside_path_targets = 0   # threats the camera took out of the path, since start
         self._seq = 0
         self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
@@ -369,6 +380,10 @@ class FusionCore:
             decision, reason = rule.cannot_tell(k, decision, reason)
         else:
             decision, reason = decide(decision, reason, verification, rule.policy)
+        if isinstance(rule, KinematicRule):
+            decision, reason, detail = self._beside_path(t, k, check.view, j, result,
+                                                         decision, reason, detail,
+                                                         radar_stamp_ns)
         score_name = result.score_name if result is not None else ""
         if verification is Verification.REJECTED:
             reason = f"{reason}; {score_name} {density:.4f}"
@@ -391,6 +406,38 @@ class FusionCore:
             path_predicted=k.window is not None,
             camera=check.view.name if check.view is not None else "",
             cameras=check.per_camera, score_name=score_name, **_kinematic_fields(k))
+
+    def _beside_path(self, t: RadarTrack, k: Kinematics, view: CameraView | None, j: int,
+                     result: GateResult | None, decision: Decision, reason: str,
+                     detail: Mapping[str, float], stamp_ns: int
+                     ) -> tuple[Decision, str, dict[str, float]]:
+        """The threat `decision` unless the camera shows the track's object beside the
+        path (KinematicRule.beside_path) in this frame, or in the last frame that showed
+        it while no frame shows it now (an object passed close beside the ego leaves the
+        image before the ego reaches it) within BESIDE_CARRY_S and no nearer the path's
+        centre than it was then."""
+        rule = self.rule
+        assert isinstance(rule, KinematicRule)
+        offset = k.path_point.d_m if k.path_point is not None else k.lateral_m
+        beside: str | None = None
+        if result is not None and view is not None:
+            beside = rule.beside_path(k, view.xy[j][0], detail)
+            if beside is None:
+                self._beside.pop(t.track_id, None)
+            else:
+                self._beside[t.track_id] = (stamp_ns, offset, beside)
+        elif k.window is None and t.track_id in self._beside:
+            then_ns, then, why = self._beside[t.track_id]
+            if (stamp_ns - then_ns <= BESIDE_CARRY_S * 1e9 and offset * then > 0.0
+                    and abs(offset) >= abs(then) - BESIDE_CARRY_M):
+                beside = f"{why} (last seen {(stamp_ns - then_ns) / 1e6:.0f} ms ago)"
+        for i in [i for i, b in self._beside.items()
+                  if stamp_ns - b[0] > BESIDE_CARRY_S * 1e9]:
+            del self._beside[i]
+        if beside is None or decision is Decision.NONE:
+            return decision, reason, dict(detail)
+        self.beside_path_targets += 1
+        return Decision.NONE, beside, {**detail, BESIDE_PATH: 1.0}
 
     def failed_cycle(self, tracks: RadarTracks, error: str, now_wall_ns: int,
                      now_mono_ns: int) -> CycleResult:

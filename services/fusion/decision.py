@@ -14,7 +14,7 @@ a policy for tracks the camera cannot check; and a minimum hold.
 """
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import msgspec
@@ -22,6 +22,14 @@ import msgspec
 from aeb_radar_camera.common.config.fusion import DecisionSettings, UnverifiablePolicy
 from aeb_radar_camera.common.messages import Decision, RadarTrack, Verification
 from aeb_radar_camera.common.vehicle_state import VehicleSample
+from aeb_radar_camera.services.fusion.evidence import (
+    AT_Y_MAX,
+    AT_Y_MIN,
+    THROUGH_HIGH_Y,
+    THROUGH_LOW_Y,
+    WINDOW_Y_MAX,
+    WINDOW_Y_MIN,
+)
 from aeb_radar_camera.services.fusion.path import (
     PathPoint,
     PredictedPath,
@@ -421,6 +429,41 @@ class KinematicRule:
         kin = Kinematics(r, track.range_rate_mps, p.d_m, ttc, ttc, in_range, in_path, window,
                          None, need, a, p)
         return replace(kin, level_pct=self.level(kin))
+
+    def beside_path(self, kin: Kinematics, x_m: float,
+                    detail: Mapping[str, float]) -> str | None:
+        """Why the camera takes a track the point test put in the path out of it, or None
+        (also for a track the point test leaves out of it, for fusion to carry).
+
+        The radar's point may lie within the path's margin while the object stands
+        beside the path: the camera's depth (`detail`, the recall-first check's extent
+        where it confirms, at the track's `x_m`) shows that only when every pixel at the
+        range lies farther than half_width_m + camera_margin_m from the path's centre on
+        one side, and the window reaches into the path (its limit on the path's side
+        within half_width_m) with its columns between seeing through. Anything short of
+        that - no extent, the crossing prediction's verdict, holes, the object touching
+        the window's edge - leaves the point test's verdict."""
+        keys = (AT_Y_MIN, AT_Y_MAX, WINDOW_Y_MIN, WINDOW_Y_MAX, THROUGH_LOW_Y, THROUGH_HIGH_Y)
+        if (not self.motion_ok or kin.window is not None
+                or any(key not in detail for key in keys)):
+            return None
+        half = self.s.path.half_width_m
+        limit = half + self.s.path.camera_margin_m
+        lo = self.path.point(x_m, detail[AT_Y_MIN]).d_m
+        hi = self.path.point(x_m, detail[AT_Y_MAX]).d_m
+        if lo > limit and hi > limit:
+            # Left of the path: its side is the window's low-y end.
+            inner, edge = lo, self.path.point(x_m, detail[WINDOW_Y_MIN]).d_m
+            clear = detail[THROUGH_LOW_Y] > 0.0
+        elif lo < -limit and hi < -limit:
+            inner, edge = hi, -self.path.point(x_m, detail[WINDOW_Y_MAX]).d_m
+            clear = detail[THROUGH_HIGH_Y] > 0.0
+        else:
+            return None
+        if not clear or edge > half:
+            return None
+        return (f"beside the path by the camera: inner edge {inner:+.2f} m, limit "
+                f"{half:.1f} + {self.s.path.camera_margin_m:.1f} m")
 
     def threat(self, kin: Kinematics) -> tuple[Decision, str]:
         if not self.motion_ok:

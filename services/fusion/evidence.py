@@ -19,6 +19,14 @@ EVIDENCE_KEY = "evidence_llr"   # the track's sum after this frame, in gate_deta
 CANNOT_TELL_KEY = "cannot_tell"
 # In gate_detail: the camera's appearance model vetoed this frame's confirmation.
 APPEARANCE_VETO = "appearance_veto"
+# In gate_detail, where depth confirms: where the pixels at the range stand sideways and
+# where the window lies at the range (ground y, metres, left positive), and whether the
+# window's columns beyond the at-pixels on the low-y / high-y side see through (1 / 0).
+AT_Y_MIN, AT_Y_MAX = "at_y_min_m", "at_y_max_m"
+WINDOW_Y_MIN, WINDOW_Y_MAX = "window_y_min_m", "window_y_max_m"
+THROUGH_LOW_Y, THROUGH_HIGH_Y = "through_low_y", "through_high_y"
+# In gate_detail: the camera showed the track's object beside the path (decision NONE).
+BESIDE_PATH = "beside_path_camera"
 
 
 class TrackEvidence:

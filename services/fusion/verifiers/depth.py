@@ -96,11 +96,13 @@ def _window_cols(obs: Observation, min_width: int, image_width: int) -> tuple[in
 class RayMaps:
     """Per pixel of a calibration's image, its ray in the ground frame per unit of camera
     depth (R^T (x/z, y/z, 1), distortion removed): horizontal `run`, `rise`, and
-    `slope` = rise / run (float32, height x width)."""
+    `slope` = rise / run, and `side`, its sideways component (the ground frame's y, left
+    positive) (float32, height x width)."""
 
     run: np.ndarray
     rise: np.ndarray
     slope: np.ndarray
+    side: np.ndarray
 
 
 def _key(cal: Calibration) -> bytes:
@@ -114,7 +116,7 @@ def _key(cal: Calibration) -> bytes:
 
 def ray_maps(cal: Calibration) -> RayMaps:
     """The calibration's RayMaps, computed once per (size, K, distortion, R) and kept for
-    the last `_MAPS` of them (each 3 x 4 bytes per pixel: 4.9 MB at 848x480)."""
+    the last `_MAPS` of them (each 4 x 4 bytes per pixel: 6.5 MB at 848x480)."""
     key = _key(cal)
     with _MAPS_LOCK:
         got = _MAPS_CACHE.get(key)
@@ -141,11 +143,13 @@ def _compute_maps(cal: Calibration) -> RayMaps:
         norm = cv2.undistortPoints(pts, k, cal.dist).reshape(h, w, 2)
         xn, yn = norm[..., 0], norm[..., 1]
     r = cal.r
-    run = np.hypot(r[0, 0] * xn + r[1, 0] * yn + r[2, 0], r[0, 1] * xn + r[1, 1] * yn + r[2, 1])
+    side = r[0, 1] * xn + r[1, 1] * yn + r[2, 1]
+    run = np.hypot(r[0, 0] * xn + r[1, 0] * yn + r[2, 0], side)
     rise = r[0, 2] * xn + r[1, 2] * yn + r[2, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = np.where(run > 1e-9, rise / run, np.inf)
-    return RayMaps(run.astype(np.float32), rise.astype(np.float32), slope.astype(np.float32))
+    return RayMaps(run.astype(np.float32), rise.astype(np.float32), slope.astype(np.float32),
+                   side.astype(np.float32))
 
 
 _MAPS = 8
@@ -199,16 +203,22 @@ class DepthConsistency:
 class ColumnDepth:
     """A track's column window seen in depth, in the ground frame. Per pixel of the
     window (float32 / uint8 masks of 255, window-sized): `dist` the measured point's
-    horizontal distance from the camera, `lift` its height above the camera, `band` the
-    pixels whose ray at the track's distance lies in the height band asked for, `returns`
-    those of them with a depth return. `expected_m`: the track's distance from the
-    camera; `camera_z_m`: the camera's height above the ground."""
+    horizontal distance from the camera, `lift` its height above the camera, `across` its
+    sideways offset from the camera (ground y, left positive), `ray_across` the same for
+    the pixel's ray at the track's distance (where the window lies at the range), `band`
+    the pixels whose ray at the track's distance lies in the height band asked for,
+    `returns` those of them with a depth return. `expected_m`: the track's distance from
+    the camera; `camera_y_m`, `camera_z_m`: the camera's sideways position and height in
+    the ground frame."""
 
     dist: np.ndarray
     lift: np.ndarray
+    across: np.ndarray
+    ray_across: np.ndarray
     band: np.ndarray
     returns: np.ndarray
     expected_m: float
+    camera_y_m: float
     camera_z_m: float
 
 
@@ -238,9 +248,16 @@ def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
     band = cv2.inRange(maps.slope[r0:r1, c0:c1], (band_min_m - cz) / expected,
                        (band_max_m - cz) / expected)
     returns = cv2.bitwise_and(band, cv2.inRange(d, NO_RETURN_M, np.inf))
-    dist = cv2.multiply(d, maps.run[r0:r1, c0:c1])
+    run = maps.run[r0:r1, c0:c1]
+    side = maps.side[r0:r1, c0:c1]
+    dist = cv2.multiply(d, run)
     lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
-    return ColumnDepth(dist, lift, band, returns, expected, cz)
+    across = cv2.multiply(d, side)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ray_across = np.where(run > 1e-9, side * np.float32(expected) / run,
+                              np.float32(0.0)).astype(np.float32)
+    return ColumnDepth(dist, lift, across, ray_across, band, returns, expected,
+                       float(centre[1]), cz)
 
 
 def make(params: Mapping[str, ParamValue]) -> Verifier:

@@ -38,7 +38,12 @@ Per frame, in this order (`detail` says which with a 1: `depth_<...>`, `appearan
     depth_confirms     at least `confirm_px` pixels at the range, covering at least
                        `confirm_area_m2` there (0.02 m2: a 14 cm square; a pixel spans
                        r / focal_px metres): a surface stands there, never vetoed,
-                       whatever it looks like
+                       whatever it looks like; where the at-pixels stand sideways is
+                       reported with it (`extent`: `at_y_min_m` .. `at_y_max_m`, the
+                       window's `window_y_min_m` .. `window_y_max_m` at the range, and
+                       whether the window's columns beyond the at-pixels on either side
+                       see through, `through_low_y` / `through_high_y`), for fusion to
+                       take an object beside the path out of it
     depth_sees_through at least `through_share` of the returns see through: veto
     depth_ambiguous    neither
     depth_missing      the frame has no depth
@@ -73,7 +78,15 @@ import numpy as np
 
 from aeb_radar_camera.common.calibration import Calibration
 from aeb_radar_camera.common.depth_error import D435Noise
-from aeb_radar_camera.services.fusion.evidence import APPEARANCE_VETO
+from aeb_radar_camera.services.fusion.evidence import (
+    APPEARANCE_VETO,
+    AT_Y_MAX,
+    AT_Y_MIN,
+    THROUGH_HIGH_Y,
+    THROUGH_LOW_Y,
+    WINDOW_Y_MAX,
+    WINDOW_Y_MIN,
+)
 from aeb_radar_camera.services.fusion.verifiers.appearance import load_hog_linear
 from aeb_radar_camera.services.fusion.verifiers.base import (
     GateResult,
@@ -83,7 +96,12 @@ from aeb_radar_camera.services.fusion.verifiers.base import (
     VerifierConfigError,
     parse_params,
 )
-from aeb_radar_camera.services.fusion.verifiers.depth import NO_RETURN_M, column_depth, ray_maps
+from aeb_radar_camera.services.fusion.verifiers.depth import (
+    NO_RETURN_M,
+    ColumnDepth,
+    column_depth,
+    ray_maps,
+)
 
 SCORE = "llr"
 Metres = Annotated[float, msgspec.Meta(ge=0, le=100)]
@@ -224,6 +242,8 @@ class RecallFirst:
         # The surface the pixels at the range cover there (a pixel spans r / f metres).
         detail["at_area_m2"] = area = n_at * (r / p.focal_px) ** 2
         if n_at >= p.confirm_px and area >= p.confirm_area_m2:
+            detail.update(extent(col, at, cv2.bitwise_or(at, near),
+                                 p.min_density * cover))
             return CONFIRMS, detail
         if n_through >= p.through_share * n_ret:
             return THROUGH, detail
@@ -250,6 +270,39 @@ class RecallFirst:
                         and outcome in (SPARSE, MISSING))
         return GateResult(llr, llr >= 0.0 and not unverifiable, detail, SCORE,
                           unverifiable=unverifiable)
+
+
+def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray,
+           min_share: float) -> dict[str, float]:
+    """Where the pixels `at` the range stand sideways (ground y, left positive: `at_y_min_m`,
+    `at_y_max_m`), where the window lies at the range (`window_y_min_m`,
+    `window_y_max_m`), and whether every column of the window beyond the at-pixels'
+    columns on the low-y side (`through_low_y`) or the high-y side (`through_high_y`)
+    sees through: 1 iff there is such a column and each has a return in at least
+    `min_share` of its band pixels (at least one) and none `standing` (at or nearer than
+    the range). Holes or too few returns cannot tell: 0."""
+    ys = col.across[at > 0]
+    band = col.band > 0
+    window = col.ray_across[band]
+    cy = col.camera_y_m
+    out = {AT_Y_MIN: float(ys.min()) + cy, AT_Y_MAX: float(ys.max()) + cy,
+           WINDOW_Y_MIN: float(window.min()) + cy, WINDOW_Y_MAX: float(window.max()) + cy}
+    n_band = np.count_nonzero(band, axis=0)
+    n_ret = np.count_nonzero(col.returns, axis=0)
+    clear = ((n_ret >= 1) & (n_ret >= min_share * n_band)
+             & (np.count_nonzero(standing, axis=0) == 0) & (n_band > 0))
+    cols = np.flatnonzero(np.count_nonzero(at, axis=0))
+    before, after = clear[:cols[0]], clear[cols[-1] + 1:]
+    before_ok = float(before.size > 0 and bool(before.all()))
+    after_ok = float(after.size > 0 and bool(after.all()))
+    # The image's columns run right to left in the ground frame for a forward camera;
+    # the ray maps say which way this window runs.
+    rows = np.any(band, axis=1)
+    line = col.ray_across[np.argmax(rows)] if rows.any() else col.ray_across[0]
+    falling = bool(line[-1] < line[0])
+    out[THROUGH_LOW_Y] = after_ok if falling else before_ok
+    out[THROUGH_HIGH_Y] = before_ok if falling else after_ok
+    return out
 
 
 def make(params: Mapping[str, ParamValue]) -> Verifier:

@@ -1,0 +1,138 @@
+"""The camera's lateral extent: where depth confirms, the recall-first check says where the
+pixels at the range stand sideways and whether the window's columns between them and the
+path see through; fusion takes a track whose radar point lies in the path's margin out of
+the path only on that evidence, and leaves a straddling object, a side-on car whose radar
+point is at its outer end, and an object with holes beside it in the path."""
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from aeb_radar_camera.common.messages import Decision
+from aeb_radar_camera.services.fusion.core import CycleResult
+from aeb_radar_camera.services.fusion.evidence import BESIDE_PATH
+from aeb_radar_camera.services.fusion.frames import DecodedFrame
+from aeb_radar_camera.services.fusion.verifiers import create
+from tests.fusion.helpers import CAL, MS, T0, cycle, feed, make_core
+from tests.fusion.test_decision_kinematic import KINEMATIC, Drive, ahead
+from tests.fusion.test_depth_check import observe, render_depth
+
+CHECK = create("recall_first")
+X = 10.0
+EDGE = 1.2                       # the radar point's distance from the path's centre
+
+
+def beside(side: float) -> tuple[float, float, float, float, float, float]:
+    """A 0.5 m wide object standing 0.3 m outside the ego's 1.8 m width on `side`."""
+    lo, hi = sorted((side * EDGE, side * (EDGE + 0.5)))
+    return (X, X + 0.6, lo, hi, 0.0, 1.7)
+
+
+# Across the path's edge: its inner side 0.8 m from the centre, inside half_width_m.
+STRADDLING = (X, X + 0.6, -1.5, -0.8, 0.0, 1.7)
+# A car standing side-on across the lane, the radar's point at its outer (right) end.
+SIDE_ON = (X, X + 1.8, -EDGE, -EDGE + 4.5, 0.0, 1.5)
+
+
+def with_holes_beside(depth: np.ndarray) -> np.ndarray:
+    """No return in the columns between the object beside on the right and the path."""
+    obs = observe(depth, X, -EDGE)
+    out = depth.copy()
+    col = obs.column
+    # The object's inner edge and the window's inner limit lie left of the column's
+    # centre in the image (the ego's side): clear everything from there to the window's.
+    mid = col.x + col.w // 2
+    out[:, mid - 60:mid - 2] = 0.0
+    return out
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_the_check_reports_an_object_beside_the_path_and_the_columns_between_seeing_through(
+        side):
+    got = CHECK.verify(observe(render_depth(CAL, boxes=(beside(side),)), X, side * EDGE))
+    d = got.detail
+    assert d["depth_confirms"] == 1.0 and got.verified
+    inner, outer = (d["at_y_min_m"], d["at_y_max_m"])[::int(side)]
+    assert abs(inner - side * EDGE) < 0.06 and abs(outer - side * (EDGE + 0.5)) < 0.06, d
+    # The window reaches 0.5 m either side of the radar's point at its range.
+    assert abs(d["window_y_min_m"] - (side * EDGE - 0.5)) < 0.06, d
+    assert abs(d["window_y_max_m"] - (side * EDGE + 0.5)) < 0.06, d
+    toward, away = ("through_low_y", "through_high_y")[::int(side)]
+    assert d[toward] == 1.0 and d[away] == 0.0, d
+
+
+def test_a_straddling_object_is_measured_inside_the_path():
+    d = CHECK.verify(observe(render_depth(CAL, boxes=(STRADDLING,)), X, -EDGE)).detail
+    assert d["depth_confirms"] == 1.0
+    assert abs(d["at_y_max_m"] - -0.8) < 0.06, d
+
+
+def test_a_side_on_car_fills_the_window_to_its_inner_edge():
+    d = CHECK.verify(observe(render_depth(CAL, boxes=(SIDE_ON,)), X, -EDGE)).detail
+    assert d["depth_confirms"] == 1.0
+    assert d["at_y_max_m"] >= d["window_y_max_m"] - 0.06 and d["through_high_y"] == 0.0, d
+
+
+def test_holes_between_the_object_and_the_path_cannot_tell():
+    depth = with_holes_beside(render_depth(CAL, boxes=(beside(-1.0),)))
+    d = CHECK.verify(observe(depth, X, -EDGE)).detail
+    assert d["depth_confirms"] == 1.0 and d["at_y_max_m"] < -EDGE + 0.06, d
+    assert d["through_high_y"] == 0.0, d
+
+
+class DepthDrive(Drive):
+    """Drive with the recall-first check, every radar cycle with a frame of `depth`."""
+
+    def __init__(self, depth: np.ndarray | None, **decision: Any) -> None:
+        super().__init__(make_core(decision={**KINEMATIC, **decision},
+                                   verifier={"name": "recall_first"}))
+        self.depth = depth
+
+    def cycle(self, *tracks, dt_ms: int = 75) -> CycleResult:
+        self.t += dt_ms * MS
+        stamp = T0 + self.t
+        f = DecodedFrame("front", self.seq, stamp, 0,
+                         np.full((CAL.height, CAL.width), 100, np.uint8), self.depth)
+        res = self.core.process(cycle(*tracks, seq=self.seq, stamp_ns=stamp), feed(f),
+                                stamp + 5 * MS, self.t + 5 * MS)
+        self.seq += 1
+        return res
+
+
+def decide(depth: np.ndarray | None, y: float = -EDGE + 0.05):
+    """The first target of a cycle at 10 m/s towards a stationary track at (X, y): 1 s
+    to go, a full brake when it is in the path."""
+    drive = DepthDrive(depth)
+    drive.step(10.0)
+    return drive.step(10.0, ahead(X, 10.0, y=y)).targets.targets[0]
+
+
+def test_a_track_in_the_margin_whose_object_stands_beside_the_path_is_not_braked_for():
+    tgt = decide(render_depth(CAL, boxes=(beside(-1.0),)))
+    assert tgt.decision is Decision.NONE and tgt.gate_detail[BESIDE_PATH] == 1.0, tgt
+    head, _, rest = tgt.reason.partition("inner edge ")
+    assert head == "beside the path by the camera: ", tgt.reason
+    assert abs(float(rest.split()[0]) - -EDGE) < 0.06, tgt.reason
+    assert rest.endswith("limit 0.9 + 0.2 m"), tgt.reason
+
+
+@pytest.mark.parametrize("scene", ["straddling", "side_on", "holes", "no_depth"])
+def test_without_evidence_that_the_path_is_clear_the_point_test_stands(scene):
+    depth = {"straddling": render_depth(CAL, boxes=(STRADDLING,)),
+             "side_on": render_depth(CAL, boxes=(SIDE_ON,)),
+             "holes": with_holes_beside(render_depth(CAL, boxes=(beside(-1.0),))),
+             "no_depth": None}[scene]
+    tgt = decide(depth)
+    assert tgt.decision is Decision.BRAKE and BESIDE_PATH not in tgt.gate_detail, tgt
+    if depth is not None:
+        # The camera measured the extent: the brake is its verdict, not its absence.
+        assert "at_y_max_m" in tgt.gate_detail, tgt.gate_detail
+
+
+def test_a_wider_camera_margin_keeps_the_object_in_the_path():
+    drive = DepthDrive(render_depth(CAL, boxes=(beside(-1.0),)),
+                       path={"camera_margin_m": 0.4})
+    drive.step(10.0)
+    tgt = drive.step(10.0, ahead(X, 10.0, y=-EDGE + 0.05)).targets.targets[0]
+    assert tgt.decision is Decision.BRAKE and "at_y_max_m" in tgt.gate_detail, tgt
