@@ -136,3 +136,14 @@ def test_a_wider_camera_margin_keeps_the_object_in_the_path():
     drive.step(10.0)
     tgt = drive.step(10.0, ahead(X, 10.0, y=-EDGE + 0.05)).targets.targets[0]
     assert tgt.decision is Decision.BRAKE and "at_y_max_m" in tgt.gate_detail, tgt
+
+
+def test_every_threat_the_camera_takes_out_of_the_path_is_counted():
+    beside_drive = DepthDrive(render_depth(CAL, boxes=(beside(-1.0),)))
+    straddling_drive = DepthDrive(render_depth(CAL, boxes=(STRADDLING,)))
+    for drive in (beside_drive, straddling_drive):
+        drive.step(10.0)
+        for _ in range(3):
+            drive.step(10.0, ahead(X, 10.0, y=-EDGE + 0.05))
+    assert beside_drive.core.beside_path_targets == 3
+    assert straddling_drive.core.beside_path_targets == 0
