@@ -202,24 +202,37 @@ class DepthConsistency:
 @dataclass(frozen=True, slots=True)
 class ColumnDepth:
     """A track's column window seen in depth, in the ground frame. Per pixel of the
-    window (float32 / uint8 masks of 255, window-sized): `dist` the measured point's
-    horizontal distance from the camera, `lift` its height above the camera, `across` its
-    sideways offset from the camera (ground y, left positive), `ray_across` the same for
-    the pixel's ray at the track's distance (where the window lies at the range), `band`
-    the pixels whose ray at the track's distance lies in the height band asked for,
-    `returns` those of them with a depth return. `expected_m`: the track's distance from
-    the camera; `camera_y_m`, `camera_z_m`: the camera's sideways position and height in
-    the ground frame."""
+    window (float32 / uint8 masks of 255, window-sized): `depth` the camera depth, `dist`
+    the measured point's horizontal distance from the camera, `lift` its height above the
+    camera, `band` the pixels whose ray at the track's distance lies in the height band
+    asked for, `returns` those of them with a depth return; `run`, `side` the window's
+    part of the RayMaps. `expected_m`: the track's distance from the camera;
+    `camera_y_m`, `camera_z_m`: the camera's sideways position and height in the ground
+    frame."""
 
+    depth: np.ndarray
     dist: np.ndarray
     lift: np.ndarray
-    across: np.ndarray
-    ray_across: np.ndarray
     band: np.ndarray
     returns: np.ndarray
+    run: np.ndarray
+    side: np.ndarray
     expected_m: float
     camera_y_m: float
     camera_z_m: float
+
+    # Asked only where depth confirms an object (its extent): not paid for every window.
+    def across(self) -> np.ndarray:
+        """Per pixel, the measured point's sideways offset from the camera (ground y,
+        left positive)."""
+        return cv2.multiply(self.depth, self.side)
+
+    def ray_across(self) -> np.ndarray:
+        """Per pixel, the sideways offset of its ray at the track's distance: where the
+        window lies at the range."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.run > 1e-9, self.side * np.float32(self.expected_m)
+                            / self.run, np.float32(0.0)).astype(np.float32)
 
 
 def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
@@ -249,14 +262,9 @@ def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
                        (band_max_m - cz) / expected)
     returns = cv2.bitwise_and(band, cv2.inRange(d, NO_RETURN_M, np.inf))
     run = maps.run[r0:r1, c0:c1]
-    side = maps.side[r0:r1, c0:c1]
     dist = cv2.multiply(d, run)
     lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
-    across = cv2.multiply(d, side)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ray_across = np.where(run > 1e-9, side * np.float32(expected) / run,
-                              np.float32(0.0)).astype(np.float32)
-    return ColumnDepth(dist, lift, across, ray_across, band, returns, expected,
+    return ColumnDepth(d, dist, lift, band, returns, run, maps.side[r0:r1, c0:c1], expected,
                        float(centre[1]), cz)
 
 

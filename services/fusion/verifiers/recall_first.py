@@ -281,9 +281,10 @@ def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray,
     sees through: 1 iff there is such a column and each has a return in at least
     `min_share` of its band pixels (at least one) and none `standing` (at or nearer than
     the range). Holes or too few returns cannot tell: 0."""
-    ys = col.across[at > 0]
+    ys = col.across()[at > 0]
     band = col.band > 0
-    window = col.ray_across[band]
+    ray_across = col.ray_across()
+    window = ray_across[band]
     cy = col.camera_y_m
     out = {AT_Y_MIN: float(ys.min()) + cy, AT_Y_MAX: float(ys.max()) + cy,
            WINDOW_Y_MIN: float(window.min()) + cy, WINDOW_Y_MAX: float(window.max()) + cy}
@@ -298,7 +299,7 @@ def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray,
     # The image's columns run right to left in the ground frame for a forward camera;
     # the ray maps say which way this window runs.
     rows = np.any(band, axis=1)
-    line = col.ray_across[np.argmax(rows)] if rows.any() else col.ray_across[0]
+    line = ray_across[np.argmax(rows)] if rows.any() else ray_across[0]
     falling = bool(line[-1] < line[0])
     out[THROUGH_LOW_Y] = after_ok if falling else before_ok
     out[THROUGH_HIGH_Y] = before_ok if falling else after_ok
