@@ -85,6 +85,22 @@ def config_checked(name: str, args: argparse.Namespace) -> int:
 STOP_GRACE_S = 15.0
 
 
+class StopEvent(threading.Event):
+    """The stop event of `stop_event_on_signals`: its untimed `wait` wakes every
+    `_POLL_S`. A signal the kernel delivers to another thread of the process (a Zenoh
+    thread) only marks Python's handler as due; it runs when the main thread next runs
+    Python code, which an untimed wait on a lock would never let it do."""
+
+    _POLL_S = 0.25
+
+    def wait(self, timeout: float | None = None) -> bool:
+        if timeout is not None:
+            return super().wait(timeout)
+        while not super().wait(self._POLL_S):
+            pass
+        return True
+
+
 def stop_event_on_signals(grace_s: float | None = STOP_GRACE_S) -> threading.Event:
     """An event set by SIGINT or SIGTERM (main thread only).
 
@@ -92,9 +108,11 @@ def stop_event_on_signals(grace_s: float | None = STOP_GRACE_S) -> threading.Eve
     with 128 + the signal's number. A service whose launcher died (PR_SET_PDEATHSIG) has
     nobody left to escalate to SIGKILL, and one that lingers keeps its serial port or
     CAN channel; a stop path that hangs (a blocked join, a library's close) must not do
-    that. `grace_s=None`: no watchdog.
+    that. A stop path that hangs in native code holding the GIL would keep the watchdog's
+    thread from running: one second later the kernel ends the process (SIGALRM, its
+    default action). `grace_s=None`: no watchdog.
     """
-    stop = threading.Event()
+    stop = StopEvent()
     watchdog: list[threading.Timer] = []
 
     def handler(signum: int, frame: object) -> None:
@@ -104,6 +122,8 @@ def stop_event_on_signals(grace_s: float | None = STOP_GRACE_S) -> threading.Eve
             timer.daemon = True
             timer.start()
             watchdog.append(timer)
+            signal.signal(signal.SIGALRM, signal.SIG_DFL)
+            signal.setitimer(signal.ITIMER_REAL, grace_s + 1.0)
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
