@@ -93,21 +93,25 @@ def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
 
         for _ in range(3):
             stream.inject(forged)
-        # Every forged message counted, not just the last publisher's: the forged ones, the
-        # malformed ones and the candidate's arrive on three publishers, in no fixed order.
-        expected = {"duplicate": 3, "old_sequence": 3, "too_old": 3, "invalid": 3,
-                    "malformed": 6, "wrong_instance": 3 + 10}
+        # Every key is congestion control DROP: a forged sample may be dropped on the way,
+        # so each reason must be counted at least once and never more than it was sent;
+        # the brake's own count of the samples it handled says nothing went uncounted.
+        sent = {"duplicate": 3, "old_sequence": 3, "too_old": 3, "invalid": 3,
+                "malformed": 6}
         _, after = rig.wait_status(
-            lambda s: all(s.rejected.get(k, 0) >= before.rejected.get(k, 0) + n
-                          for k, n in expected.items()),
-            len(rig.status), 30, "all rejections counted")
+            lambda s: all(s.rejected.get(k, 0) > before.rejected.get(k, 0) for k in sent)
+            and s.rejected.get("wrong_instance", 0) >= before.rejected.get(
+                "wrong_instance", 0) + 10,
+            len(rig.status), 30, "every rejection reason counted")
         candidate.stop()
         t1 = time.monotonic_ns()
         statuses = rig.status.since(start)
     grew = {k: after.rejected.get(k, 0) - before.rejected.get(k, 0) for k in after.rejected}
-    assert grew["duplicate"] == 3 and grew["old_sequence"] == 3 and grew["too_old"] == 3
-    assert grew["invalid"] == 3 and grew["malformed"] == 6
-    assert grew["wrong_instance"] >= 3 + 10              # forged + the candidate process
+    assert all(1 <= grew[k] <= n for k, n in sent.items()), grew
+    assert grew["wrong_instance"] >= 10                  # the candidate process (+ forged)
+    handled = after.counters["command_samples"] - before.counters["command_samples"]
+    followed = after.counters["commands"] - before.counters["commands"]
+    assert handled == followed + sum(grew.values()), (handled, followed, grew)
     assert set(_levels_since(rig, t0)) == {0}, "a rejected command moved the brake"
     window = [s for s in statuses if t0 <= s.header.pub_mono_ns <= t1]
     assert window and all(s.state is BrakeState.ARMED and s.commanded_level_pct == 0
@@ -239,9 +243,13 @@ def test_every_accepted_command_gets_its_own_status_soon_after(rig):
     settled = sorted(sent)[3:-2]   # the stream's first and last commands race the window
     missing = [q for q in settled if q not in seen]
     assert not missing, f"sequences without their own status: {missing}"
-    delays_ms = sorted(
-        (s.header.pub_mono_ns - s.last_cmd_rx_mono_ns) / 1e6 for s in statuses
-        if s.last_cmd_seq in settled and s.last_cmd_rx_mono_ns > 0)
+    # Each sequence's own status is its first: the 10 Hz ticks repeat it later.
+    first: dict[int, float] = {}
+    for st in statuses:
+        if st.last_cmd_seq in settled and st.last_cmd_rx_mono_ns > 0:
+            delay = (st.header.pub_mono_ns - st.last_cmd_rx_mono_ns) / 1e6
+            first[st.last_cmd_seq] = min(delay, first.get(st.last_cmd_seq, delay))
+    delays_ms = sorted(first.values())
     median = delays_ms[len(delays_ms) // 2]
     # the actuator's acknowledgement: far below the timer's 50 ms period
     assert 0 < median < 25.0, delays_ms
