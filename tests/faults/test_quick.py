@@ -65,3 +65,31 @@ def test_link_cut_over_the_loopback_relay_fails_safe(tmp_path):
     (rec,) = records
     assert len(rec.outcomes) == 1 and rec.outcomes[0].ok, rec.outcomes[0].detail
     assert "loopback relay" in rec.outcomes[0].detail
+
+
+def _can_use_fifo(priority: int) -> bool:
+    import os
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError):
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+@pytest.mark.skipif(not _can_use_fifo(20), reason="SCHED_FIFO not allowed here (not root, "
+                    "no RLIMIT_RTPRIO); the quick test above runs the same faults without")
+def test_faults_run_the_stack_at_the_deployed_realtime_priority(tmp_path):
+    """`aeb faults --realtime-priority 20`: the stack's latency path runs SCHED_FIFO as
+    deployed, the table says so, and a fault still gets its response."""
+    records, info = harness.run(tmp_path, 1, "quick", io.StringIO(), only=["SIGKILL fusion"],
+                                realtime_priority=20)
+    log = (tmp_path / "stack.log").read_text()
+    assert info.scheduling == "SCHED_FIFO 20"
+    for service in ("router", "brake", "fusion", "radar"):
+        assert any(line.startswith(service) and "realtime_thread" in line
+                   and "priority=" in line for line in log.splitlines()), (service, log[-3000:])
+    (rec,) = records
+    assert len(rec.outcomes) == 1 and rec.outcomes[0].response_ms is not None, rec.outcomes
+    md, _, _ = report.write(tmp_path, records, info)
+    assert "scheduling: SCHED_FIFO 20" in md.read_text()

@@ -46,6 +46,7 @@ class RunInfo:
     rounds_done: int = 0
     seconds: float = 0.0
     link: str = ""
+    scheduling: str = "normal"          # of the stack's latency path
     stopped_early: str = ""
     unexpected_exits: list[str] = field(default_factory=list)
     runs: list[dict[str, Any]] = field(default_factory=list)   # of a combined table
@@ -140,18 +141,22 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
         on_progress: Callable[[str], None] | None = None,
         link_kind: str = "auto",
         stop: threading.Event | None = None,
-        skip: list[str] | None = None) -> tuple[list[Record], RunInfo]:
+        skip: list[str] | None = None,
+        realtime_priority: int = 0) -> tuple[list[Record], RunInfo]:
     """Start the stack, inject each fault `rounds` times (a round: each fault once, in
     catalogue order), stop. `time_budget_s`: no new round starts after it. `only`:
     faults whose name contains one of these, `skip`: not those. `link_kind`: "auto"
     (network namespaces, else the loopback relay) or "relay". `stop` set: no new
-    injection starts, the stack is stopped and what was measured is returned."""
+    injection starts, the stack is stopped and what was measured is returned.
+    `realtime_priority` > 0: the stack's latency path at SCHED_FIFO, as deployed."""
     stop = stop or threading.Event()
     rng = random.Random(seed)
     faults = [f for f in all_faults() if (only is None or any(o in f.name for o in only))
               and not any(k in f.name for k in skip or [])]
     records = {f.name: Record(f.name, f.required) for f in faults}
     info = RunInfo(mode, rounds)
+    if realtime_priority:
+        info.scheduling = f"SCHED_FIFO {realtime_priority}"
     port = free_port()
     local = f"tcp/127.0.0.1:{port}"
     link, link_note = _make_link(port, link_kind)
@@ -165,7 +170,8 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
     say = on_progress or (lambda text: print(text, file=log, flush=True))
     try:
         with closed_loop(out, port=port, log=log, restart="always",
-                         router_listen=extra_listen, adapt=adapt) as loop:
+                         router_listen=extra_listen, adapt=adapt,
+                         realtime_priority=realtime_priority) as loop:
             gate = CanGate(loop.feed.sink)
             loop.feed.sink = gate
             brake_cfg = load_config(Path(out) / "run" / "brake.toml", BrakeConfig).brake

@@ -4,6 +4,7 @@ and its time bound; `aeb faults fuzz`: the long fuzz run (tools/faults/fuzz.py).
     aeb faults                    # quick: one injection of each fault (CI)
     aeb faults --soak             # at least 100 injections of each, one stack throughout
     aeb faults --rounds 5 --only SIGKILL,intruder
+    aeb faults --soak --realtime-priority 20   # the services at SCHED_FIFO, as deployed
     aeb faults fuzz [--scale 0.1]
 
 The stack is the closed loop of `aeb demo` (router, radar, camera, fusion, brake, started
@@ -47,6 +48,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--link", choices=["auto", "relay"], default="auto",
                    help="the cut link: fusion in its own network namespace (auto, where "
                         "it can be made; else) or behind a loopback TCP relay")
+    p.add_argument("--realtime-priority", type=int, default=0, metavar="N",
+                   help="SCHED_FIFO at N for the router and the latency path of radar, "
+                        "fusion and brake, as deployed (deploy/*.toml: 20); 0: normal "
+                        "scheduling. Needs root or an RLIMIT_RTPRIO of N")
     p.add_argument("--seed", type=int, default=19)
     p.add_argument("--out", default="out/faults")
     add_log_level(p, "WARNING")
@@ -81,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_event_on_signals(grace_s=None)
     try:
         records, info = harness.run(out, rounds, mode, sys.stdout, budget, only, args.seed,
-                                    link_kind=args.link, stop=stop, skip=skip)
+                                    link_kind=args.link, stop=stop, skip=skip,
+                                    realtime_priority=args.realtime_priority)
     except (StackStartError, ConfigError, BusError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

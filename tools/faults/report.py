@@ -52,7 +52,7 @@ def markdown(table: list[dict[str, Any]], info: RunInfo) -> str:
     head = (f"{len(info.runs)} runs ({runs})" if info.runs else
             f"mode {info.mode}: {info.rounds_done} of {info.rounds_planned} rounds in "
             f"{info.seconds / 60:.1f} min")
-    lines = [f"{head}; link cut: {info.link}"
+    lines = [f"{head}; link cut: {info.link}; scheduling: {info.scheduling}"
              + (f"; stopped early: {info.stopped_early}" if info.stopped_early else ""), "",
              "| fault | required response | injections | within bound | bound ms | p50 ms "
              "| max ms | recovery p50 / max s | lost |",
@@ -122,7 +122,8 @@ def write(out: Path, records: list[Record], info: RunInfo) -> tuple[Path, Path, 
     js.write_text(json.dumps({
         "mode": info.mode, "rounds_planned": info.rounds_planned,
         "rounds_done": info.rounds_done, "seconds": round(info.seconds, 1),
-        "link": info.link, "stopped_early": info.stopped_early,
+        "link": info.link, "scheduling": info.scheduling,
+        "stopped_early": info.stopped_early,
         "unexpected_exits": info.unexpected_exits,
         "machine": {"node": platform.node(), "cpus": _cpus(), "python": platform.python_version(),
                     "kernel": platform.release()},
@@ -140,7 +141,8 @@ def write(out: Path, records: list[Record], info: RunInfo) -> tuple[Path, Path, 
 
 def _run_dict(info: RunInfo) -> dict[str, Any]:
     return {"mode": info.mode, "rounds_done": info.rounds_done, "seconds": info.seconds,
-            "stopped_early": info.stopped_early, "link": info.link}
+            "stopped_early": info.stopped_early, "link": info.link,
+            "scheduling": info.scheduling}
 
 
 def combine(paths: list[Path]) -> tuple[list[Record], RunInfo]:
@@ -167,6 +169,7 @@ def combine(paths: list[Path]) -> tuple[list[Record], RunInfo]:
         info.seconds += data["seconds"]
         info.unexpected_exits += data["unexpected_exits"]
         info.link = info.link or data["link"]
+        info.scheduling = data.get("scheduling", info.scheduling)
         if data["stopped_early"]:
             info.stopped_early += f"{path.parent.name}: {data['stopped_early']} "
     return list(records.values()), info
