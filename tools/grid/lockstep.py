@@ -83,6 +83,9 @@ SETTLED_POSITION_PCT = 2.0        # the runner's "actuator released"
 HOUSEKEEPING_NS = 10_000_000      # the radar service's, while frames flow
 
 
+IDEAL = "ideal"
+
+
 class LockstepError(RuntimeError):
     """The loop could not run the scenario (the stack never armed, a config that does
     not fit the simulated camera)."""
@@ -101,15 +104,20 @@ class LoopConfig:
     delays: Delays = field(default_factory=Delays)
     loop: LoopSettings = field(default_factory=LoopSettings)
     name: str = ""                # how results name this configuration
+    # IDEAL (a bound, not a system): fusion's decision replaced by full braking from the
+    # first radar cycle after the ground truth puts the ego on a collision course
+    ideal: bool = False
 
     @classmethod
-    def load(cls, fusion: Path, candidate: Path | None = None) -> "LoopConfig":
+    def load(cls, fusion: Path, candidate: Path | None = None,
+             ideal: bool = False) -> "LoopConfig":
         """From fusion config files; the radar's settings are the defaults (the paper's
         prefilter, 25 m), widened to what a kinematic fusion's range gate reaches.
-        Raises ConfigError."""
+        `ideal`: the IDEAL decision on this loop (named ``ideal``). Raises ConfigError."""
         cfg = load_config(fusion, FusionConfig)
         cand = load_config(candidate, FusionConfig) if candidate is not None else None
-        return cls(cfg, cand, radar=radar_for(cfg, cand), name=fusion.stem)
+        return cls(cfg, cand, radar=radar_for(cfg, cand),
+                   name=IDEAL if ideal else fusion.stem, ideal=ideal)
 
 
 @dataclass
@@ -219,6 +227,7 @@ class Lockstep:
         self.cycles: list[FusionCycle] = []
         self._tick_ns = round(config.loop.tick_s * 1e9)
         self._world_ns = 0              # when the world was last stepped
+        self._ideal_braking = False     # IDEAL: a collision course has been seen
 
     def _instances(self) -> list[_Fusion]:
         return [self.primary] + ([self.candidate] if self.candidate is not None else [])
@@ -335,7 +344,7 @@ class Lockstep:
             shadow = (self.candidate.process(tracks, self.frames, wall, mono)
                       if self.candidate is not None else None)
         published = t_ns + self.delays.fusion_ns
-        command = result.command
+        command = self._ideal(result.command) if self.config.ideal else result.command
         command = _published(command, ev.mono_ns(published))
         signer = self.primary.signer
         assert signer is not None
@@ -347,6 +356,23 @@ class Lockstep:
             self.cycles.append(cycle)
         ev.at(published + self.delays.zenoh_hop_ns,
               partial(self._brake_command, signed, command.decision, cycle))
+
+    def _ideal(self, command: BrakeCommand) -> BrakeCommand:
+        """IDEAL: fusion's command replaced by full braking, held to the end, from the
+        first cycle whose latest tick had the ground truth on a collision course (at
+        current velocities; before any sensor could confirm it), else by a NONE. With the
+        loop's radar cycle, delays and actuator unchanged, the impact speeds it leaves
+        are what no decision on this loop can beat."""
+        run = self.run
+        if (run is not None and not run.ended and run.samples
+                and run.samples[-1].ttc_s is not None):
+            self._ideal_braking = True
+        if self._ideal_braking:
+            return msgspec.structs.replace(
+                command, decision=Decision.BRAKE, brake_level_pct=100.0, held=False,
+                reason="ideal: the ground truth's collision course")
+        return msgspec.structs.replace(command, decision=Decision.NONE, brake_level_pct=0.0,
+                                       held=False, reason="ideal: no collision course")
 
     def _brake_command(self, payload: bytes, decision: Decision, cycle: FusionCycle | None,
                        t_ns: int) -> None:

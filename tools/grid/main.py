@@ -8,6 +8,7 @@ case's timeline plot. A SIMULATION.
     aeb grid --quick                                  # one case per family (CI)
     aeb grid                                          # the nominal grid, deploy/fusion.toml
     aeb grid --paper --workers 2                      # ... and deploy/fusion-paper.toml
+    aeb grid --ideal --families CBNA-50               # ... and the IDEAL decision's bound
     aeb grid --families CCRs,CCRb --speeds 40,50,60 --seeds heldout:3
     aeb grid --candidate my-fusion.toml               # a candidate in shadow mode
     aeb grid --list                                   # the families and their grids
@@ -69,6 +70,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                          "deploy/fusion.toml)")
     ap.add_argument("--paper", action="store_true",
                     help="also deploy/fusion-paper.toml, side by side")
+    ap.add_argument("--ideal", action="store_true",
+                    help="also an IDEAL decision on the same loop (full braking from the "
+                         "ground truth's first collision course): what no decision beats")
     ap.add_argument("--candidate", type=Path, default=None, metavar="CONFIG",
                     help="a fusion configuration in shadow mode beside --config: where it "
                          "decided differently")
@@ -166,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     from aeb_radar_camera.common.config.loader import ConfigError
     from aeb_radar_camera.common.service import stop_event_on_signals
     from aeb_radar_camera.tools.grid import report
-    from aeb_radar_camera.tools.grid.lockstep import LoopConfig
+    from aeb_radar_camera.tools.grid.lockstep import IDEAL, LoopConfig
     from aeb_radar_camera.tools.grid.pool import Case, print_progress, run_cases
     from aeb_radar_camera.tools.grid.score import sensor_floor
     from aeb_radar_camera.tools.sim.families import FAMILIES, listing
@@ -186,9 +190,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     paths = [args.config] + ([PAPER_CONFIG] if args.paper else [])
     configs = config_names(paths)
+    if args.ideal:
+        if IDEAL in configs:
+            print(f"error: a configuration file named {IDEAL}.toml clashes with --ideal",
+                  file=sys.stderr)
+            return 2
+        configs[IDEAL] = args.config
     try:
         loaded = {name: LoopConfig.load(p, args.candidate if name == next(iter(configs))
-                                        else None) for name, p in configs.items()}
+                                        else None, name == IDEAL)
+                  for name, p in configs.items()}
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -200,7 +211,8 @@ def main(argv: list[str] | None = None) -> int:
             plot = (None if args.no_plots
                     else out / name / "plots" / c.family / f"{c.name}.png")
             runs.append((name, c, Case(c.scenario(), path, candidate,
-                                       name=f"{c.name} [{name}]", plot=plot)))
+                                       name=f"{c.name} [{name}]", plot=plot,
+                                       ideal=name == IDEAL)))
     print(f"aeb grid: {len(cases)} cases x {len(configs)} configuration"
           f"{'s' if len(configs) > 1 else ''} ({', '.join(configs)}), {args.workers} "
           f"worker{'s' if args.workers > 1 else ''}; output in {out}/", file=sys.stderr)

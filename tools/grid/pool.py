@@ -44,6 +44,7 @@ class Case:
     loop_seed: int = 0
     name: str = ""
     plot: Path | None = None
+    ideal: bool = False         # the IDEAL decision on this loop (lockstep.LoopConfig)
 
     @property
     def label(self) -> str:
@@ -67,7 +68,7 @@ Progress = Callable[[int, int, Outcome], None]
 
 # A worker's renderer and configurations, built once per process.
 _scenes: SceneCamera | None = None
-_configs: dict[tuple[Path, Path | None], LoopConfig] = {}
+_configs: dict[tuple[Path, Path | None, bool], LoopConfig] = {}
 
 
 def _worker_init() -> None:
@@ -80,9 +81,10 @@ def run_case(index: int, case: Case) -> Outcome:
     try:
         if _scenes is None:
             _scenes = SceneCamera(Calibration.load(EXAMPLE_CALIBRATION))
-        key = (case.fusion_config, case.candidate_config)
+        key = (case.fusion_config, case.candidate_config, case.ideal)
         if key not in _configs:
-            _configs[key] = LoopConfig.load(case.fusion_config, case.candidate_config)
+            _configs[key] = LoopConfig.load(case.fusion_config, case.candidate_config,
+                                            case.ideal)
         result = run_scenario(case.scenario, _configs[key], _scenes, case.loop_seed)
     except Exception as exc:     # reported with the case; the other cases go on
         return Outcome(index, case, None, f"{type(exc).__name__}: {exc}",
