@@ -50,6 +50,7 @@ from aeb_radar_camera.services.fusion.decision import (
 from aeb_radar_camera.services.fusion.evidence import (
     BESIDE_PATH,
     CANNOT_TELL_KEY,
+    EVIDENCE_CARRIED_KEY,
     EVIDENCE_KEY,
     LLR_KEY,
     TrackEvidence,
@@ -362,7 +363,7 @@ class FusionCore:
             # No frame shows the track now: the evidence gathered so far decides.
             carried = self.evidence.carried(t.track_id, (t.x_m, t.y_m), radar_stamp_ns)
             if carried is not None and carried != 0.0:
-                detail = {EVIDENCE_KEY: carried, "evidence_carried": 1.0}
+                detail = {EVIDENCE_KEY: carried, EVIDENCE_CARRIED_KEY: 1.0}
                 verification = (Verification.REJECTED if self.evidence.vetoed(carried)
                                 else Verification.VERIFIED if carried > 0 else verification)
         density = result.score if result is not None else None
@@ -386,9 +387,12 @@ class FusionCore:
                                                          radar_stamp_ns)
         score_name = result.score_name if result is not None else ""
         if verification is Verification.REJECTED:
-            reason = f"{reason}; {score_name} {density:.4f}"
+            # No frame this cycle (a veto carried by the evidence): no score to give.
+            parts = [f"{score_name} {density:.4f}"] if density is not None else []
             if EVIDENCE_KEY in detail:
-                reason = f"{reason}, evidence {detail[EVIDENCE_KEY]:.2f}"
+                parts.append(f"evidence {detail[EVIDENCE_KEY]:.2f}"
+                             + (" carried" if EVIDENCE_CARRIED_KEY in detail else ""))
+            reason = "; ".join([reason, ", ".join(parts)]) if parts else reason
         # Where a track no camera sees is reported: the first camera with a frame.
         view = check.view or next((v for v in views if v.frame is not None), views[0])
         frame = view.frame

@@ -14,6 +14,7 @@ from aeb_radar_camera.common.config.fusion import EvidenceSettings
 
 LLR_KEY = "llr"                 # a verifier's per-frame value, in its GateResult.detail
 EVIDENCE_KEY = "evidence_llr"   # the track's sum after this frame, in gate_detail
+EVIDENCE_CARRIED_KEY = "evidence_carried"   # 1: no frame showed the track, the sum carried
 # In gate_detail: the verifier could not tell this frame and the track's evidence holds
 # no confirmation (`[fusion.decision.kinematic] cannot_tell_full_only` then applies).
 CANNOT_TELL_KEY = "cannot_tell"

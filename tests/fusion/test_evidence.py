@@ -6,7 +6,7 @@ import pytest
 from aeb_radar_camera.common.config.loader import ConfigError
 from aeb_radar_camera.common.messages import Decision, Verification
 from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation, ParamValue
-from tests.fusion.helpers import MS, T0, make_core, run, settings, track
+from tests.fusion.helpers import MS, T0, feed, make_core, run, settings, track
 
 CYCLE_NS = 74 * MS
 
@@ -106,6 +106,21 @@ def test_a_track_out_of_view_keeps_its_evidence_and_a_new_id_near_it_takes_it_ov
     assert ev.carried(22, (12.0, 1.0), now) is None
     assert ev.carried(23, (3.0, -3.2), T0 + 40 * CYCLE_NS) is None
 
+
+
+def test_a_vetoed_track_no_frame_shows_is_decided_on_its_carried_evidence():
+    """No frame this cycle: the veto the evidence reached stands, said in the reason
+    (the cycle once failed formatting the absent frame's score)."""
+    v = Scripted(-1.0, -1.0, -1.0, -1.0)
+    v.gives_llr = True                             # type: ignore[attr-defined]
+    core = make_core(v)
+    got = drive(core, 4)
+    assert got[-1].verification is Verification.REJECTED
+    t = run(core, track(1, x=20.0 - 0.6 * 4, vx=-8.0), frames=feed(),
+            stamp_ns=T0 + 4 * CYCLE_NS, seq=4).targets.targets[0]
+    assert t.verification is Verification.REJECTED and t.decision is Decision.NONE
+    assert t.gate_detail["evidence_carried"] == 1.0
+    assert "evidence -4.00 carried" in t.reason, t.reason
 
 
 def test_closing_tracks_that_are_not_threats_yet_are_checked_for_their_evidence():
