@@ -85,11 +85,13 @@ def test_faults_run_the_stack_at_the_deployed_realtime_priority(tmp_path):
     records, info = harness.run(tmp_path, 1, "quick", io.StringIO(), only=["SIGKILL fusion"],
                                 realtime_priority=20)
     log = (tmp_path / "stack.log").read_text()
-    assert info.scheduling == "SCHED_FIFO 20"
+    # the harness's stand-ins for hardware just below: a fault's load does not starve them
+    assert info.scheduling.startswith("SCHED_FIFO 20; simulated hardware (")
+    assert "sim-loop" in info.scheduling and info.scheduling.endswith("at SCHED_FIFO 10")
     for service in ("router", "brake", "fusion", "radar"):
         assert any(line.startswith(service) and "realtime_thread" in line
                    and "priority=" in line for line in log.splitlines()), (service, log[-3000:])
     (rec,) = records
     assert len(rec.outcomes) == 1 and rec.outcomes[0].response_ms is not None, rec.outcomes
     md, _, _ = report.write(tmp_path, records, info)
-    assert "scheduling: SCHED_FIFO 20" in md.read_text()
+    assert f"scheduling: {info.scheduling}" in md.read_text()

@@ -17,6 +17,7 @@ from aeb_radar_camera.common.config.brake import BrakeConfig
 from aeb_radar_camera.common.config.loader import load_config
 from aeb_radar_camera.common.messages import BrakeState, VerifierStatus
 from aeb_radar_camera.common.net import free_port
+from aeb_radar_camera.common.realtime import set_fifo, zenoh_io_threads
 from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
 from aeb_radar_camera.tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome
 from aeb_radar_camera.tools.faults.links import CanGate, NetnsLink, RelayLink
@@ -126,6 +127,31 @@ class Drive:
         self._thread.join(self.RUN_S + 5.0)
 
 
+# The harness's threads that stand in for hardware: the simulated world and radar
+# (its CAN frames), the actuator, the slcan link. A sensor or an actuator does not wait for
+# a CPU; these threads do, and starved by a fault's load they would fail the stack for
+# something no vehicle has. Not the main thread (it starts the faults' processes) nor the
+# launcher's (it restarts services): a child inherits its parent thread's policy.
+SIMULATED_HARDWARE_THREADS = ("sim-loop", "sim-actuator", "slcan-link")
+SIMULATED_HARDWARE_BELOW = 10     # priorities under the stack's latency path
+
+
+def simulated_hardware_at_fifo(priority: int) -> str:
+    """The simulated hardware's threads and the harness's Zenoh I/O threads (the world's
+    samples) at SCHED_FIFO `priority`; says which, or why not (no root, not Linux)."""
+    tids = {t.native_id: t.name for t in threading.enumerate()
+            if t.name in SIMULATED_HARDWARE_THREADS and t.native_id is not None}
+    tids.update(zenoh_io_threads())
+    try:
+        for tid in tids:
+            set_fifo(priority, tid)
+    except (OSError, AttributeError) as exc:
+        return f"simulated hardware at normal scheduling ({exc})"
+    names = sorted({n.split("-")[0] + "-*" if n.startswith(("rx-", "tx-")) else n
+                    for n in tids.values()})
+    return f"simulated hardware ({', '.join(names)}) at SCHED_FIFO {priority}"
+
+
 def _make_link(port: int, kind: str) -> tuple[NetnsLink | RelayLink, str]:
     if kind == "relay":
         return RelayLink(port), "loopback relay (asked for)"
@@ -178,6 +204,9 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
             keys = load_keyring(brake_cfg.command_keys, brake_cfg.instance)
             observer = Observer(loop.bus, loop.actuator, keys)
             drive = Drive(loop.sim).start()
+            if realtime_priority:
+                info.scheduling += "; " + simulated_hardware_at_fifo(
+                    max(1, realtime_priority - SIMULATED_HARDWARE_BELOW))
             ctx = Context(loop, observer, bounds_for(Path(out) / "run" / "brake.toml"), rng,
                           gate, link, "")
             if not settled(ctx, 60.0):

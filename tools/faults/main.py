@@ -50,8 +50,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         "it can be made; else) or behind a loopback TCP relay")
     p.add_argument("--realtime-priority", type=int, default=0, metavar="N",
                    help="SCHED_FIFO at N for the router and the latency path of radar, "
-                        "fusion and brake, as deployed (deploy/*.toml: 20); 0: normal "
-                        "scheduling. Needs root or an RLIMIT_RTPRIO of N")
+                        "fusion and brake, as deployed (deploy/*.toml: 20), and at N - 10 "
+                        "for the simulated hardware's threads (a sensor does not wait for "
+                        "a CPU); 0: normal scheduling. Needs root or an RLIMIT_RTPRIO of N")
     p.add_argument("--seed", type=int, default=19)
     p.add_argument("--out", default="out/faults")
     add_log_level(p, "WARNING")
