@@ -52,6 +52,10 @@ from aeb_radar_camera.services.fusion.verifiers import wants_depth
 RADAR_RING = 4     # radar samples Zenoh keeps for the radar thread; the oldest dropped
 
 
+# A radar sequence step larger than this (cycles; about 70 s at 14 Hz) is a jump, not
+# that many missed cycles.
+MAX_RADAR_SEQ_GAP = 1000
+
 class RadarGate:
     """At most one radar cycle per `interval_ns`: `wait_ns` says how long until the next
     may be handled, `take` marks one handled. Not thread-safe: the radar thread only."""
@@ -328,6 +332,11 @@ class FusionShell:
             # Answered all the same (one command per cycle); the stamp decides staleness.
             self.counters.add("radar_seq_not_increasing")
             self._rl.warning("radar:order", "radar_seq_not_increasing", seq=seq, last=last)
+        elif last is not None and seq > last + MAX_RADAR_SEQ_GAP:
+            # Not cycles lost (a forged or flooded sample, a radar host's counter reset
+            # upwards): counted as a jump, so that the missed count keeps its meaning.
+            self.counters.add("radar_seq_jumps")
+            self._rl.warning("radar:order", "radar_seq_jump", seq=seq, last=last)
         elif last is not None and seq > last + 1:
             self.counters.add("radar_cycles_missed", seq - last - 1)
         self._last_radar_seq = seq

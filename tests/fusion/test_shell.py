@@ -130,6 +130,17 @@ def test_radar_sequence_gaps_and_regressions_are_counted_and_still_answered():
     assert [m.header.seq for name, m in bus.log if name == "fusion_brake_cmd"] == [0, 1, 2, 3, 4]
 
 
+def test_a_forged_sequence_far_ahead_is_a_jump_not_a_trillion_missed_cycles():
+    """A flood's sample numbered 2^40 must not make the missed-cycle count meaningless."""
+    shell, bus = shell_with(FixedVerifier())
+    for seq in (5, 7, 1 << 40, 8, 9):
+        shell.on_tracks_payload(payload(seq=seq), "k", 0)
+    assert shell.counters.get("radar_cycles_missed") == 1
+    assert shell.counters.get("radar_seq_jumps") == 1
+    assert shell.counters.get("radar_seq_not_increasing") == 1
+    assert len([m for name, m in bus.log if name == "fusion_brake_cmd"]) == 5
+
+
 def test_a_camera_calibration_other_than_ours_is_counted_and_named():
     import numpy as np
 
