@@ -149,9 +149,9 @@ def _admits(chain: _Chain, p: EdgePoint, s: RoadEdgeSettings, path_curvature: fl
         return path_curvature if abs(slope) <= math.tan(math.radians(
             s.start_heading_deg)) else None
     # The points must lie within residual_m of a curve whose road curvature (the path's
-    # plus the chain's own, 2 c2: at most the true one's for a chain at an angle) a driver
-    # takes at this speed: the bound is on the curve, so radar noise on three close
-    # returns does not read as a bend too tight to drive.
+    # plus the chain's own, 2 c2: at least the true one's for a chain at an angle, so the
+    # bound is the stricter there) a driver takes at this speed. The bound is on the
+    # curve, so radar noise on three close returns does not read as a bend too tight.
     c0, c1, c2 = bounded_fit(pts, (-limit - path_curvature) / 2.0,
                              (limit - path_curvature) / 2.0)
     if any(abs(c0 + c1 * x + c2 * x * x - y) > s.residual_m for x, y in pts):
