@@ -138,6 +138,38 @@ class PathSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     max_curvature_per_m: Positive = 0.05
 
 
+class RoadEdgeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The road's edge from stationary radar returns (services/fusion/road_edge.py): a
+    chain of stationary tracks that starts beside the path and bends like a road the ego
+    could take is the road's edge (a guard rail along a bend's outside), and its members
+    with more of the chain beyond them are out of the path. Only the kinematic rule
+    reads it."""
+
+    enabled: bool = True
+    # A track is stationary when its speed over ground is below this (m/s).
+    stationary_mps: NonNegative = 1.0
+    # The chain's nearest member: beside the path (beyond half_width_m + margin_m), at
+    # most this far along it (m), ...
+    start_range_m: Positive = 20.0
+    # ... and its first step running along the path, within this angle (deg).
+    start_heading_deg: Annotated[float, msgspec.Meta(ge=0, le=45)] = 10.0
+    # Consecutive members at most this far apart (m): a rail's returns come every
+    # segment (4 m in the simulator); a car further on is no continuation.
+    max_spacing_m: Positive = 9.0
+    # Each new member is fitted with the members within this length behind it
+    # (a quadratic in arc length) ...
+    fit_length_m: Positive = 24.0
+    # ... every one of them within this of the fit (m) ...
+    residual_m: NonNegative = 0.3
+    # ... and the road's curvature it implies at most what gives this lateral
+    # acceleration at the ego's speed (m/s^2), never beyond the path's max_curvature_per_m.
+    max_lateral_mps2: Positive = 5.0
+    # A chain of fewer members is none; a member is the edge only with this many beyond
+    # it (the chain's end, where a car behind a rail's end would be, never is).
+    min_members: Annotated[int, msgspec.Meta(ge=2, le=20)] = 3
+    members_after: Annotated[int, msgspec.Meta(ge=1, le=10)] = 2
+
+
 class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """The kinematic rule's bounds (`rule = "kinematic"`; docs/fusion.md).
 
@@ -254,6 +286,7 @@ class DecisionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     path: PathSettings = msgspec.field(default_factory=PathSettings)
     kinematic: KinematicSettings = msgspec.field(default_factory=KinematicSettings)
     override: OverrideSettings = msgspec.field(default_factory=OverrideSettings)
+    road_edge: RoadEdgeSettings = msgspec.field(default_factory=RoadEdgeSettings)
 
     @property
     def range_bounds_m(self) -> tuple[float, float]:

@@ -53,6 +53,7 @@ from aeb_radar_camera.services.fusion.evidence import (
     EVIDENCE_CARRIED_KEY,
     EVIDENCE_KEY,
     LLR_KEY,
+    ROAD_EDGE,
     TrackEvidence,
 )
 from aeb_radar_camera.services.fusion.frames import (
@@ -154,6 +155,9 @@ class FusionCore:
         # the radar point's offset from the path then, the reason).
         self._beside: dict[int, tuple[int, float, str]] = {}
         self.beside_path_targets = 0   # threats the camera took out of the path, since start
+        # Tracks in range the road's edge took out of the path where they reached a stage
+        # (each cycle counts), since start.
+        self.road_edge_targets = 0
         self._seq = 0
         self.invalid_tracks = 0    # confirmed tracks with non-finite numbers, since start
         self._max_skew_ns = round(settings.frames.max_skew_s * 1e9)
@@ -218,6 +222,10 @@ class FusionCore:
         feeds = self._usable(feeds, confirmed)
         kins = [self._kinematics(t) for t in confirmed]
         threats = [self.rule.threat(k) for k in kins]
+        if isinstance(self.rule, KinematicRule):
+            rule = self.rule
+            self.road_edge_targets += sum(1 for k in kins if k.road_edge and k.in_range
+                                          and rule.stage(k) is not None)
         ranks = [_rank(threat, k.ttc_eff_s, k.level_pct)
                  for (threat, _), k in zip(threats, kins, strict=True)]
         order = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
@@ -381,6 +389,8 @@ class FusionCore:
             decision, reason = rule.cannot_tell(k, decision, reason)
         else:
             decision, reason = decide(decision, reason, verification, rule.policy)
+        if k.road_edge:
+            detail = {**detail, ROAD_EDGE: 1.0}
         if isinstance(rule, KinematicRule):
             decision, reason, detail = self._beside_path(t, k, check.view, j, result,
                                                          decision, reason, detail,

@@ -36,6 +36,7 @@ from aeb_radar_camera.services.fusion.path import (
     predicted_path,
     straight_path,
 )
+from aeb_radar_camera.services.fusion.road_edge import EdgePoint, on_edge, road_edges
 
 
 def severity(d: Decision) -> int:
@@ -72,6 +73,8 @@ class Kinematics:
     required_decel_mps2: float | None = None
     accel_mps2: float | None = None          # the target's along the path (over ground)
     path_point: PathPoint | None = None
+    # Why the point test's in-path track is out of it as the road's edge ("": it is not).
+    road_edge: str = ""
 
 
 def corridor_window(lateral_m: float, lateral_speed_mps: float,
@@ -351,6 +354,7 @@ class KinematicRule:
         self.max_range = s.max_range_m
         self._accels: dict[int, float] = {}
         self._ground: dict[int, tuple[float, float]] = {}   # id -> (along, across) over ground
+        self._edge: dict[int, str] = {}    # id -> why it is the road's edge, this cycle
 
     def begin(self, vehicle: VehicleSample, tracks: Sequence[RadarTrack],
               stamp_ns: int) -> None:
@@ -362,6 +366,7 @@ class KinematicRule:
         self.degraded = vehicle.reason
         self._ground = {}
         self._accels = {}
+        self._edge = {}
         if motion is None:
             self.path = straight_path(self.s.corridor.half_width_m + self.s.corridor.margin_m,
                                       self.s.max_range_m, self.centre, "no vehicle state")
@@ -379,6 +384,23 @@ class KinematicRule:
             gx, gy = t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m
             self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
         self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
+        if self.s.road_edge.enabled:
+            self._edge = self._road_edge(tracks)
+
+    def _road_edge(self, tracks: Sequence[RadarTrack]) -> dict[int, str]:
+        """The stationary tracks that form the road's edge this cycle (road_edge.py)."""
+        e = self.s.road_edge
+        points = []
+        for t in tracks:
+            along, across = self._ground[t.track_id]
+            if math.hypot(along, across) < e.stationary_mps:
+                p = self.path.point(t.x_m, t.y_m)
+                points.append(EdgePoint(t.track_id, p.s_m, p.d_m))
+        if len(points) < e.min_members:
+            return {}
+        edges = road_edges(points, self.path.half_width_m, self.path.curvature_per_m,
+                           self.ego_mps, e, self.s.path.max_curvature_per_m)
+        return on_edge(edges, e)
 
     def lateral_input(self, tracks: list[RadarTrack]) -> list[RadarTrack]:
         """The tracks whose sideways motion LateralMotion judges: across the path, over
@@ -421,13 +443,18 @@ class KinematicRule:
                            and p.s_m <= self.path.length_m)
                 window = PathWindow(enter, leave, arrival)
                 lead, decel = 0.0, 0.0      # it crosses: the ego must stop before its line
+        edge = ""
+        if in_path and window is None and track.track_id in self._edge:
+            # A guard rail where the road bends: the straight path runs into it, the road
+            # does not (road_edge.py).
+            edge, in_path = self._edge[track.track_id], False
         gap = p.s_m - k.stop_margin_m
         ttc = time_to_collision(p.s_m, v, lead, decel)
         if window is not None:
             ttc = window.arrival_s
         need = required_decel(gap, v, lead, decel, k.latency_s) if v > 0.0 else 0.0
         kin = Kinematics(r, track.range_rate_mps, p.d_m, ttc, ttc, in_range, in_path, window,
-                         None, need, a, p)
+                         None, need, a, p, edge)
         return replace(kin, level_pct=self.level(kin))
 
     def beside_path(self, kin: Kinematics, x_m: float,
@@ -505,6 +532,10 @@ class KinematicRule:
         p = kin.path_point
         w = kin.window
         if not kin.in_path:
+            if kin.road_edge:
+                where = "" if p is None else f"s {p.s_m:.1f} m, offset {p.d_m:+.2f} m: "
+                return Decision.NONE, (f"out of path as the road's edge ({where}"
+                                       f"{kin.road_edge}, {self.path.describe()})")
             why = "" if w is None else f"; {_window_text(w)}"
             where = "" if p is None else f"s {p.s_m:.1f} m, offset {p.d_m:+.2f} m, "
             return Decision.NONE, (f"out of path ({where}limit {self.path.half_width_m:g} m,"

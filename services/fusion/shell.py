@@ -379,7 +379,8 @@ class FusionShell:
                    depth_received=sum(f.depth_received for f in feeds),
                    depth_unusable=sum(f.depth_undecodable + f.depth_dropped for f in feeds),
                    invalid_tracks=self.core.invalid_tracks, tracks_shed=self.tracks_shed,
-                   beside_path_targets=self.core.beside_path_targets)
+                   beside_path_targets=self.core.beside_path_targets,
+                   road_edge_targets=self.core.road_edge_targets)
         if self.s.decision.rule is RuleName.KINEMATIC:
             with self._vehicle_lock:
                 for name, state in (("motion", self.core.vehicle.motion),

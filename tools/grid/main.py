@@ -54,8 +54,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="aeb grid", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--families", default="all",
-                    help="comma-separated families or groups (euro_ncap, bend, no_threat, "
-                         "false_target, obstacle), or 'all'")
+                    help="comma-separated families or groups (euro_ncap, bend, road_edge, "
+                         "no_threat, false_target, obstacle), or 'all'")
     ap.add_argument("--speeds", default="", help="ego speeds in km/h, comma-separated "
                     "(default: each family's own)")
     ap.add_argument("--seeds", default="nominal", help="nominal | heldout:N | train:N | A-B | "

@@ -164,8 +164,8 @@ class Family:
 
     name: str
     kind: ScenarioKind
-    group: str                   # euro_ncap | bend | no_threat | false_target | obstacle |
-    #                              override
+    group: str                   # euro_ncap | bend | road_edge | no_threat | false_target |
+    #                              obstacle | override
     description: str
     speeds_kph: tuple[float, ...]
     points: tuple[Params, ...]
@@ -490,18 +490,56 @@ def guard_rail(b: Build, radius_m: float, curve_start_m: float, first_m: float,
     """A guard rail of straight segments along the outside edge of a bend, from station
     `first_m` to `last_m` (also for the demo's rail scenario)."""
     b.road = RoadSpec(curve_start_m=curve_start_m, radius_m=radius_m)
-    d = -offset_m if radius_m > 0 else offset_m
+    _rail(b, first_m, last_m, -offset_m if radius_m > 0 else offset_m, segment_m)
+    b.until(last_m + 10.0)
+
+
+def _rail(b: Build, first_m: float, last_m: float, d_m: float, segment_m: float = 4.0
+          ) -> None:
+    """Guard rail segments of about `segment_m` at offset `d_m` from station `first_m`
+    to `last_m`, along the road (straight or bending)."""
     n = max(1, round((last_m - first_m) / segment_m))
     length = (last_m - first_m) / n
     for i in range(n):
-        b.add(ObjectKind.GUARD_RAIL, first_m + (i + 0.5) * length, d, 0.0,
+        b.add(ObjectKind.GUARD_RAIL, first_m + (i + 0.5) * length, d_m, 0.0,
               (round(length, 3), 0.1, 0.75), name="guard rail")
-    b.until(last_m + 10.0)
 
 
 def _rail_bend(b: Build) -> None:
     start = round(b.draw.uniform(20.0, 10.0, 30.0), 1)
     guard_rail(b, b.pf("radius_m"), start, 8.0, start + 45.0)
+
+
+RAIL_OFFSET_M = 2.6      # a guard rail's offset from the lane's centre (the bend family's)
+RAIL_MIN_M = 20.0        # the straight rail's families: at least this much rail from 8 m
+
+
+def _rail_side(b: Build) -> float:
+    """The side a straight rail stands on: right (-1) nominally, either in variants."""
+    return 1.0 if b.draw.choice("right", ("left", "right")) == "left" else -1.0
+
+
+def _rail_end_car(b: Build) -> None:
+    """A straight road with a straight guard rail along its edge that ends `beyond_m`
+    before a car stopped in the lane: the rail's returns run along the road and end, the
+    car stands where the line of the rail does not go."""
+    beyond = b.pf("beyond_m") + b.draw.jitter(0.0, 1.0)
+    gap = max(b.approach(), 8.0 + RAIL_MIN_M + beyond)
+    car = b.scaled(ObjectKind.CAR, 0.05)
+    b.add(ObjectKind.CAR, gap + car[0] / 2, b.draw.jitter(0.0, 0.2), 0.0, car,
+          name="stopped car")
+    _rail(b, 8.0, gap - beyond, _rail_side(b) * b.draw.jitter(RAIL_OFFSET_M, 0.2))
+    b.until(gap)
+
+
+def _rail_beside_car(b: Build) -> None:
+    """A car stopped in the lane (offset by the overlap) beside a straight guard rail that
+    runs along the road's edge past it."""
+    gap = b.approach()
+    car = b.scaled(ObjectKind.CAR, 0.05)
+    b.add(ObjectKind.CAR, gap + car[0] / 2, _offset_m(b), 0.0, car, name="stopped car")
+    _rail(b, 8.0, gap + 20.0, _rail_side(b) * b.draw.jitter(RAIL_OFFSET_M, 0.2))
+    b.until(gap)
 
 
 STANDING_POSES = {"facing": 180.0, "side-on": 90.0}
@@ -613,6 +651,14 @@ _FAMILY_LIST = [
            "A car stopped in the lane on a bend (radius signed: positive left) the ego "
            "follows.", ALL_SPEEDS, _points(radius_m=RADII), _bend_car,
            allowed=_bend_allowed),
+    Family("rail_end_stopped_car", ScenarioKind.THREAT, "road_edge",
+           "A car stopped in the lane of a straight road `beyond_m` past the end of a "
+           "straight guard rail along its edge.", ALL_SPEEDS[:4],
+           _points(beyond_m=(3.0, 10.0, 20.0)), _rail_end_car),
+    Family("rail_beside_stopped_car", ScenarioKind.THREAT, "road_edge",
+           "A car stopped in the lane of a straight road (offset by the overlap) beside a "
+           "straight guard rail along its edge.", ALL_SPEEDS[:4],
+           _points(offset=(-25.0, 0.0, 25.0)), _rail_beside_car),
     Family("beside_path", ScenarioKind.NO_THREAT, "no_threat",
            "A stationary object just outside the ego's path, its inner edge `gap_m` from it.",
            ALL_SPEEDS, _points(object=("car", "pedestrian", "box"),
