@@ -140,3 +140,16 @@ def test_the_run_folder_is_absolute_when_out_is_relative(tmp_path, monkeypatch):
     folder = run_dir(ctx)
     assert folder.is_absolute()
     assert folder == tmp_path / "out" / "x" / "run"
+
+
+def test_a_helper_process_that_ignores_sigterm_is_killed_not_left_to_end_the_run():
+    import subprocess
+    import sys
+
+    from aeb_radar_camera.tools.faults.security import end_process
+    code = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+            "print('ready', flush=True); time.sleep(60)")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    assert end_process(proc, grace_s=0.5) == -9
+    assert proc.poll() == -9

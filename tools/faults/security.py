@@ -235,6 +235,18 @@ STUCK_OBSERVE_S = 6.0
 STUCK_FILL_TIMEOUT_S = 60.0
 
 
+def end_process(proc: "subprocess.Popen[str]", grace_s: float = 10.0) -> int:
+    """SIGTERM, then SIGKILL after `grace_s`: the fault's own helper process is gone
+    when this returns (a load publisher stuck in a put outlived its SIGTERM once and
+    ended the whole run with a TimeoutExpired). Returns its exit code."""
+    proc.terminate()
+    try:
+        return proc.wait(grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait()
+
+
 class StuckSubscriber(Fault):
     name = "stuck subscriber"
     required = ("a subscriber of every key frozen: the brake gets fusion's commands within "
@@ -268,8 +280,7 @@ class StuckSubscriber(Fault):
             # the load stops once the link is full: what the router sends the stuck process
             # from now on waits in the router, and the stack (without real-time priorities
             # here) is not starved of CPU by the load while it is judged
-            load.terminate()
-            load.wait(10)
+            end_process(load)
             t_full = mono_ns()
             end = obs.status.wait(
                 lambda s: s.header.pub_mono_ns > t_full + int(STUCK_OBSERVE_S * 1e9), mark,
@@ -278,14 +289,8 @@ class StuckSubscriber(Fault):
             if proc.poll() is None:
                 proc.send_signal(signal.SIGCONT)
             for p in (load, proc):
-                if p is None:
-                    continue
-                p.terminate()
-                try:
-                    p.wait(10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+                if p is not None:
+                    end_process(p)
         if end is None:
             return Outcome(False, None, "no brake status after the subscriber's link filled",
                            lost=1)
