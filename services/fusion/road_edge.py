@@ -26,6 +26,9 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.polynomial import polynomial as P
+
 from aeb_radar_camera.common.config.fusion import RoadEdgeSettings
 
 # The ego's speed below this counts as this for the curvature bound (m/s): at a crawl
@@ -56,35 +59,12 @@ class RoadEdge:
 
 def quadratic_fit(points: Sequence[tuple[float, float]]) -> tuple[float, float, float]:
     """Least squares d = c0 + c1 s + c2 s^2 through (s, d) points: (c0, c1, c2). Two
-    points give a line (c2 = 0), one a constant. Raises ValueError for no point."""
-    n = len(points)
-    if n == 0:
+    points give a line (c2 = 0), one (or all at one s) a constant. Raises ValueError for
+    no point."""
+    if not points:
         raise ValueError("no point to fit")
-    if n == 1:
-        return points[0][1], 0.0, 0.0
-    # Centred on the mean s: the normal equations stay well conditioned 60 m ahead.
-    m = sum(p[0] for p in points) / n
-    xs = [p[0] - m for p in points]
-    ys = [p[1] for p in points]
-    if n == 2 or max(xs) - min(xs) < 1e-6:
-        return _lsq_line(points)
-    s1 = sum(xs)
-    s2 = sum(x * x for x in xs)
-    s3 = sum(x ** 3 for x in xs)
-    s4 = sum(x ** 4 for x in xs)
-    t0 = sum(ys)
-    t1 = sum(x * y for x, y in zip(xs, ys, strict=True))
-    t2 = sum(x * x * y for x, y in zip(xs, ys, strict=True))
-    a = ((n, s1, s2), (s1, s2, s3), (s2, s3, s4))
-    det = _det3(a)
-    if abs(det) < 1e-9:
-        return quadratic_fit([points[0], points[-1]])
-    r = (t0, t1, t2)
-    cs = [_det3(tuple(tuple(r[i] if j == col else a[i][j] for j in range(3))
-                      for i in range(3))) / det for col in range(3)]
-    a0, a1, a2 = cs
-    # Back from the centred variable: d = a0 + a1 (s - m) + a2 (s - m)^2.
-    return a0 - a1 * m + a2 * m * m, a1 - 2.0 * a2 * m, a2
+    xs, ys = np.array(points, dtype=float).T
+    return _fit(xs, ys, min(2, len(points) - 1))
 
 
 def bounded_fit(points: Sequence[tuple[float, float]], c2_lo: float, c2_hi: float
@@ -97,23 +77,18 @@ def bounded_fit(points: Sequence[tuple[float, float]], c2_lo: float, c2_hi: floa
     if c2_lo <= c2 <= c2_hi or len(points) < 3:
         return c0, c1, c2
     c2 = min(max(c2, c2_lo), c2_hi)
-    b0, b1, _ = _lsq_line([(x, y - c2 * x * x) for x, y in points])
+    xs, ys = np.array(points, dtype=float).T
+    b0, b1, _ = _fit(xs, ys - c2 * xs * xs, 1)
     return b0, b1, c2
 
 
-def _lsq_line(points: Sequence[tuple[float, float]]) -> tuple[float, float, float]:
-    """The least squares line d = c0 + c1 s: (c0, c1, 0)."""
-    n = len(points)
-    m = sum(p[0] for p in points) / n
-    sxx = sum((p[0] - m) ** 2 for p in points)
-    b = sum((p[0] - m) * p[1] for p in points) / sxx if sxx > 1e-12 else 0.0
-    return sum(p[1] for p in points) / n - b * m, b, 0.0
-
-
-def _det3(a: Sequence[Sequence[float]]) -> float:
-    return (a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
-            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]))
+def _fit(xs: np.ndarray, ys: np.ndarray, degree: int) -> tuple[float, float, float]:
+    """numpy's least squares polynomial (its columns scaled: well conditioned 60 m ahead)
+    as (c0, c1, c2); a constant where every s is the same."""
+    if np.ptp(xs) < 1e-6:
+        degree = 0
+    c = np.pad(P.polyfit(xs, ys, degree), (0, 2 - degree))
+    return float(c[0]), float(c[1]), float(c[2])
 
 
 def curvature_limit(speed_mps: float, s: RoadEdgeSettings, max_curvature_per_m: float
