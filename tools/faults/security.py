@@ -23,6 +23,7 @@ import subprocess
 import sys
 import threading
 import time
+from typing import Any
 
 from aeb_radar_camera.common.clock import mono_ns, wall_ns
 from aeb_radar_camera.common.command_auth import load_key
@@ -235,7 +236,7 @@ STUCK_OBSERVE_S = 6.0
 STUCK_FILL_TIMEOUT_S = 60.0
 
 
-def end_process(proc: "subprocess.Popen[str]", grace_s: float = 10.0) -> int:
+def end_process(proc: "subprocess.Popen[Any]", grace_s: float = 10.0) -> int:
     """SIGTERM, then SIGKILL after `grace_s`: the fault's own helper process is gone
     when this returns (a load publisher stuck in a put outlived its SIGTERM once and
     ended the whole run with a TimeoutExpired). Returns its exit code."""
@@ -388,11 +389,7 @@ class BrakeRestartMidStop(Fault):
             stop.set()
             for proc in procs:
                 if proc.poll() is None:
-                    proc.terminate()
-                    try:
-                        proc.wait(15)
-                    except subprocess.TimeoutExpired:
-                        proc.kill()
+                    end_process(proc, grace_s=15.0)
             pair.remove()
         if not lines:
             return Outcome(False, None, "no line from the restarted brake")
