@@ -8,10 +8,11 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
-from aeb_radar_camera.tools.faults.catalogue import Outcome
+from aeb_radar_camera.tools.faults.catalogue import Outcome, stream_gaps
 from aeb_radar_camera.tools.faults.harness import Record, RunInfo
 from aeb_radar_camera.tools.faults.links import CanGate, RelayLink
 from aeb_radar_camera.tools.faults.mutate import mutate_bytes, mutate_msgpack, mutate_tree
+from aeb_radar_camera.tools.faults.observe import Observer, Seen, Stream
 from aeb_radar_camera.tools.faults.report import markdown, rows, write
 from aeb_radar_camera.tools.faults.robust import run_dir
 
@@ -153,3 +154,26 @@ def test_a_helper_process_that_ignores_sigterm_is_killed_not_left_to_end_the_run
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
     assert end_process(proc, grace_s=0.5) == -9
     assert proc.poll() == -9
+
+
+def test_a_failsafe_during_a_camera_fault_says_which_stream_stopped():
+    ms = 1_000_000
+    obs = Observer.__new__(Observer)
+    obs.tracks, obs.targets, obs.commands = Stream(), Stream(), Stream()
+    # radar every 70 ms throughout; fusion receives and commands each, but for a 280 ms
+    # stall after the cycle at 700 ms (the three cycles in it decided late, together).
+    for t in range(0, 1400, 70):
+        obs.tracks.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=t * ms))))
+        rx = t if not 700 < t < 980 else 980
+        pub = rx + 2
+        obs.targets.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=pub * ms),
+                                                processing_ns=(pub - rx) * ms)))
+        obs.commands.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=pub * ms))))
+    failsafe = SimpleNamespace(header=SimpleNamespace(pub_mono_ns=910 * ms),
+                               last_cmd_rx_mono_ns=703 * ms)
+    text = stream_gaps(obs, 0, cast(Any, failsafe))
+    assert "radar published gap 70 ms" in text
+    # the stall still open at the FAILSAFE: from the last cycle before it
+    assert "fusion received gap 210 ms at -210 ms" in text
+    assert "fusion commanded gap 208 ms at -208 ms" in text
+    assert "0 commands published after the brake's last receipt" in text

@@ -18,6 +18,7 @@ Required responses (docs/brake.md, docs/fusion.md, DESIGN.md):
 - garbage on every key: nothing crashes, the stack stays armed.
 """
 
+import itertools
 import os
 import random
 import signal
@@ -46,6 +47,7 @@ from aeb_radar_camera.common.keys import (
 )
 from aeb_radar_camera.common.messages import (
     BrakeState,
+    BrakeStatus,
     CompressedFrame,
     VerifierStatus,
 )
@@ -170,8 +172,42 @@ def camera_unavailable_response(ctx: Context, inject: Callable[[], None], bound_
     response = (got.rx_ns - t0) / MS
     detail = got.msg.unavailable_reason[:80]
     if failsafe:
-        return Outcome(False, response, f"brake went FAILSAFE; {detail}", lost=1)
+        return Outcome(False, response,
+                       f"brake went FAILSAFE ({stream_gaps(obs, mark, failsafe[0].msg)}); "
+                       f"{detail}", lost=1)
     return Outcome(response <= bound_ms, response, detail, bound_ms=bound_ms)
+
+
+def _widest_gap(stamps: list[int]) -> tuple[int, int]:
+    """(width, start) of the widest step between consecutive stamps (0, 0 for fewer
+    than two)."""
+    return max(((b - a, a) for a, b in itertools.pairwise(sorted(stamps))), default=(0, 0))
+
+
+def stream_gaps(obs: Observer, targets_mark: int, failsafe: BrakeStatus) -> str:
+    """Where the command stream stopped before the brake's FAILSAFE status: the widest gap
+    (ms, and when it began relative to that status; one still open at the status ends
+    there) between the radar's publications, the cycles fusion received and the commands
+    it published, all on this host's monotonic clock (the publishers' own stamps, not the
+    harness's receipt, so that a slow harness does not show as a gap), and how many
+    commands fusion published after the brake's last receipt (those it never got)."""
+    until_ns = failsafe.header.pub_mono_ns
+    since = min((t.msg.header.pub_mono_ns for t in obs.targets.since(targets_mark)),
+                default=until_ns - 2_000 * MS) - 500 * MS
+    radar = [t.msg.header.pub_mono_ns for t in obs.tracks.since(0)
+             if since <= t.msg.header.pub_mono_ns <= until_ns]
+    targets = [t.msg for t in obs.targets.since(0) if since <= t.msg.header.pub_mono_ns <= until_ns]
+    fusion_rx = [t.header.pub_mono_ns - t.processing_ns for t in targets]
+    commands = [c.msg.header.pub_mono_ns for c in obs.commands.since(0)
+                if since <= c.msg.header.pub_mono_ns <= until_ns]
+    parts = []
+    for name, stamps in (("radar published", radar), ("fusion received", fusion_rx),
+                         ("fusion commanded", commands)):
+        width, start = _widest_gap([*stamps, until_ns])    # a gap still open counts
+        parts.append(f"{name} gap {width / MS:.0f} ms at {(start - until_ns) / MS:+.0f} ms")
+    unreceived = sum(1 for t in commands if t > failsafe.last_cmd_rx_mono_ns)
+    parts.append(f"{unreceived} commands published after the brake's last receipt")
+    return ", ".join(parts)
 
 
 # -- the faults ------------------------------------------------------------------------------

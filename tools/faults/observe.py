@@ -1,6 +1,7 @@
 """What the harness watches while it injects faults: the brake's status, fusion's
-targets and commands, the camera's newest frame (from the bus, each with its receipt
-time on this host's monotonic clock) and the simulated actuator's events."""
+targets and commands, the radar's tracks, the camera's newest frame (from the bus, each
+with its receipt time on this host's monotonic clock) and the simulated actuator's
+events."""
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -8,13 +9,19 @@ from typing import Any, Generic, TypeVar
 
 from aeb_radar_camera.common.bus import Bus
 from aeb_radar_camera.common.command_auth import CommandKey, mac_problem
-from aeb_radar_camera.common.keys import BRAKE_STATUS, CAMERA_JPEG, FUSION_BRAKE_CMD, FUSION_TARGETS
-from aeb_radar_camera.common.messages import BrakeCommand, BrakeStatus, VerifiedTargets
+from aeb_radar_camera.common.keys import (
+    BRAKE_STATUS,
+    CAMERA_JPEG,
+    FUSION_BRAKE_CMD,
+    FUSION_TARGETS,
+    RADAR_TRACKS,
+)
+from aeb_radar_camera.common.messages import BrakeCommand, BrakeStatus, RadarTracks, VerifiedTargets
 from aeb_radar_camera.common.messages.codec import DecodeError, decode
 from aeb_radar_camera.tools.arrivals import Arrivals
 
 T = TypeVar("T")
-M = TypeVar("M", BrakeStatus, VerifiedTargets, BrakeCommand)
+M = TypeVar("M", BrakeStatus, VerifiedTargets, BrakeCommand, RadarTracks)
 HISTORY = 4000
 
 
@@ -59,6 +66,7 @@ class Observer:
         self.status: Stream[BrakeStatus] = Stream()
         self.targets: Stream[VerifiedTargets] = Stream()
         self.commands: Stream[BrakeCommand] = Stream()
+        self.tracks: Stream[RadarTracks] = Stream()
         self.actuator_events: Stream[Any] = Stream()
         self.frame_payload: bytes | None = None
         self._brake_source = brake_source
@@ -69,6 +77,7 @@ class Observer:
             bus.subscribe_raw(FUSION_TARGETS, self._on_targets, instance=fusion_instance),
             bus.subscribe_raw(FUSION_BRAKE_CMD, self._on_command, instance=fusion_instance),
             bus.subscribe_raw(CAMERA_JPEG, self._on_frame, camera="front"),
+            bus.subscribe_raw(RADAR_TRACKS, self._on_tracks, sensor="front"),
         ]
         actuator.add_listener(lambda e: self.actuator_events.add(Seen(e.t_ns, e)))
         self.forged_seen = 0      # harness's own publications that came back (ignored)
@@ -82,6 +91,9 @@ class Observer:
     def _on_command(self, payload: bytes, key: str, rx_ns: int) -> None:
         self._keep(payload, rx_ns, BrakeCommand, self._fusion_source, self.commands,
                    lambda msg: not mac_problem(payload, msg, self._keys))
+
+    def _on_tracks(self, payload: bytes, key: str, rx_ns: int) -> None:
+        self._keep(payload, rx_ns, RadarTracks, "radar/front", self.tracks)
 
     def _keep(self, payload: bytes, rx_ns: int, msg_type: type[M], source: str,
               stream: Stream[M], authentic: Callable[[M], bool] = lambda msg: True) -> None:
