@@ -355,6 +355,10 @@ class KinematicRule:
         self._accels: dict[int, float] = {}
         self._ground: dict[int, tuple[float, float]] = {}   # id -> (along, across) over ground
         self._edge: dict[int, str] = {}    # id -> why it is the road's edge, this cycle
+        # The yaw rate as the radar's lateral velocities follow it (low-passed with
+        # turn_lag_s): None until the first motion, and again after motion was lost.
+        self._yaw_lagged: tuple[float, int] | None = None     # (rad/s, stamp)
+        self.yaw_step_rps = 0.0       # this cycle's yaw rate less the lagged one
 
     def begin(self, vehicle: VehicleSample, tracks: Sequence[RadarTrack],
               stamp_ns: int) -> None:
@@ -368,6 +372,8 @@ class KinematicRule:
         self._accels = {}
         self._edge = {}
         if motion is None:
+            self._yaw_lagged = None
+            self.yaw_step_rps = 0.0
             self.path = straight_path(self.s.corridor.half_width_m + self.s.corridor.margin_m,
                                       self.s.max_range_m, self.centre, "no vehicle state")
             self.accel.update({}, stamp_ns)
@@ -375,6 +381,7 @@ class KinematicRule:
         k = self.k
         self.ego_mps = v = motion.speed_mps
         self.yaw_rps = w = math.radians(motion.yaw_rate_dps)
+        self.yaw_step_rps = w - self._lagged_yaw(w, stamp_ns)
         steer = vehicle.driver.steering_wheel_angle_deg if vehicle.driver is not None else None
         self.path = predicted_path(v, motion.yaw_rate_dps, steer, self.s.path, self.centre)
         self.max_range = min(k.range_max_m, k.range_base_m + k.range_time_s * max(v, 0.0),
@@ -386,6 +393,19 @@ class KinematicRule:
         self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
         if self.s.road_edge.enabled:
             self._edge = self._road_edge(tracks)
+
+    def _lagged_yaw(self, yaw_rps: float, stamp_ns: int) -> float:
+        """The yaw rate low-passed with `turn_lag_s` up to `stamp_ns` (a radar cycle's),
+        as the radar's filtered lateral velocities have followed it."""
+        prev, tau = self._yaw_lagged, self.k.turn_lag_s
+        if prev is None or tau <= 0.0:
+            lagged, t = yaw_rps, stamp_ns
+        else:
+            dt_s = max(0, stamp_ns - prev[1]) / 1e9
+            lagged = prev[0] + (yaw_rps - prev[0]) * (1.0 - math.exp(-dt_s / tau))
+            t = max(stamp_ns, prev[1])
+        self._yaw_lagged = (lagged, t)
+        return lagged
 
     def _road_edge(self, tracks: Sequence[RadarTrack]) -> dict[int, str]:
         """The stationary tracks that form the road's edge this cycle (road_edge.py)."""
@@ -410,13 +430,17 @@ class KinematicRule:
             return tracks
         # In a bend a stationary object's lateral velocity in the radar frame (-w x)
         # changes as the ego nears it, and the radar's filtered velocity lags it by about
-        # `turn_lag_s`: that much of w v is no evidence of motion.
+        # `turn_lag_s`: that much of w v is no evidence of motion. Where the yaw rate
+        # itself has just changed (a bend's entry or exit), the radar's velocities still
+        # follow the yaw rate that was: the step's -dw x is no evidence either.
         allowance = self.k.turn_lag_s * abs(self.yaw_rps * self.ego_mps)
+        step = abs(self.yaw_step_rps)
         out = []
         for t in tracks:
             g = self._ground.get(t.track_id)
             if g is not None:
-                across = math.copysign(max(0.0, abs(g[1]) - allowance), g[1])
+                slack = allowance + step * abs(t.x_m)
+                across = math.copysign(max(0.0, abs(g[1]) - slack), g[1])
                 t = msgspec.structs.replace(t, vy_mps=across)
             out.append(t)
         return out

@@ -302,6 +302,47 @@ def test_an_object_parked_beside_a_bend_does_not_walk_into_the_path():
         assert not res.targets.targets[0].path_predicted
 
 
+def test_a_rail_post_at_a_bends_entry_is_not_walked_into_the_path_by_the_yaw_step():
+    """The ego drives straight, then enters a right bend: its yaw rate steps at once, but
+    the radar's filtered lateral velocity of a post on the bend's outside still says
+    what it said on the straight (0), so over ground the post seems to cross the path at
+    w x. That step is the radar's lag, not motion: the post stays out of the path."""
+    v, radius = 30 / 3.6, -50.0
+    w = v / radius
+    d = Drive()
+    post_x, post_y = 16.0, 1.6     # beside the straight path (half-width 1.2 m)
+    for _ in range(4):
+        res = d.step(v, track(tid=4, x=post_x, y=post_y, vx=-v, vy=0.0))
+        post_x -= v * 0.075
+    for _ in range(3):       # the bend: the radar's vy still lags at 0
+        res = d.step(v, track(tid=4, x=post_x, y=post_y, vx=-v, vy=0.0),
+                     yaw_dps=math.degrees(w))
+        post_x -= v * 0.075
+        tgt = res.targets.targets[0]
+        assert not tgt.path_predicted, tgt.reason
+        assert res.command.decision is Decision.NONE, tgt.reason
+
+
+def test_a_pedestrian_crossing_in_a_steady_bend_is_predicted_once_the_yaw_step_has_settled():
+    """The allowance for a yaw step fades with the radar's lag (turn_lag_s): two seconds
+    into a bend a pedestrian crossing at 1.5 m/s over ground is predicted as before."""
+    v, radius = 20 / 3.6, 100.0
+    w = v / radius
+    d = Drive()
+    d.step(v)
+    for _ in range(27):      # about 2 s into the bend, nothing ahead
+        d.step(v, yaw_dps=math.degrees(w))
+    s, dist = 15.0, -3.0
+    phi = s / radius
+    rho = radius - dist
+    x, y = rho * math.sin(phi), radius - rho * math.cos(phi)
+    gvx, gvy = -1.5 * math.sin(phi), 1.5 * math.cos(phi)
+    ped = track(tid=3, x=x, y=y, vx=gvx - v + w * y, vy=gvy - w * x)
+    results = [d.step(v, ped, yaw_dps=math.degrees(w)) for _ in range(3)]
+    tgt = results[-1].targets.targets[0]
+    assert tgt.path_predicted and tgt.in_path
+
+
 def test_low_speed_no_new_activation_and_standstill_hold_then_release():
     d = Drive(kinematic={"standstill_hold_s": 0.3})
     v = 20 / 3.6
