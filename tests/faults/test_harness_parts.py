@@ -8,6 +8,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
+from aeb_radar_camera.common.clock import mono_ns, wall_ns
 from aeb_radar_camera.tools.faults.catalogue import Outcome, stream_gaps
 from aeb_radar_camera.tools.faults.harness import Record, RunInfo
 from aeb_radar_camera.tools.faults.links import CanGate, RelayLink
@@ -163,7 +164,9 @@ def test_a_failsafe_during_a_camera_fault_says_which_stream_stopped():
     # radar every 70 ms throughout; fusion receives and commands each, but for a 280 ms
     # stall after the cycle at 700 ms (the three cycles in it decided late, together).
     for t in range(0, 1400, 70):
-        obs.tracks.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=t * ms))))
+        stamp = t * ms + wall_ns() - mono_ns()
+        obs.tracks.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=t * ms,
+                                                                      stamp_ns=stamp))))
         rx = t if not 700 < t < 980 else 980
         pub = rx + 2
         obs.targets.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=pub * ms),
@@ -171,8 +174,10 @@ def test_a_failsafe_during_a_camera_fault_says_which_stream_stopped():
         obs.commands.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=pub * ms))))
     failsafe = SimpleNamespace(header=SimpleNamespace(pub_mono_ns=910 * ms),
                                last_cmd_rx_mono_ns=703 * ms)
-    text = stream_gaps(obs, 0, cast(Any, failsafe))
-    assert "radar published gap 70 ms" in text
+    sent = [(t * ms - 3 * ms, t * ms - 2 * ms) for t in range(0, 1400, 70)]
+    text = stream_gaps(obs, 0, cast(Any, failsafe), sent)
+    assert "simulated radar wrote gap 70 ms" in text and "longest cycle write 1 ms" in text
+    assert "radar received gap 70 ms" in text and "radar published gap 70 ms" in text
     # the stall still open at the FAILSAFE: from the last cycle before it
     assert "fusion received gap 210 ms at -210 ms" in text
     assert "fusion commanded gap 208 ms at -208 ms" in text

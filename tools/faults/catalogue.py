@@ -24,7 +24,7 @@ import random
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -166,6 +166,7 @@ def camera_unavailable_response(ctx: Context, inject: Callable[[], None], bound_
     got = obs.targets.wait(lambda t: t.verifier_status is VerifierStatus.UNAVAILABLE
                            and because(t.unavailable_reason), mark, timeout_s)
     failsafe = [s for s in obs.status.since(smark) if s.msg.state is BrakeState.FAILSAFE]
+    sent = [(c.first_write_mono_ns, c.last_write_mono_ns) for c in ctx.loop.feed.cycles()]
     if got is None:
         return Outcome(False, None, "fusion never reported the camera unavailable",
                        lost=len(failsafe) > 0)
@@ -173,7 +174,7 @@ def camera_unavailable_response(ctx: Context, inject: Callable[[], None], bound_
     detail = got.msg.unavailable_reason[:80]
     if failsafe:
         return Outcome(False, response,
-                       f"brake went FAILSAFE ({stream_gaps(obs, mark, failsafe[0].msg)}); "
+                       f"brake went FAILSAFE ({stream_gaps(obs, mark, failsafe[0].msg, sent)}); "
                        f"{detail}", lost=1)
     return Outcome(response <= bound_ms, response, detail, bound_ms=bound_ms)
 
@@ -184,27 +185,39 @@ def _widest_gap(stamps: list[int]) -> tuple[int, int]:
     return max(((b - a, a) for a, b in itertools.pairwise(sorted(stamps))), default=(0, 0))
 
 
-def stream_gaps(obs: Observer, targets_mark: int, failsafe: BrakeStatus) -> str:
+def stream_gaps(obs: Observer, targets_mark: int, failsafe: BrakeStatus,
+                sent: Sequence[tuple[int, int]] = ()) -> str:
     """Where the command stream stopped before the brake's FAILSAFE status: the widest gap
     (ms, and when it began relative to that status; one still open at the status ends
-    there) between the radar's publications, the cycles fusion received and the commands
-    it published, all on this host's monotonic clock (the publishers' own stamps, not the
-    harness's receipt, so that a slow harness does not show as a gap), and how many
-    commands fusion published after the brake's last receipt (those it never got)."""
+    there) in each hop - the simulated radar's cycles written to its link (`sent`: first
+    and last write of each), the cycles the radar received and published, those fusion
+    received and the commands it published - all on this host's monotonic clock (the
+    services' own stamps, not the harness's receipt, so that a slow harness does not
+    show as a gap); the longest write of a cycle; and how many commands fusion published
+    after the brake's last receipt (those it never got)."""
     until_ns = failsafe.header.pub_mono_ns
     since = min((t.msg.header.pub_mono_ns for t in obs.targets.since(targets_mark)),
                 default=until_ns - 2_000 * MS) - 500 * MS
+    written = [(a, b) for a, b in sent if since <= a <= until_ns]
     radar = [t.msg.header.pub_mono_ns for t in obs.tracks.since(0)
              if since <= t.msg.header.pub_mono_ns <= until_ns]
+    # the radar stamps a cycle with the wall time its last frame came: on this host's
+    # monotonic clock by the offset between the two clocks now
+    offset = wall_ns() - mono_ns()
+    radar_rx = [t.msg.header.stamp_ns - offset for t in obs.tracks.since(0)
+                if since <= t.msg.header.pub_mono_ns <= until_ns]
     targets = [t.msg for t in obs.targets.since(0) if since <= t.msg.header.pub_mono_ns <= until_ns]
     fusion_rx = [t.header.pub_mono_ns - t.processing_ns for t in targets]
     commands = [c.msg.header.pub_mono_ns for c in obs.commands.since(0)
                 if since <= c.msg.header.pub_mono_ns <= until_ns]
     parts = []
-    for name, stamps in (("radar published", radar), ("fusion received", fusion_rx),
-                         ("fusion commanded", commands)):
+    for name, stamps in (("simulated radar wrote", [a for a, _ in written]),
+                         ("radar received", radar_rx), ("radar published", radar),
+                         ("fusion received", fusion_rx), ("fusion commanded", commands)):
         width, start = _widest_gap([*stamps, until_ns])    # a gap still open counts
         parts.append(f"{name} gap {width / MS:.0f} ms at {(start - until_ns) / MS:+.0f} ms")
+    longest = max((b - a for a, b in written), default=0)
+    parts.append(f"longest cycle write {longest / MS:.0f} ms")
     unreceived = sum(1 for t in commands if t > failsafe.last_cmd_rx_mono_ns)
     parts.append(f"{unreceived} commands published after the brake's last receipt")
     return ", ".join(parts)
