@@ -56,6 +56,7 @@ RADAR_RING = 4     # radar samples Zenoh keeps for the radar thread; the oldest 
 # that many missed cycles.
 MAX_RADAR_SEQ_GAP = 1000
 
+
 class RadarGate:
     """At most one radar cycle per `interval_ns`: `wait_ns` says how long until the next
     may be handled, `take` marks one handled. Not thread-safe: the radar thread only."""
