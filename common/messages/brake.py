@@ -21,7 +21,7 @@ class FailsafePolicy(enum.Enum):
     RELEASE = "release"    # release the brake
 
 
-class BrakeStatus(msgspec.Struct, frozen=True, kw_only=True):
+class BrakeStatus(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """Published at >= 10 Hz and on every change of state."""
 
     header: Header

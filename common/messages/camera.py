@@ -8,7 +8,7 @@ from aeb_radar_camera.common.messages.header import Header
 DEPTH_CODECS = ("zstd", "png")
 
 
-class CompressedFrame(msgspec.Struct, frozen=True, kw_only=True):
+class CompressedFrame(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """One JPEG frame. `header.stamp_ns` is the capture time (wall clock).
 
     `crc32` is zlib.crc32 of `jpeg`, set by the camera: a JPEG with a flipped bit often
@@ -23,7 +23,7 @@ class CompressedFrame(msgspec.Struct, frozen=True, kw_only=True):
     crc32: int | None = None
 
 
-class DepthFrame(msgspec.Struct, frozen=True, kw_only=True):
+class DepthFrame(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """One depth image aligned to a colour frame (common/depth_image.py encodes it).
 
     `header.stamp_ns` is the capture time of the colour frame it is aligned to (the same
@@ -42,7 +42,7 @@ class DepthFrame(msgspec.Struct, frozen=True, kw_only=True):
     units_m: float = 0.001
 
 
-class CameraInfo(msgspec.Struct, frozen=True, kw_only=True):
+class CameraInfo(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """Size, intrinsics and radar-to-camera extrinsics.
 
     `k` is the 3x3 camera matrix row-major, `dist` OpenCV distortion coefficients

@@ -29,7 +29,7 @@ class VerifierStatus(enum.Enum):
     STALE_RADAR = "stale_radar"    # radar input older than allowed: never brakes
 
 
-class CameraCheck(msgspec.Struct, frozen=True):
+class CameraCheck(msgspec.Struct, frozen=True, gc=False):
     """One camera's view of a track, in instances with several cameras. `not_checked`
     here also means a camera after the one that verified the track (not gated)."""
 
@@ -39,7 +39,7 @@ class CameraCheck(msgspec.Struct, frozen=True):
     density: float | None = None
 
 
-class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
+class VerifiedTarget(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """One confirmed radar track after verification and decision.
 
     `x_m`, `y_m` are the track predicted to the frame's capture time (what was projected;
@@ -92,7 +92,7 @@ class VerifiedTarget(msgspec.Struct, frozen=True, kw_only=True):
     path_d_m: float | None = None
 
 
-class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
+class VerifiedTargets(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     header: Header
     instance: str
     radar_sensor: str
@@ -128,7 +128,7 @@ class VerifiedTargets(msgspec.Struct, frozen=True, kw_only=True):
     range_gate_m: float | None = None
 
 
-class CommandAuth(msgspec.Struct, frozen=True):
+class CommandAuth(msgspec.Struct, frozen=True, gc=False):
     """Who made a BrakeCommand (common/command_auth.py, docs/security.md).
 
     `mac` is keyed BLAKE2b (32 bytes), with the key `key_id` names, over the encoded
@@ -141,7 +141,7 @@ class CommandAuth(msgspec.Struct, frozen=True):
     mac: bytes
 
 
-class BrakeCommand(msgspec.Struct, frozen=True, kw_only=True):
+class BrakeCommand(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """Exactly one per radar cycle per fusion instance: the most severe decision, or a
     plain heartbeat (decision NONE, level 0).
 

@@ -5,7 +5,7 @@ import msgspec
 SCHEMA_VERSION = 1
 
 
-class Header(msgspec.Struct, frozen=True):
+class Header(msgspec.Struct, frozen=True, gc=False):
     """Common header.
 
     `seq` increases by one per message on a key; `source` names the publishing service

@@ -35,7 +35,7 @@ BUS_NOT_READY = {
 
 # Unlike the other messages of many fields not keyword-only: the tracker builds hundreds
 # per cycle positionally, and 16 keyword arguments cost CPython about five times as much.
-class RadarTrack(msgspec.Struct, frozen=True):
+class RadarTrack(msgspec.Struct, frozen=True, gc=False):
     """One Kalman track in the radar frame (x forward, y left, z up; origin at the radar).
 
     `range_rate_mps` is the time derivative of range: negative means closing.
@@ -59,7 +59,7 @@ class RadarTrack(msgspec.Struct, frozen=True):
     obj_class: int = -1        # ARS408 object class (0x60D: 0 point, 1 car, ...), -1 when unknown
 
 
-class RadarTracks(msgspec.Struct, frozen=True, kw_only=True):
+class RadarTracks(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """Every track of one radar cycle, confirmed or not; published every cycle, also when empty.
 
     `header.stamp_ns` is the wall time the cycle's status frame was received.
@@ -79,7 +79,7 @@ class RadarTracks(msgspec.Struct, frozen=True, kw_only=True):
     tracks: tuple[RadarTrack, ...]
 
 
-class RadarState(msgspec.Struct, frozen=True, kw_only=True):
+class RadarState(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """Decoded 0x201 RadarState."""
 
     nvm_read_ok: bool
@@ -98,7 +98,7 @@ class RadarState(msgspec.Struct, frozen=True, kw_only=True):
     rcs_threshold: int
 
 
-class RadarStatus(msgspec.Struct, frozen=True, kw_only=True):
+class RadarStatus(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """Radar health: published at 1 Hz and on every change of `ready`, `bus_state` or state."""
 
     header: Header
@@ -125,7 +125,7 @@ class RadarStatus(msgspec.Struct, frozen=True, kw_only=True):
     tracks_resumed: int = 0
 
 
-class CanFrame(msgspec.Struct, frozen=True, array_like=True, kw_only=True):
+class CanFrame(msgspec.Struct, frozen=True, gc=False, array_like=True, kw_only=True):
     """One CAN frame as the radar service received it (encoded as an array: a cycle has
     hundreds; a field added later goes at the end, with a default, so that older readers
     still decode it). `timestamp_s` is the interface's own time (python-can's `Message.timestamp`,
@@ -145,7 +145,7 @@ CAN_REMOTE = 2
 CAN_ERROR = 4
 
 
-class RawCanFrames(msgspec.Struct, frozen=True):
+class RawCanFrames(msgspec.Struct, frozen=True, gc=False):
     """The raw frames of one CAN bus, in receive order, published when the radar is asked
     to (`[radar.raw_can] publish = true`): every frame received since the previous batch,
     one batch per radar cycle (after its tracks) and at least every cycle period while

@@ -14,7 +14,7 @@ from aeb_radar_camera.common.messages.header import Header
 from aeb_radar_camera.common.messages.radar import BusState
 
 
-class EgoMotion(msgspec.Struct, frozen=True):
+class EgoMotion(msgspec.Struct, frozen=True, gc=False):
     """Ego speed (forward positive, reverse negative) and yaw rate (left positive).
     From the gateway, `header.stamp_ns` is when the newest of the values was received
     from the car (each of the others within its own bound before it)."""
@@ -33,7 +33,7 @@ class Gear(enum.Enum):
     DRIVE = "drive"
 
 
-class DriverInputs(msgspec.Struct, frozen=True, kw_only=True):
+class DriverInputs(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """What the driver does with the wheel, the pedals and the gear selector.
     `header.stamp_ns`: when the newest of the values was received from the car (each of
     the others within its own bound before it)."""
@@ -48,7 +48,7 @@ class DriverInputs(msgspec.Struct, frozen=True, kw_only=True):
     gear: Gear | None
 
 
-class SignalHealth(msgspec.Struct, frozen=True, kw_only=True):
+class SignalHealth(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """One CAN signal the gateway maps: `signal` is ``Message.Signal`` in the DBC,
     `field` the message field it feeds (``motion.speed_mps``). `age_s` is None until
     the signal was first received."""
@@ -59,7 +59,7 @@ class SignalHealth(msgspec.Struct, frozen=True, kw_only=True):
     fresh: bool
 
 
-class VehicleStatus(msgspec.Struct, frozen=True, kw_only=True):
+class VehicleStatus(msgspec.Struct, frozen=True, gc=False, kw_only=True):
     """The vehicle gateway's health: published at `status_period_s` and on every change
     of `ready`, `not_ready_reason` or `bus_state`.
 

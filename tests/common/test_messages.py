@@ -85,3 +85,18 @@ def test_messages_with_many_fields_are_built_by_field_name(msg_type):
     else:
         with pytest.raises(TypeError):
             msg_type(*values)
+
+
+def test_no_message_is_tracked_by_the_garbage_collector():
+    """Messages are trees: kept by the thousand (a history, an observer), tracked ones
+    would lengthen every full collection, a pause for every thread of the process."""
+    import gc
+
+    import aeb_radar_camera.common.messages as messages
+
+    types = [t for t in vars(messages).values()
+             if isinstance(t, type) and issubclass(t, msgspec.Struct)]
+    assert len(types) >= 15
+    for tp in types:
+        value = decode(encode(example(tp)), tp)
+        assert not gc.is_tracked(value), tp.__name__
