@@ -86,3 +86,18 @@ def test_closed_link_refuses_to_send():
     link.close()
     with pytest.raises(OSError):
         link.send(CYCLE)
+
+
+def test_a_links_received_frames_are_bounded_and_the_newest_still_found():
+    """A soak's hours of forwarded ego motion must not pile up: the link keeps the
+    newest FRAMES_KEPT frames (each one more object for every garbage collection)."""
+    from aeb_radar_camera.tools.sim import can_links
+
+    with SlcanPtyLink() as link:
+        for i in range(can_links.FRAMES_KEPT + 500):
+            link._got(RadarFrame(0x300, i.to_bytes(4, "big")))
+        kept = link.received()
+        assert len(kept) <= can_links.FRAMES_KEPT
+        assert kept[-1].data == (can_links.FRAMES_KEPT + 499).to_bytes(4, "big")
+        newest = link.wait_frame(lambda f: f.data == kept[-1].data, 1)
+        assert newest == kept[-1]

@@ -3,6 +3,7 @@ radar, camera, fusion and brake started by the launcher of `aeb up`, on the SIMU
 radar link, camera and actuator), every fault injected in rounds, the stack recovering
 between injections (a killed process is restarted by the launcher)."""
 
+import gc
 import random
 import signal
 import threading
@@ -207,6 +208,12 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
             if realtime_priority:
                 info.scheduling += "; " + simulated_hardware_at_fifo(
                     max(1, realtime_priority - SIMULATED_HARDWARE_BELOW))
+            # The run's start-up objects (modules, the simulator's scene, the launcher)
+            # live as long as the run: out of every later full collection, whose pause
+            # holds the GIL and so stalls the simulated radar and actuator threads (as
+            # the services do after their own start-up: common/realtime.py).
+            gc.collect()
+            gc.freeze()
             ctx = Context(loop, observer, bounds_for(Path(out) / "run" / "brake.toml"), rng,
                           gate, link, "")
             if not settled(ctx, 60.0):

@@ -74,7 +74,10 @@ from aeb_radar_camera.services.brake.protocol import (
 from aeb_radar_camera.tools.sim.pty_pair import PtyPair
 
 ACTUATOR_ACCEPTS = frozenset("CQ")
-HISTORY = 100_000
+# The command lines kept for `commands_since` (about 15 min of a braking host's lines):
+# each is two objects the garbage collector walks in every full collection, whose pause
+# stalls the process's other threads (the fault harness's simulated radar among them).
+HISTORY = 20_000
 _log = logging.getLogger("sim_actuator")
 
 
@@ -277,6 +280,7 @@ class SimActuator:
         self._noise_p = 0.0
         # observation
         self.history: deque[Received] = deque(maxlen=HISTORY)
+        self.commands_received = 0      # every command line, also those history let go
         self.bad_lines: Counter[str] = Counter()
         self.acks_sent = 0
         self.naks_sent = 0
@@ -368,7 +372,7 @@ class SimActuator:
                 position_pct=round(self._position(now), 3), target_pct=self._target,
                 state=self._state().value, mode=None if self._mode is None else self._mode.value,
                 warning=self._warning(), watchdog_tripped=self._wd_tripped,
-                last_seq=self._last_seq, commands=len(self.history), acks_sent=self.acks_sent,
+                last_seq=self._last_seq, commands=self.commands_received, acks_sent=self.acks_sent,
                 naks_sent=self.naks_sent, watchdog_trips=self.watchdog_trips,
                 bad_lines=dict(self.bad_lines),
             )
@@ -535,6 +539,7 @@ class SimActuator:
         if self._fault is None:
             self._set_target(self._commanded, now)
         self.history.append(Received(now, frame))
+        self.commands_received += 1
         self._event(now, "command", frame)
         if self._no_ack:
             return

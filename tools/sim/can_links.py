@@ -16,7 +16,7 @@ radar behind it. The service opens `link.path` with python-can's ``slcan`` inter
         link.wait_open(timeout_s=30)                    # the adapter saw "O" (open)
         link.send(object_cycle_frames([ObjectGeneral(1, 12.0, 0.4, -3.0, 0.0, 0, 10.0)], 0))
         cfg = link.wait_frame(lambda f: f.arb_id == 0x200, timeout_s=5)  # service -> radar
-        link.received()                                 # every frame the service wrote
+        link.received()                                 # the frames the service wrote
         link.commands                                   # slcan commands: ["C", "S6", "O"]
 
 `SocketcandServer`: a minimal socketcand server on 127.0.0.1 (one client at a time) for
@@ -56,6 +56,12 @@ FrameCallback = Callable[[RadarFrame], None]
 
 _log = logging.getLogger("sim.can_links")
 
+# The frames from the service kept for `received` and `wait_frame` (about 3 min of the
+# ego motion it forwards at 50 Hz): a run's whole history grew without bound, and every
+# frame kept is an object each full garbage collection walks, a pause that stalls the
+# simulator's other threads.
+FRAMES_KEPT = 20_000
+
 # python-can's socketcand client matches each handshake reply with one recv(): a frame
 # sent right after the last "< ok >" could arrive glued to it. Wait this long first.
 SOCKETCAND_SETTLE_S = 0.1
@@ -66,7 +72,7 @@ class _Link:
 
     def __init__(self, on_frame: FrameCallback | None) -> None:
         self._listeners: list[FrameCallback] = [on_frame] if on_frame is not None else []
-        self._frames: Arrivals[RadarFrame] = Arrivals()
+        self._frames: Arrivals[RadarFrame] = Arrivals(keep=FRAMES_KEPT)
         self._stop = threading.Event()
         self._opened = threading.Event()
         self.commands: list[str] = []
@@ -88,7 +94,7 @@ class _Link:
                 _log.exception("can link: on_frame failed for 0x%03X", frame.arb_id)
 
     def received(self) -> list[RadarFrame]:
-        """Every frame the service wrote so far."""
+        """The frames the service wrote so far (the newest FRAMES_KEPT at most)."""
         return self._frames.items
 
     def wait_frame(self, predicate: Callable[[RadarFrame], bool], timeout_s: float) -> RadarFrame:
