@@ -182,3 +182,23 @@ def test_a_failsafe_during_a_camera_fault_says_which_stream_stopped():
     assert "fusion received gap 210 ms at -210 ms" in text
     assert "fusion commanded gap 208 ms at -208 ms" in text
     assert "0 commands published after the brake's last receipt" in text
+
+
+def test_the_harness_measures_its_own_garbage_collections_and_reports_the_longest(tmp_path):
+    import gc
+
+    from aeb_radar_camera.tools.faults.gc_pauses import GcPauses
+
+    pauses = GcPauses().start()
+    kept = [[i] for i in range(200_000)]       # tracked: a full collection walks them
+    gc.collect()
+    pauses.stop()
+    assert pauses.collections >= 1 and pauses.max_ms > 0.0
+    counted = pauses.collections
+    gc.collect()
+    assert pauses.collections == counted          # stopped: no longer counting
+    del kept
+    info = RunInfo("soak", 1, 1, 12.0, "loopback relay")
+    info.gc_pause_max_ms = pauses.max_ms
+    text = markdown(rows([]), info)
+    assert f"the harness's longest garbage collection {pauses.max_ms:.0f} ms" in text

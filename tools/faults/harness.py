@@ -21,6 +21,7 @@ from aeb_radar_camera.common.net import free_port
 from aeb_radar_camera.common.realtime import set_fifo, zenoh_io_threads
 from aeb_radar_camera.services.brake.shell import TIMER_PERIOD_S
 from aeb_radar_camera.tools.faults.catalogue import SERVICES, Bounds, Context, Fault, Outcome
+from aeb_radar_camera.tools.faults.gc_pauses import GcPauses
 from aeb_radar_camera.tools.faults.links import CanGate, NetnsLink, RelayLink
 from aeb_radar_camera.tools.faults.observe import Observer
 from aeb_radar_camera.tools.faults.registry import all_faults
@@ -49,6 +50,7 @@ class RunInfo:
     seconds: float = 0.0
     link: str = ""
     scheduling: str = "normal"          # of the stack's latency path
+    gc_pause_max_ms: float = 0.0        # the harness's longest garbage collection
     stopped_early: str = ""
     unexpected_exits: list[str] = field(default_factory=list)
     runs: list[dict[str, Any]] = field(default_factory=list)   # of a combined table
@@ -195,6 +197,7 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
 
     t_start = time.monotonic()
     say = on_progress or (lambda text: print(text, file=log, flush=True))
+    pauses = GcPauses().start()
     try:
         with closed_loop(out, port=port, log=log, restart="always",
                          router_listen=extra_listen, adapt=adapt,
@@ -237,6 +240,8 @@ def run(out: Path, rounds: int, mode: str, log: IO[str], time_budget_s: float | 
     finally:
         link.remove()
         info.seconds = time.monotonic() - t_start
+        pauses.stop()
+        info.gc_pause_max_ms = pauses.max_ms
     return list(records.values()), info
 
 

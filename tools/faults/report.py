@@ -52,7 +52,9 @@ def markdown(table: list[dict[str, Any]], info: RunInfo) -> str:
     head = (f"{len(info.runs)} runs ({runs})" if info.runs else
             f"mode {info.mode}: {info.rounds_done} of {info.rounds_planned} rounds in "
             f"{info.seconds / 60:.1f} min")
-    lines = [f"{head}; link cut: {info.link}; scheduling: {info.scheduling}"
+    gc_pause = (f"; the harness's longest garbage collection {info.gc_pause_max_ms:.0f} ms"
+                if info.gc_pause_max_ms else "")
+    lines = [f"{head}; link cut: {info.link}; scheduling: {info.scheduling}{gc_pause}"
              + (f"; stopped early: {info.stopped_early}" if info.stopped_early else ""), "",
              "| fault | required response | injections | within bound | bound ms | p50 ms "
              "| max ms | recovery p50 / max s | lost |",
@@ -123,6 +125,7 @@ def write(out: Path, records: list[Record], info: RunInfo) -> tuple[Path, Path, 
         "mode": info.mode, "rounds_planned": info.rounds_planned,
         "rounds_done": info.rounds_done, "seconds": round(info.seconds, 1),
         "link": info.link, "scheduling": info.scheduling,
+        "gc_pause_max_ms": round(info.gc_pause_max_ms, 1),
         "stopped_early": info.stopped_early,
         "unexpected_exits": info.unexpected_exits,
         "machine": {"node": platform.node(), "cpus": _cpus(), "python": platform.python_version(),
@@ -142,7 +145,7 @@ def write(out: Path, records: list[Record], info: RunInfo) -> tuple[Path, Path, 
 def _run_dict(info: RunInfo) -> dict[str, Any]:
     return {"mode": info.mode, "rounds_done": info.rounds_done, "seconds": info.seconds,
             "stopped_early": info.stopped_early, "link": info.link,
-            "scheduling": info.scheduling}
+            "scheduling": info.scheduling, "gc_pause_max_ms": info.gc_pause_max_ms}
 
 
 def combine(paths: list[Path]) -> tuple[list[Record], RunInfo]:
@@ -170,6 +173,7 @@ def combine(paths: list[Path]) -> tuple[list[Record], RunInfo]:
         info.unexpected_exits += data["unexpected_exits"]
         info.link = info.link or data["link"]
         info.scheduling = data.get("scheduling", info.scheduling)
+        info.gc_pause_max_ms = max(info.gc_pause_max_ms, data.get("gc_pause_max_ms", 0.0))
         if data["stopped_early"]:
             info.stopped_early += f"{path.parent.name}: {data['stopped_early']} "
     return list(records.values()), info
