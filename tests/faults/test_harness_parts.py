@@ -163,15 +163,17 @@ def test_a_failsafe_during_a_camera_fault_says_which_stream_stopped():
     obs.tracks, obs.targets, obs.commands = Stream(), Stream(), Stream()
     # radar every 70 ms throughout; fusion receives and commands each, but for a 280 ms
     # stall after the cycle at 700 ms (the three cycles in it decided late, together).
+    def msg(**fields: Any) -> Any:      # the fields stream_gaps reads, as a message's
+        return SimpleNamespace(**fields)
+
     for t in range(0, 1400, 70):
         stamp = t * ms + wall_ns() - mono_ns()
-        obs.tracks.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=t * ms,
-                                                                      stamp_ns=stamp))))
+        obs.tracks.add(Seen(0, msg(header=msg(pub_mono_ns=t * ms, stamp_ns=stamp))))
         rx = t if not 700 < t < 980 else 980
         pub = rx + 2
-        obs.targets.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=pub * ms),
-                                                processing_ns=(pub - rx) * ms)))
-        obs.commands.add(Seen(0, SimpleNamespace(header=SimpleNamespace(pub_mono_ns=pub * ms))))
+        obs.targets.add(Seen(0, msg(header=msg(pub_mono_ns=pub * ms),
+                                    processing_ns=(pub - rx) * ms)))
+        obs.commands.add(Seen(0, msg(header=msg(pub_mono_ns=pub * ms))))
     failsafe = SimpleNamespace(header=SimpleNamespace(pub_mono_ns=910 * ms),
                                last_cmd_rx_mono_ns=703 * ms)
     sent = [(t * ms - 3 * ms, t * ms - 2 * ms) for t in range(0, 1400, 70)]
