@@ -4,8 +4,8 @@ Every message struct is declared ``gc=False``: a message is a tree (frozen, no r
 cycles), and a process that keeps thousands of them (a monitor's history, the fault
 harness's observer, a recording's index) would otherwise have the garbage collector walk
 each one in every full collection, a pause that holds the GIL for every thread of the
-process (4,000 each of four message types: 41 ms tracked, 1 ms untracked;
-benchmarks/bench_gc.py)."""
+process (`python -m benchmarks.bench_gc`: 4,000 each of four message types kept, a full
+collection 1.9 ms p50 as untracked structs, 69.4 ms as the same history tracked)."""
 
 from aeb_radar_camera.common.messages.brake import BrakeState, BrakeStatus, FailsafePolicy
 from aeb_radar_camera.common.messages.camera import CameraInfo, CompressedFrame, DepthFrame
