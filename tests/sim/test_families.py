@@ -139,6 +139,27 @@ def test_impact_points_follow_euro_ncap():
     assert sc.object[0].y_m == pytest.approx(-0.9)
 
 
+def test_the_cbna_cyclist_rides_its_last_17_m_at_speed_and_the_kerb_cyclist_its_last_5():
+    """Euro NCAP's CBNA: at 15 km/h over the last 17 m before the impact point (its
+    steady-state distance), at every ego speed and seed; `cyclist_from_kerb` sets off 5 m
+    from the ego's centre."""
+    for family, run_up in (("CBNA-50", 17.0), ("cyclist_from_kerb", 5.0)):
+        for case in itertools.chain(FAMILIES[family].cases([0]),
+                                    FAMILIES[family].cases([1000, 2000])):
+            world = drive_unbraked(case.scenario())
+            assert world.collision is not None, case.name
+            # the cyclist's lateral offset while moving: a steady rate from run_up on
+            world = World(case.scenario())
+            moving_from: float | None = None
+            while world.collision is None:
+                world.step(DT, 0.0)
+                bike = world.bodies()[0]
+                if moving_from is None and abs(bike.vy_mps) > 0:
+                    moving_from = abs(bike.y_m)
+                    assert abs(bike.vy_mps) == pytest.approx(15 / 3.6, rel=0.11), case.name
+            assert moving_from == pytest.approx(run_up, abs=0.6), case.name
+
+
 def test_a_braking_lead_decelerates_to_a_stop_after_its_trigger():
     sc = case_of("CCRb", 50.0, decel_mps2=6, gap_m=40).scenario()
     motion = sc.object[0].motion

@@ -74,6 +74,9 @@ CHILD_SIZE = (0.3, 0.45, 1.15)
 # Where crossing targets start: the kerb of the ego's side (near) or of the far lane.
 NEAR_START_M = 4.5
 FAR_START_M = 6.0
+# Euro NCAP's steady-state distance D of CBNA: the cyclist is at its 15 km/h over the last
+# 17 m before the impact point (AEB VRU test protocol).
+CBNA_STEADY_M = 17.0
 LOOKAHEAD_S = 4.0        # a target comes into reach this long before impact, at least
 MAX_LATERAL_MPS2 = 5.0   # bend cases only at speeds a driver takes the bend at
 
@@ -359,6 +362,12 @@ def _longitudinal(kind: ObjectKind, speed_mps: float) -> Callable[[Build], None]
 
 
 def _bicycle_crossing(b: Build) -> None:
+    """Euro NCAP's CBNA: the cyclist rides its last `CBNA_STEADY_M` to the impact point
+    at a steady 15 km/h (movers step to their speed, so it starts there at speed)."""
+    _crossing(b, ObjectKind.BICYCLE, CYCLE_MPS, 50.0, True, CBNA_STEADY_M)
+
+
+def _cyclist_from_kerb(b: Build) -> None:
     _crossing(b, ObjectKind.BICYCLE, CYCLE_MPS, 50.0, True, NEAR_START_M + 0.5)
 
 
@@ -643,7 +652,8 @@ _FAMILY_LIST = [
     _ahead("CPLA-25", ObjectKind.PEDESTRIAN, WALK_MPS, 25.0, ("day", "night")),
     _ahead("CPLA-50", ObjectKind.PEDESTRIAN, WALK_MPS, 50.0),
     Family("CBNA-50", ScenarioKind.THREAT, "euro_ncap",
-           "A cyclist (15 km/h) crosses from the near side, hit at 50 % of the ego's front.",
+           "A cyclist (15 km/h) crosses from the near side, hit at 50 % of the ego's front; "
+           "it rides its last 17 m to the impact point at that speed.",
            ALL_SPEEDS, NO_PARAMS, _bicycle_crossing),
     _ahead("CBLA-25", ObjectKind.BICYCLE, CYCLE_MPS, 25.0),
     _ahead("CBLA-50", ObjectKind.BICYCLE, CYCLE_MPS, 50.0),
@@ -704,6 +714,10 @@ _FAMILY_LIST = [
            "An obstacle of every kind the simulator has standing in the lane (0.4-2 m), "
            "facing the ego or side-on, by day or at dusk.",
            ALL_SPEEDS[:3], STANDING, _standing),
+    Family("cyclist_from_kerb", ScenarioKind.THREAT, "obstacle",
+           "Not a Euro NCAP case: a cyclist waiting at the near kerb, 5 m from the ego's "
+           "centre, sets off at 15 km/h about 1.2 s before the ego arrives; hit at 50 %.",
+           ALL_SPEEDS, NO_PARAMS, _cyclist_from_kerb),
     Family("obstacle_crossing", ScenarioKind.THREAT, "obstacle",
            "An obstacle of every kind crossing the ego's path from the near or far side, "
            "hit at 50 %, by day or at dusk.", ALL_SPEEDS[:3],
