@@ -66,6 +66,7 @@ from aeb_radar_camera.tools.grid.profile import Profile
 from aeb_radar_camera.tools.grid.radar import LockstepRadar
 from aeb_radar_camera.tools.messages import SimWorld
 from aeb_radar_camera.tools.recording.frame_source import FrameSource
+from aeb_radar_camera.tools.sim.radar_model import radar_sees
 from aeb_radar_camera.tools.sim.radar_reach import radar_for
 from aeb_radar_camera.tools.sim.scenario import RadarLook, Scenario
 from aeb_radar_camera.tools.sim.scenario_run import (
@@ -360,13 +361,17 @@ class Lockstep:
     def _ideal(self, command: BrakeCommand) -> BrakeCommand:
         """IDEAL: fusion's command replaced by full braking, held to the end, from the
         first cycle whose latest tick had the ground truth on a collision course (at
-        current velocities; before any sensor could confirm it), else by a NONE. With the
-        loop's radar cycle, delays and actuator unchanged, the impact speeds it leaves
-        are what no decision on this loop can beat."""
+        current velocities) with an object the radar can see (in its field of view, not
+        hidden behind a parked car: a decision cannot brake for what no sensor has
+        seen), else by a NONE. No confirmation, no camera: with the loop's radar cycle,
+        delays and actuator unchanged, the impact speeds it leaves are what no decision
+        on this loop can beat."""
         run = self.run
-        if (run is not None and not run.ended and run.samples
-                and run.samples[-1].ttc_s is not None):
-            self._ideal_braking = True
+        if run is not None and not run.ended and run.samples:
+            threat = run.world.threat()
+            if threat is not None and radar_sees(run.world.vehicle_bodies(),
+                                                 threat.object_index):
+                self._ideal_braking = True
         if self._ideal_braking:
             return msgspec.structs.replace(
                 command, decision=Decision.BRAKE, brake_level_pct=100.0, held=False,

@@ -158,6 +158,14 @@ def _visible(bodies: list[Body], ego_x: float) -> list[_Seen]:
     return out
 
 
+def radar_sees(bodies: list[Body], index: int) -> bool:
+    """Whether the radar can see `bodies[index]` (bodies in the vehicle frame): in its
+    field of view and not hidden behind nearer obstacles, by the test its returns use.
+    Raises IndexError for an index out of range."""
+    target = bodies[index]
+    return any(s.body is target for s in _visible(bodies, 0.0))
+
+
 def _face_points(seen: _Seen, n: int, rng: np.random.Generator) -> list[tuple[float, float]]:
     """n points spread over the edges of a footprint that face the radar."""
     c = seen.corners
