@@ -9,7 +9,7 @@ deploy/fusion-paper.toml. A SIMULATION.
 
 The cases: threat families at 10-30 km/h with every obstacle kind the simulator has
 (obstacle_standing: boxes 0.4-1.5 m, pedestrians, a bicycle, a car, facing or side-on;
-obstacle_crossing: each kind from the near or far side; CBNA-50; CPNA-25; day and dusk,
+obstacle_crossing: each kind from the near or far side; cyclist_from_kerb; CPNA-25; day and dusk,
 CPNA-25 by night), false-target families at several ranges and speeds (plate, overhead
 sign, ghost). Per family: threats avoided and the mean impact speed of those hit;
 false-target cases with a brake activation. `regressions`: the cases the paper avoids and
@@ -17,7 +17,7 @@ the default does not (the check is meant to have none). Writes recall_cases.json
 recall_cases.md (the tables) and one PNG per family under --out; prints a line per case
 as it finishes.
 
-`--issue-rows`: the four scenarios of issue 25 (the cyclist crossing CBNA-50 at 20 km/h,
+`--issue-rows`: the four scenarios of issue 25 (the cyclist crossing from the kerb at 20 km/h,
 a bicycle standing across the lane at 25 km/h, a 0.4 m box at 20 km/h, the shipped
 `bicycle_crossing_20kph`), `--runs` times each with the default config: the first three
 on held-out seeds, the shipped scenario on loop seeds 0.. (its world is fixed).
@@ -48,7 +48,7 @@ FALSE_SPEEDS = (10.0, 30.0, 50.0)
 PLAN: dict[str, tuple[tuple[float, ...], int]] = {
     "obstacle_standing": (THREAT_SPEEDS, 1),
     "obstacle_crossing": (THREAT_SPEEDS, 1),
-    "CBNA-50": (THREAT_SPEEDS, 5),
+    "cyclist_from_kerb": (THREAT_SPEEDS, 5),
     "CPNA-25": (THREAT_SPEEDS, 1),
     "plate": (FALSE_SPEEDS, 2),
     "overhead_sign": (FALSE_SPEEDS, 1),
@@ -203,8 +203,8 @@ def issue_rows(runs: int) -> list[tuple[str, Scenario, int]]:
     box = (("object", "box"), ("size_m", 0.4), ("pose", "facing"), ("light", "day"))
     out: list[tuple[str, Scenario, int]] = []
     for s in seeds:
-        out.append(("cyclist crossing CBNA-50 20 km/h",
-                    FamilyCase("CBNA-50", 20.0, (), s).scenario(), 0))
+        out.append(("cyclist crossing from the kerb 20 km/h",
+                    FamilyCase("cyclist_from_kerb", 20.0, (), s).scenario(), 0))
         out.append(("bicycle standing across the lane 25 km/h",
                     FamilyCase("obstacle_standing", 25.0, standing, s).scenario(), 0))
         out.append(("0.4 m box 20 km/h", FamilyCase("obstacle_standing", 20.0, box, s)
