@@ -8,7 +8,7 @@ case's timeline plot. A SIMULATION.
     aeb grid --quick                                  # one case per family (CI)
     aeb grid                                          # the nominal grid, deploy/fusion.toml
     aeb grid --paper --workers 2                      # ... and deploy/fusion-paper.toml
-    aeb grid --ideal --families CBNA-50               # ... and the IDEAL decision's bound
+    aeb grid --ideal --families cyclist_from_kerb     # ... and the IDEAL decision's bound
     aeb grid --families CCRs,CCRb --speeds 40,50,60 --seeds heldout:3
     aeb grid --candidate my-fusion.toml               # a candidate in shadow mode
     aeb grid --list                                   # the families and their grids
