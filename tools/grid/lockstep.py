@@ -106,7 +106,8 @@ class LoopConfig:
     loop: LoopSettings = field(default_factory=LoopSettings)
     name: str = ""                # how results name this configuration
     # IDEAL (a bound, not a system): fusion's decision replaced by full braking from the
-    # first radar cycle after the ground truth puts the ego on a collision course
+    # first radar cycle after the ground truth puts the ego on a collision course with an
+    # object the radar can see
     ideal: bool = False
 
     @classmethod
