@@ -224,6 +224,12 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     # stage.
     cannot_tell_full_only: bool = False
     cannot_tell_decel_mps2: Positive = 5.5
+    # A threat no camera's image holds (the track projects outside every image; no frame
+    # at all is `unverifiable_policy`'s) and on which the track's evidence holds nothing:
+    # true, it is decided as one the camera cannot tell (above); false, it follows
+    # `unverifiable_policy`. The radar sees +-60 deg near, a camera of 87 deg +-43: a
+    # cyclist crossing from the side is in the radar's view seconds before the camera's.
+    not_visible_full_only: bool = False
 
     def __post_init__(self) -> None:
         if not self.warning_decel_mps2 <= self.partial_decel_mps2 <= self.full_decel_mps2:

@@ -582,8 +582,12 @@ class KinematicRule:
     def cannot_tell_full_only(self) -> bool:
         return self.k.cannot_tell_full_only
 
-    def cannot_tell(self, kin: Kinematics, threat: Decision, reason: str
-                    ) -> tuple[Decision, str]:
+    @property
+    def not_visible_full_only(self) -> bool:
+        return self.k.not_visible_full_only
+
+    def cannot_tell(self, kin: Kinematics, threat: Decision, reason: str,
+                    what: str = "camera cannot tell") -> tuple[Decision, str]:
         """A threat the camera cannot tell yet (`cannot_tell_full_only`): WARNING up to
         the full stage with its deceleration bound raised to `cannot_tell_decel_mps2`,
         BRAKE (at the full stage's level) from it. A radar false target at speed is
@@ -597,9 +601,8 @@ class KinematicRule:
         bounds = f"{k.cannot_tell_decel_mps2:g} m/s^2 or TTC {k.full_ttc_s:g} s"
         if threat is Decision.BRAKE and (need >= k.cannot_tell_decel_mps2
                                          or ttc < k.full_ttc_s):
-            return Decision.BRAKE, f"camera cannot tell, full stage ({bounds}): {reason}"
-        return Decision.WARNING, (f"camera cannot tell, warning until the full stage "
-                                  f"({bounds}): {reason}")
+            return Decision.BRAKE, f"{what}, full stage ({bounds}): {reason}"
+        return Decision.WARNING, f"{what}, warning until the full stage ({bounds}): {reason}"
 
     def level(self, kin: Kinematics) -> float | None:
         """The brake level of a track's stage (None below the partial stage)."""

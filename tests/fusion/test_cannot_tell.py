@@ -13,7 +13,7 @@ from aeb_radar_camera.common.messages import Decision, Verification
 from aeb_radar_camera.services.fusion.decision import required_decel
 from aeb_radar_camera.services.fusion.verifiers import GateResult, Observation, ParamValue
 from tests.fusion.helpers import FixedVerifier, make_core, settings
-from tests.fusion.test_decision_kinematic import Drive, ahead
+from tests.fusion.test_decision_kinematic import Drive, ahead, track
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 V50 = 50 / 3.6
@@ -146,3 +146,41 @@ def test_shipped_configs_the_default_brakes_cannot_tell_threats_at_full_only_the
 def test_cannot_tell_decel_below_the_full_stage_is_refused():
     with pytest.raises(ConfigError):
         settings(decision={"kinematic": {"cannot_tell_decel_mps2": 4.0}})
+
+
+def cyclist_outside_the_image(d: Drive, v: float) -> list:
+    """A cyclist 4 m ahead and 6 m to the right (56 deg: the radar's view, not the
+    camera's), crossing left at 4 m/s: in the path when the ego arrives, TTC 1.4 s."""
+    return [d.step(v, track(tid=4, x=4.0 - v * 0.075 * i, y=-6.0 + 4.0 * 0.075 * i,
+                            vx=-v, vy=4.0))
+            for i in range(3)]
+
+
+def test_a_threat_outside_the_camera_s_view_brakes_at_the_full_stage_with_the_setting():
+    v = 10 / 3.6
+    on = Drive(make_core(FixedVerifier(verdict=False), decision={
+        "rule": "kinematic", "kinematic": {"not_visible_full_only": True}}))
+    res = cyclist_outside_the_image(on, v)[-1]
+    tgt = res.targets.targets[0]
+    assert tgt.verification is Verification.NOT_VISIBLE and tgt.path_predicted
+    assert tgt.ttc_s is not None and tgt.ttc_s < 1.6
+    assert (res.command.decision, res.command.brake_level_pct) == (Decision.BRAKE, 100.0)
+    assert "outside the camera's view, full stage" in tgt.reason
+    # without it, the unverifiable policy (warn): a WARNING at the full stage
+    off = Drive(make_core(FixedVerifier(verdict=False), decision={"rule": "kinematic"}))
+    res = cyclist_outside_the_image(off, v)[-1]
+    assert res.command.decision is Decision.WARNING
+    assert "camera not visible, warn only" in res.targets.targets[0].reason
+
+
+def test_outside_the_camera_s_view_before_the_full_stage_is_a_warning():
+    v = 30 / 3.6
+    d = Drive(make_core(FixedVerifier(verdict=False), decision={
+        "rule": "kinematic", "kinematic": {"not_visible_full_only": True}}))
+    # 20 m ahead, 25 m to the side, crossing at 10 m/s: TTC 2.4 s, a warning stage
+    res = d.step(v, track(tid=5, x=20.0, y=-25.0, vx=-v, vy=10.0))
+    res = d.step(v, track(tid=5, x=20.0 - v * 0.075, y=-25.0 + 0.75, vx=-v, vy=10.0))
+    tgt = res.targets.targets[0]
+    assert tgt.verification is Verification.NOT_VISIBLE and tgt.path_predicted
+    assert res.command.decision is Decision.WARNING
+    assert "outside the camera's view, warning until the full stage" in tgt.reason
