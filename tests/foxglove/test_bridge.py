@@ -47,7 +47,15 @@ async def receive(port: int, wanted: dict[str, int], timeout_s: float):
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout_s
         while any(len(got[t]) < n for t, n in wanted.items()):
-            msg = await asyncio.wait_for(ws.recv(), max(0.1, deadline - loop.time()))
+            # The deadline is the loop's: other topics' messages arriving faster than the
+            # wait would otherwise keep a stalled topic waiting for ever.
+            try:
+                msg = await asyncio.wait_for(ws.recv(), max(0.0, deadline - loop.time()))
+            except TimeoutError:
+                raise TimeoutError(
+                    f"after {timeout_s:g} s: {({t: len(v) for t, v in got.items()})} of "
+                    f"{wanted}; advertised {sorted(c['topic'] for c in channels.values())}"
+                ) from None
             if isinstance(msg, str):
                 data = json.loads(msg)
                 if data["op"] == "advertise":
