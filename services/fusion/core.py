@@ -385,11 +385,9 @@ class FusionCore:
                        name for name, v in detail.items() if name.startswith("depth_") and v))
             reason = f"{reason}; {why}"
         rule = self.rule
-        outside = (verification is Verification.NOT_VISIBLE and isinstance(rule, KinematicRule)
-                   and rule.not_visible_full_only)
-        if outside or (cannot_tell and isinstance(rule, KinematicRule)
-                       and rule.cannot_tell_full_only):
-            assert isinstance(rule, KinematicRule)
+        outside = verification is Verification.NOT_VISIBLE
+        if isinstance(rule, KinematicRule) and ((cannot_tell and rule.cannot_tell_full_only)
+                                                or (outside and rule.not_visible_full_only)):
             decision, reason = rule.cannot_tell(
                 k, decision, reason,
                 "outside the camera's view" if outside else "camera cannot tell")
