@@ -368,7 +368,7 @@ class Lockstep:
         delays and actuator unchanged, the impact speeds it leaves are what no decision
         on this loop can beat."""
         run = self.run
-        if run is not None and not run.ended and run.samples:
+        if not self._ideal_braking and run is not None and not run.ended and run.samples:
             threat = run.world.threat()
             if threat is not None and radar_sees(run.world.vehicle_bodies(),
                                                  threat.object_index):
