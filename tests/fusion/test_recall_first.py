@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from aeb_radar_camera.common.depth_error import D435Noise
+from aeb_radar_camera.common.depth_image import to_metres, to_units
 from aeb_radar_camera.services.fusion.verifiers import (
     GateResult,
     Observation,
@@ -17,6 +18,7 @@ from aeb_radar_camera.services.fusion.verifiers import (
 )
 from aeb_radar_camera.services.fusion.verifiers.base import ParamValue
 from aeb_radar_camera.services.fusion.verifiers.recall_first import RecallFirst, RecallFirstParams
+from aeb_radar_camera.tools.eval.depth import Box, box_scene_depth, car_box
 from tests.fusion.helpers import CAL
 from tests.fusion.test_depth_check import WIDE, observe, render_depth
 
@@ -133,6 +135,41 @@ def test_where_the_camera_does_not_see_the_radars_point_it_cannot_tell():
     assert got.detail["in_view"] < 0.5
     inside = CHECK.verify(observe(render_depth(CAL), x, edge[0] + 1.0, projector=WIDE))
     assert outcome(inside) == "depth_sees_through" and inside.detail["in_view"] > 0.99
+
+
+def over_the_wire(depth: np.ndarray) -> np.ndarray:
+    """Depth as a DepthFrame carries it: uint16 millimetres, no return beyond 65.5 m."""
+    return to_metres(to_units(depth))
+
+
+def far_scene(*boxes: Box) -> np.ndarray:
+    return over_the_wire(box_scene_depth(CAL, boxes, max_range_m=1000.0))
+
+
+@pytest.mark.parametrize("x", [32.0, 38.0])
+def test_at_30_40_m_depth_still_tells_though_most_of_the_band_cannot_return(x):
+    """At 30-40 m most of the band's rays look above the horizon or meet the road beyond
+    the depth's range, so an empty road returns from under half of the band; judged
+    against the pixels it could return from, the plate is seen through and a 1 m box is
+    confirmed (a 0.4 m one is not told from the road there: the D435's depth error at
+    30 m lifts the road as high)."""
+    plate = (x - 0.4, x + 0.4, -0.4, 0.4, 0.0, 0.02)
+    got = CHECK.verify(observe(far_scene(plate), x))
+    assert outcome(got) == "depth_sees_through" and not got.verified, got
+    d = got.detail
+    assert d["returns"] < 0.5 * d["band_px"] and d["returns"] >= 0.9 * d["reach_px"], d
+    with_box = CHECK.verify(observe(far_scene(box(x, 1.0)), x))
+    assert outcome(with_box) == "depth_confirms" and with_box.verified, with_box
+
+
+def test_at_35_m_a_car_the_sensor_cannot_match_cannot_tell():
+    """Every pixel of the car a hole (black paint, no texture): what the window sees
+    beside and below it is too little of what an empty road returns to veto."""
+    x = 35.0
+    road, with_car = far_scene(), far_scene(car_box(x))
+    holes = np.where(with_car != road, 0.0, with_car).astype(np.float32)
+    got = CHECK.verify(observe(holes, x))
+    assert outcome(got) == "depth_sparse" and got.verified, got
 
 
 class Look:

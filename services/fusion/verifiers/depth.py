@@ -205,8 +205,8 @@ class ColumnDepth:
     window (float32 / uint8 masks of 255, window-sized): `depth` the camera depth, `dist`
     the measured point's horizontal distance from the camera, `lift` its height above the
     camera, `band` the pixels whose ray at the track's distance lies in the height band
-    asked for, `returns` those of them with a depth return; `run`, `side` the window's
-    part of the RayMaps. `expected_m`: the track's distance from the camera;
+    asked for, `returns` those of them with a depth return; `run`, `side`, `slope` the
+    window's part of the RayMaps. `expected_m`: the track's distance from the camera;
     `camera_y_m`, `camera_z_m`: the camera's sideways position and height in the ground
     frame."""
 
@@ -217,6 +217,7 @@ class ColumnDepth:
     returns: np.ndarray
     run: np.ndarray
     side: np.ndarray
+    slope: np.ndarray
     expected_m: float
     camera_y_m: float
     camera_z_m: float
@@ -258,14 +259,14 @@ def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
         d = d.astype(np.float32)
     # In the band: the ray at the track's distance stands min..max height above the
     # ground, i.e. rise / run within [(min - cz) / r, (max - cz) / r].
-    band = cv2.inRange(maps.slope[r0:r1, c0:c1], (band_min_m - cz) / expected,
-                       (band_max_m - cz) / expected)
+    slope = maps.slope[r0:r1, c0:c1]
+    band = cv2.inRange(slope, (band_min_m - cz) / expected, (band_max_m - cz) / expected)
     returns = cv2.bitwise_and(band, cv2.inRange(d, NO_RETURN_M, np.inf))
     run = maps.run[r0:r1, c0:c1]
     dist = cv2.multiply(d, run)
     lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
-    return ColumnDepth(d, dist, lift, band, returns, run, maps.side[r0:r1, c0:c1], expected,
-                       float(centre[1]), cz)
+    return ColumnDepth(d, dist, lift, band, returns, run, maps.side[r0:r1, c0:c1], slope,
+                       expected, float(centre[1]), cz)
 
 
 def make(params: Mapping[str, ParamValue]) -> Verifier:

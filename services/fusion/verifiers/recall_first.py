@@ -27,14 +27,21 @@ Per frame, in this order (`detail` says which with a 1: `depth_<...>`, `appearan
     depth_sparse       less than `min_in_view` of the window about the radar's point
                        (`lateral_m` either side of it at its range) lies in the image
                        (`in_view`: the camera does not see where the radar does), or
-                       fewer than `min_returns` band pixels with a return, or a share of
-                       the band with a return below `min_density` times the share the
-                       sensor returns across the whole frame in the window's rows
-                       (`row_cover`): depth cannot tell. Relative to the sensor's own
-                       cover, so that a dense D435 column that is mostly holes (a black,
-                       shiny or close obstacle it cannot match) cannot tell, while a
-                       lidar's projected scan lines, 10-20 % of the pixels everywhere,
-                       can.
+                       fewer than `min_returns` band pixels with a return, or fewer
+                       returns than `min_density` x the sensor's cover x the band
+                       pixels an empty road would return from (`reach_px`: those
+                       whose ray meets the ground within `return_range_m`; a ray above
+                       the horizon, or one that meets the road beyond the depth's
+                       range, returns nothing from an empty road). The sensor's cover
+                       (`row_cover`) is the share of such pixels with a return across
+                       the whole frame in the window's rows: depth cannot tell.
+                       Relative to the sensor's own cover, so that a dense D435 column
+                       that is mostly holes (a black, shiny or close obstacle it cannot
+                       match) cannot tell, while a lidar's projected scan lines, 10-20 %
+                       of the pixels everywhere, can; relative to the pixels that
+                       could return, so that at 30-40 m, where most of the band looks
+                       above the horizon or past the depth's range, an empty road that
+                       returns from every pixel it can still tells.
     depth_confirms     at least `confirm_px` pixels at the range, covering at least
                        `confirm_area_m2` there (0.02 m2: a 14 cm square; a pixel spans
                        r / focal_px metres): a surface stands there, never vetoed,
@@ -134,6 +141,9 @@ class RecallFirstParams(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     min_returns: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 12
     # Of the sensor's own cover in the window's rows (depth_sparse in the docstring).
     min_density: Share = 0.3
+    # The farthest the depth returns: the wire's uint16 millimetres end at 65.5 m
+    # (common/depth_image.py), whatever the sensor could do.
+    return_range_m: Annotated[float, msgspec.Meta(gt=0, le=1000)] = 65.0
     confirm_px: Annotated[int, msgspec.Meta(ge=1, le=100000)] = 4
     confirm_area_m2: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.02
     through_share: Share = 0.9
@@ -165,9 +175,10 @@ class RecallFirst:
         self.look = look
         self.model = D435Noise(focal_px=p.focal_px, baseline_m=p.baseline_m,
                                subpixel=p.subpixel, hole_rate=0.0)
-        # The last depth image's returns per row, cumulated: every track of a frame
-        # shares one image, so the frame is counted once, not once per track.
-        self._rows: tuple[weakref.ref[np.ndarray], np.ndarray] | None = None
+        # The last depth image's reachable pixels with a return, and its reachable
+        # pixels, per row, cumulated: every track of a frame shares one image, so the
+        # frame is counted once, not once per track.
+        self._rows: tuple[weakref.ref[np.ndarray], float, np.ndarray, np.ndarray] | None = None
 
     def params(self) -> dict[str, ParamValue]:
         return msgspec.structs.asdict(self.p)
@@ -179,18 +190,23 @@ class RecallFirst:
     def tolerance_m(self, distance_m: float) -> float:
         return float(self.p.k_sigma * self.model.rms_m(distance_m) + self.p.margin_m)
 
-    def row_cover(self, depth: np.ndarray, r0: int, r1: int) -> float:
-        """The share of the pixels of rows r0..r1 (the whole frame's width) with a
-        return."""
+    def row_cover(self, depth: np.ndarray, slope: np.ndarray, lowest: float, r0: int,
+                  r1: int) -> float:
+        """The share of the pixels of rows r0..r1 (the whole frame's width) an empty road
+        would return from (their ray's `slope` at most `lowest`: it meets the ground within
+        `return_range_m`) that have a return: the sensor's cover where it could see."""
         rows = self._rows
-        if rows is None or rows[0]() is not depth:
-            counts = np.count_nonzero(depth > NO_RETURN_M, axis=1)
-            rows = (weakref.ref(depth), np.concatenate(([0], np.cumsum(counts))))
+        if rows is None or rows[0]() is not depth or rows[1] != lowest:
+            reach = slope <= lowest
+            seen = np.count_nonzero(reach & (depth > NO_RETURN_M), axis=1)
+            rows = (weakref.ref(depth), lowest,
+                    np.concatenate(([0], np.cumsum(seen))),
+                    np.concatenate(([0], np.cumsum(np.count_nonzero(reach, axis=1)))))
             self._rows = rows
         r0, r1 = max(r0, 0), min(r1, depth.shape[0])
-        if r1 <= r0:
+        if r1 <= r0 or rows[3][r1] == rows[3][r0]:
             return 0.0
-        return float(rows[1][r1] - rows[1][r0]) / ((r1 - r0) * depth.shape[1])
+        return float(rows[2][r1] - rows[2][r0]) / float(rows[3][r1] - rows[3][r0])
 
     def in_view_share(self, cal: Calibration, xy_m: tuple[float, float],
                       distance_m: float) -> float:
@@ -206,6 +222,12 @@ class RecallFirst:
                    p.lateral_m * float(cal.k[0, 0]) / max(distance_m, 0.1))
         seen = min(u + half, float(cal.width)) - max(u - half, 0.0)
         return min(max(seen / (2.0 * half), 0.0), 1.0)
+
+    def lowest_slope(self, camera_z_m: float) -> float:
+        """The largest ray slope (rise / run) that still meets the ground within
+        `return_range_m` of a camera `camera_z_m` above it: a pixel an empty road returns
+        from has a ray at most this steep upwards."""
+        return -camera_z_m / self.p.return_range_m
 
     def depth_evidence(self, obs: Observation) -> tuple[str, dict[str, float]]:
         """The depth outcome of one observation (one of the module's names) and its
@@ -235,14 +257,18 @@ class RecallFirst:
         detail["in_view"] = in_view = self.in_view_share(obs.calibration, obs.xy_m, r)
         if in_view < p.min_in_view:
             return SPARSE, detail
-        detail["row_cover"] = cover = self.row_cover(obs.depth_m, obs.roi.y,
-                                                     obs.roi.y + obs.roi.h)
-        if n_ret < p.min_returns or n_ret < p.min_density * cover * n_band:
+        lowest = self.lowest_slope(col.camera_z_m)
+        detail["row_cover"] = cover = self.row_cover(
+            obs.depth_m, ray_maps(obs.calibration).slope, lowest, obs.roi.y,
+            obs.roi.y + obs.roi.h)
+        reach = cv2.bitwise_and(col.band, cv2.inRange(col.slope, -np.inf, lowest))
+        detail["reach_px"] = n_reach = float(cv2.countNonZero(reach))
+        if n_ret < p.min_returns or n_ret < p.min_density * cover * n_reach:
             return SPARSE, detail
         # The surface the pixels at the range cover there (a pixel spans r / f metres).
         detail["at_area_m2"] = area = n_at * (r / p.focal_px) ** 2
         if n_at >= p.confirm_px and area >= p.confirm_area_m2:
-            detail.update(extent(col, at, cv2.bitwise_or(at, near),
+            detail.update(extent(col, at, cv2.bitwise_or(at, near), reach,
                                  p.min_density * cover))
             return CONFIRMS, detail
         if n_through >= p.through_share * n_ret:
@@ -272,15 +298,16 @@ class RecallFirst:
                           unverifiable=unverifiable)
 
 
-def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray,
+def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray, reach: np.ndarray,
            min_share: float) -> dict[str, float]:
     """Where the pixels `at` the range stand sideways (ground y, left positive: `at_y_min_m`,
     `at_y_max_m`), where the window lies at the range (`window_y_min_m`,
     `window_y_max_m`), and whether every column of the window beyond the at-pixels'
     columns on the low-y side (`through_low_y`) or the high-y side (`through_high_y`)
     sees through: 1 iff there is such a column and each has a return in at least
-    `min_share` of its band pixels (at least one) and none `standing` (at or nearer than
-    the range). Holes or too few returns cannot tell: 0."""
+    `min_share` of its band pixels an empty road would return from (`reach`), at least
+    one, and none `standing` (at or nearer than the range). Holes or too few returns
+    cannot tell: 0."""
     ys = col.across()[at > 0]
     band = col.band > 0
     ray_across = col.ray_across()
@@ -289,8 +316,9 @@ def extent(col: ColumnDepth, at: np.ndarray, standing: np.ndarray,
     out = {AT_Y_MIN: float(ys.min()) + cy, AT_Y_MAX: float(ys.max()) + cy,
            WINDOW_Y_MIN: float(window.min()) + cy, WINDOW_Y_MAX: float(window.max()) + cy}
     n_band = np.count_nonzero(band, axis=0)
+    n_reach = np.count_nonzero(reach, axis=0)
     n_ret = np.count_nonzero(col.returns, axis=0)
-    clear = ((n_ret >= 1) & (n_ret >= min_share * n_band)
+    clear = ((n_ret >= 1) & (n_ret >= min_share * n_reach)
              & (np.count_nonzero(standing, axis=0) == 0) & (n_band > 0))
     cols = np.flatnonzero(np.count_nonzero(at, axis=0))
     before, after = clear[:cols[0]], clear[cols[-1] + 1:]
