@@ -334,12 +334,6 @@ class EvidenceSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # crossing cyclist under a new id as it comes close).
     handover_m: Annotated[float, msgspec.Meta(ge=0, le=20)] = 3.0
     handover_s: Annotated[float, msgspec.Meta(ge=0, le=5)] = 1.0
-    # A track the radar's tracker has not confirmed yet, with at least this many hits, is
-    # decided as a threat once its evidence holds a confirmation (a frame where depth saw
-    # a surface at its range); until then it never warns or brakes. 0: only confirmed
-    # tracks are decided on. The camera's confirmation stands in for the tracker's last
-    # cycles: a child stepping out from behind a parked car is braked for a cycle sooner.
-    tentative_hits: Annotated[int, msgspec.Meta(ge=0, le=20)] = 0
 
     def __post_init__(self) -> None:
         if self.veto_at < self.floor:

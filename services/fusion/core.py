@@ -3,13 +3,11 @@ and the cycle's VerifiedTargets out. Pure: no Zenoh, no clocks (the shell passes
 time), no threads; its state is the brake hold, the sequence number and each track's
 recent sideways motion (for path prediction).
 
-Per confirmed track (and, with `[fusion.evidence] tentative_hits`, per tentative track
-that is a threat: decided on only once the camera's evidence confirms it): kinematics
-and the radar's threat (decision.py); per camera, the frame nearest the cycle within the
-skew bound (frames.py), the track predicted to that frame's time and its column
-projected to a ROI (roi.py); the verifier (verifiers/) in the cameras that see it,
-combined (cameras.py); the decision. The command is the most severe decision (ties: the
-smallest TTC_eff), or a heartbeat.
+Per confirmed track: kinematics and the radar's threat (decision.py); per camera, the
+frame nearest the cycle within the skew bound (frames.py), the track predicted to that
+frame's time and its column projected to a ROI (roi.py); the verifier (verifiers/) in
+the cameras that see it, combined (cameras.py); the decision. The command is the most
+severe decision (ties: the smallest TTC_eff), or a heartbeat.
 
 A cycle is two steps. `decide` settles the command: threats are checked most severe
 first, then most urgent; a track's decision is at most its radar threat, so once the
@@ -87,13 +85,11 @@ class CycleResult:
 @dataclass(slots=True)
 class DecidedCycle:
     """A radar cycle whose command is decided: what `report` needs to describe it.
-    `decided`: the confirmed tracks, then the tentative ones decided on
-    (`[fusion.evidence] tentative_hits`); `checked` holds the targets of the tracks the
-    command needed, by index in `decided`."""
+    `checked` holds the targets of the tracks the command needed, by confirmed index."""
 
     tracks: RadarTracks
     feeds: tuple[FrameFeed, ...]
-    decided: list[RadarTrack]
+    confirmed: list[RadarTrack]
     invalid: list[RadarTrack]
     status: VerifierStatus
     reason_unavailable: str
@@ -102,7 +98,7 @@ class DecidedCycle:
     command: BrakeCommand
     kins: list[Kinematics] = field(default_factory=list)
     threats: list[tuple[Decision, str]] = field(default_factory=list)
-    threat_order: list[int] = field(default_factory=list)     # indices in decided
+    threat_order: list[int] = field(default_factory=list)     # confirmed indices
     threat_views: list[CameraView] = field(default_factory=list)
     checked: dict[int, VerifiedTarget] = field(default_factory=dict)
     cameras_unavailable: dict[str, str] = field(default_factory=dict)
@@ -155,8 +151,6 @@ class FusionCore:
                          else None)
         self._gathers = self.evidence is not None and bool(
             getattr(verifier, "gives_llr", False))
-        # Tentative tracks are decided on only where evidence can confirm them.
-        self._tentative_hits = settings.evidence.tentative_hits if self._gathers else 0
         # Per track, the last frame that showed its object beside the path: (radar stamp,
         # the radar point's offset from the path then, the reason).
         self._beside: dict[int, tuple[int, float, str]] = {}
@@ -202,19 +196,16 @@ class FusionCore:
             raise ValueError(f"{len(feeds)} frame feeds for {len(self.cameras)} cameras")
         confirmed: list[RadarTrack] = []
         invalid: list[RadarTrack] = []
-        tentative: list[RadarTrack] = []
         for t in tracks.tracks:
             if t.confirmed:
                 (confirmed if finite_track(t) else invalid).append(t)
-            elif self._tentative_hits and t.hits >= self._tentative_hits and finite_track(t):
-                tentative.append(t)
         self.invalid_tracks += len(invalid)
         if isinstance(self.rule, KinematicRule):
             sample = vehicle if vehicle is not None else self.vehicle.sample(now_mono_ns)
-            self.rule.begin(sample, confirmed, tracks.header.stamp_ns, tentative)
-            lateral_input = self.rule.lateral_input(confirmed + tentative)
+            self.rule.begin(sample, confirmed, tracks.header.stamp_ns)
+            lateral_input = self.rule.lateral_input(confirmed)
         else:
-            lateral_input = confirmed + tentative
+            lateral_input = confirmed
         self._moving = self.lateral.update(lateral_input) if self.lateral is not None else set()
         if self.evidence is not None:
             self.evidence.forget_older(tracks.header.stamp_ns)
@@ -229,24 +220,17 @@ class FusionCore:
             return DecidedCycle(tracks, feeds, confirmed, invalid, VerifierStatus.STALE_RADAR,
                                 "", age_ns, now_mono_ns, command, checked=stale)
         feeds = self._usable(feeds, confirmed)
-        decided = confirmed + tentative
-        kins = [self._kinematics(t) for t in decided]
+        kins = [self._kinematics(t) for t in confirmed]
         threats = [self.rule.threat(k) for k in kins]
-        if tentative:
-            # A tentative track is checked and reported only where it is a threat.
-            keep = [i for i, (d, _) in enumerate(threats)
-                    if i < len(confirmed) or d is not Decision.NONE]
-            decided = [decided[i] for i in keep]
-            kins, threats = [kins[i] for i in keep], [threats[i] for i in keep]
         if isinstance(self.rule, KinematicRule):
             rule = self.rule
             self.road_edge_targets += sum(1 for k in kins if k.road_edge and k.in_range
                                           and rule.stage(k) is not None)
         ranks = [_rank(threat, k.ttc_eff_s, k.level_pct)
                  for (threat, _), k in zip(threats, kins, strict=True)]
-        order = sorted((i for i in range(len(decided)) if threats[i][0] is not Decision.NONE),
+        order = sorted((i for i in range(len(confirmed)) if threats[i][0] is not Decision.NONE),
                        key=ranks.__getitem__, reverse=True)
-        views = camera_views(self.cameras, feeds, [decided[i] for i in order],
+        views = camera_views(self.cameras, feeds, [confirmed[i] for i in order],
                              tracks.header.stamp_ns, self._max_skew_ns, self.s.frames.align,
                              self.verifier.needs_depth)
         reason_unavailable = ""
@@ -260,7 +244,7 @@ class FusionCore:
         for j, i in enumerate(order):
             if ranks[i] <= best_rank:
                 break                    # neither this threat nor any after it can win
-            tgt = self._target(decided[i], kins[i], threats[i], views, j,
+            tgt = self._target(confirmed[i], kins[i], threats[i], views, j,
                                tracks.header.stamp_ns, gate=True)
             checked[i] = tgt
             if tgt.decision is not Decision.NONE:
@@ -268,25 +252,25 @@ class FusionCore:
         command = self._command(tracks, list(checked.values()), status, reason_unavailable,
                                 age_ns, now_wall_ns, now_mono_ns, confirmed=confirmed)
         return DecidedCycle(
-            tracks, feeds, decided, invalid, status, reason_unavailable, age_ns,
+            tracks, feeds, confirmed, invalid, status, reason_unavailable, age_ns,
             now_mono_ns, command, kins, threats, order, views, checked,
             {v.name: v.reason for v in views if v.frame is None})
 
     def report(self, cycle: DecidedCycle) -> VerifiedTargets:
-        """Every confirmed track of a decided cycle as a target, in track order, the
-        tentative threats decided on, then the invalid ones: the threats the command did
-        not need are gated now, the other tracks only with `gate_scope = "all"`."""
+        """Every confirmed track of a decided cycle as a target, in track order, then the
+        invalid ones: the threats the command did not need are gated now, the other tracks
+        only with `gate_scope = "all"`."""
         targets = dict(cycle.checked)
         stamp_ns = cycle.tracks.header.stamp_ns
         if cycle.status is not VerifierStatus.STALE_RADAR:
             for j, i in enumerate(cycle.threat_order):
                 if i not in targets:
-                    targets[i] = self._target(cycle.decided[i], cycle.kins[i],
+                    targets[i] = self._target(cycle.confirmed[i], cycle.kins[i],
                                               cycle.threats[i], cycle.threat_views, j,
                                               stamp_ns, gate=True)
-            others = [i for i in range(len(cycle.decided)) if i not in targets]
+            others = [i for i in range(len(cycle.confirmed)) if i not in targets]
             views = camera_views(self.cameras, cycle.feeds,
-                                 [cycle.decided[i] for i in others], stamp_ns,
+                                 [cycle.confirmed[i] for i in others], stamp_ns,
                                  self._max_skew_ns, self.s.frames.align,
                                  self.verifier.needs_depth)
             gate_all = self.s.gate_scope is GateScope.ALL
@@ -296,7 +280,7 @@ class FusionCore:
                 # cyclist crossing close ahead) has the evidence of when it was seen.
                 k = cycle.kins[i]
                 gather = self._gathers and k.in_range and k.ttc_s is not None
-                targets[i] = self._target(cycle.decided[i], k, cycle.threats[i],
+                targets[i] = self._target(cycle.confirmed[i], k, cycle.threats[i],
                                           views, j, stamp_ns, gate=gate_all or gather)
         feeds = cycle.feeds
         header = Header(seq=cycle.command.header.seq, source=self.source, stamp_ns=stamp_ns,
@@ -305,7 +289,7 @@ class FusionCore:
             header=header, instance=self.s.instance, radar_sensor=cycle.tracks.sensor,
             radar_seq=cycle.tracks.header.seq, verifier=self.verifier.name,
             verifier_params=self.verifier_params, verifier_status=cycle.status,
-            targets=(*(targets[i] for i in range(len(cycle.decided))),
+            targets=(*(targets[i] for i in range(len(cycle.confirmed))),
                      *(_invalid_target(t) for t in cycle.invalid)),
             processing_ns=0, camera=self.camera_names,
             unavailable_reason=cycle.reason_unavailable, radar_age_ms=cycle.age_ns / 1e6,
@@ -409,8 +393,6 @@ class FusionCore:
                 "outside the camera's view" if outside else "camera cannot tell")
         else:
             decision, reason = decide(decision, reason, verification, rule.policy)
-        if not t.confirmed and decision is not Decision.NONE:
-            decision, reason = _tentative(t, decision, reason, verification, detail)
         if k.road_edge:
             detail = {**detail, ROAD_EDGE: 1.0}
         if isinstance(rule, KinematicRule):
@@ -550,16 +532,6 @@ class FusionCore:
             verifier_status=status, held=held, track_id=track_id, range_m=range_m,
             ttc_s=ttc_s, reason=reason, radar_seq=tracks.header.seq,
             radar_last_frame_mono_ns=tracks.last_frame_mono_ns, override=staged.override)
-
-
-def _tentative(t: RadarTrack, decision: Decision, reason: str, verification: Verification,
-               detail: Mapping[str, float]) -> tuple[Decision, str]:
-    """A tentative track's decision: as a confirmed track's once its evidence holds a
-    confirmation (`[fusion.evidence] tentative_hits`), else none."""
-    if verification is Verification.VERIFIED and detail.get(EVIDENCE_KEY, 0.0) > 0.0:
-        return decision, f"{reason}; tentative track ({t.hits} hits) the camera confirms"
-    return Decision.NONE, (f"tentative track ({t.hits} hits) the camera has not "
-                           f"confirmed: {reason}")
 
 
 def _kinematic_fields(k: Kinematics) -> dict[str, float | None]:

@@ -361,10 +361,9 @@ class KinematicRule:
         self.yaw_step_rps = 0.0       # this cycle's yaw rate less the lagged one
 
     def begin(self, vehicle: VehicleSample, tracks: Sequence[RadarTrack],
-              stamp_ns: int, tentative: Sequence[RadarTrack] = ()) -> None:
+              stamp_ns: int) -> None:
         """This cycle's vehicle state and confirmed (finite) tracks, at the radar cycle's
-        stamp; `tentative`: the unconfirmed tracks decided on too (their motion over
-        ground; the road's edge is fitted to confirmed tracks alone)."""
+        stamp."""
         self.vehicle = vehicle
         motion = vehicle.motion
         self.motion_ok = motion is not None
@@ -387,7 +386,7 @@ class KinematicRule:
         self.path = predicted_path(v, motion.yaw_rate_dps, steer, self.s.path, self.centre)
         self.max_range = min(k.range_max_m, k.range_base_m + k.range_time_s * max(v, 0.0),
                              self.s.path.length_m)
-        for t in (*tracks, *tentative):
+        for t in tracks:
             # Over ground: the radar's velocities are relative to the turning vehicle frame.
             gx, gy = t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m
             self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
