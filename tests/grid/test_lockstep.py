@@ -83,18 +83,32 @@ def test_a_false_target_brakes_the_papers_gate_and_not_the_default(scenes):
 
 def test_a_far_false_target_at_50_kph_is_a_warning_the_camera_cannot_tell_not_a_brake(
         scenes):
-    # A metal plate 40 m ahead at 50 km/h: the kinematic rule's stages begin 55 m ahead,
-    # where the D435's depth is too sparse to tell; the threat is a WARNING until the
-    # stop would need the full brake, and by then depth sees through the column.
+    # A metal plate 60 m ahead at 50 km/h: the kinematic rule's stages begin 55 m ahead,
+    # where the depth is too sparse to tell (the band's rays meet the road beyond its
+    # 65 m); the threat is a WARNING until the stop would need the full brake, and by
+    # then depth sees through the column.
     fam = FAMILIES["plate"]
     speed, params = next((v, p) for v, p in fam.grid()
-                         if v == 50.0 and dict(p)["range_m"] == 40)
+                         if v == 50.0 and dict(p)["range_m"] == 60)
     r = run_scenario(FamilyCase("plate", speed, params, 0).scenario(), DEFAULT, scenes, 0)
     assert r.verdict.brake_activations == 0, r.verdict
     told = [t for c in r.cycles for t in c.targets.targets if t.gate_detail.get("cannot_tell")]
     assert told and {t.decision for t in told} <= {Decision.WARNING, Decision.NONE}
     assert any("camera cannot tell, warning until the full stage" in c.command.reason
                for c in r.cycles)
+
+
+def test_a_plate_40_m_ahead_at_60_kph_is_seen_through_before_the_full_stage(scenes):
+    # The full stage is due about 34 m ahead: depth sees through the column there,
+    # though most of its band looks above the horizon or past the depth's range.
+    fam = FAMILIES["plate"]
+    speed, params = next((v, p) for v, p in fam.grid()
+                         if v == 60.0 and dict(p)["range_m"] == 40)
+    r = run_scenario(FamilyCase("plate", speed, params, 0).scenario(), DEFAULT, scenes, 0)
+    assert r.verdict.brake_activations == 0, r.verdict
+    far = [t for c in r.cycles for t in c.targets.targets
+           if t.range_m > 30.0 and t.gate_detail.get("depth_sees_through")]
+    assert far and all(t.decision is Decision.NONE for t in far)
 
 
 def test_a_candidate_in_shadow_mode_is_recorded_per_cycle_and_never_brakes(scenes):
