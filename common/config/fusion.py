@@ -129,6 +129,11 @@ class PathSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # camera_margin_m from the path's centre and the path's side of it empty
     # (KinematicRule.beside_path).
     camera_margin_m: NonNegative = 0.2
+    # An object the point test leaves out of the path (its radar point beyond the path's
+    # edge, by at most camera_into_m) is in it when the camera's depth shows its surface
+    # at the radar's range running on, window by window, into the path (a car standing
+    # side-on whose radar point is its far corner; KinematicRule.into_path_next). 0: off.
+    camera_into_m: Annotated[float, msgspec.Meta(ge=0, le=10)] = 0.0
     length_m: Positive = 80.0
     min_yaw_speed_mps: NonNegative = 3.0
     wheelbase_m: Positive | None = None

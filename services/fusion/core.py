@@ -52,6 +52,7 @@ from aeb_radar_camera.services.fusion.evidence import (
     CANNOT_TELL_KEY,
     EVIDENCE_CARRIED_KEY,
     EVIDENCE_KEY,
+    INTO_PATH,
     LLR_KEY,
     ROAD_EDGE,
     TrackEvidence,
@@ -74,6 +75,10 @@ _NO_ROI: tuple[int, ...] = ()
 # the ego reaches it), unless its radar point comes this much nearer the path's centre.
 BESIDE_CARRY_S = 0.5
 BESIDE_CARRY_M = 0.1
+# A track the camera put in the path stays there this long without a frame that shows
+# it so again; the camera follows an object's surface toward the path this many windows.
+INTO_CARRY_S = 0.3
+INTO_WINDOWS = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,6 +160,9 @@ class FusionCore:
         # the radar point's offset from the path then, the reason).
         self._beside: dict[int, tuple[int, float, str]] = {}
         self.beside_path_targets = 0   # threats the camera took out of the path, since start
+        # Per track the point test leaves out of the path, the last frame that showed its
+        # object's surface running into it: (radar stamp, why).
+        self._into: dict[int, tuple[int, str]] = {}
         # Tracks in range the road's edge took out of the path where they reached a stage
         # (each cycle counts), since start.
         self.road_edge_targets = 0
@@ -282,6 +290,7 @@ class FusionCore:
                 gather = self._gathers and k.in_range and k.ttc_s is not None
                 targets[i] = self._target(cycle.confirmed[i], k, cycle.threats[i],
                                           views, j, stamp_ns, gate=gate_all or gather)
+            self._follow_into_path(cycle, targets, stamp_ns)
         feeds = cycle.feeds
         header = Header(seq=cycle.command.header.seq, source=self.source, stamp_ns=stamp_ns,
                         pub_mono_ns=cycle.now_mono_ns)
@@ -298,6 +307,50 @@ class FusionCore:
             frames_dropped=sum(f.dropped for f in feeds),
             frames_corrupt=sum(f.corrupt for f in feeds),
             cameras_unavailable=cycle.cameras_unavailable, override=cycle.command.override))
+
+    def _follow_into_path(self, cycle: DecidedCycle, targets: Mapping[int, VerifiedTarget],
+                          stamp_ns: int) -> None:
+        """For each checked track the point test leaves out of the path whose object's
+        surface at the range runs up to the window's edge on the path's side, the camera
+        looks in the window beside it, and on, up to INTO_WINDOWS
+        (KinematicRule.into_path_next, into_path): a track whose surface runs into the path
+        is in it from the next cycle on, while frames keep showing it so (or for
+        INTO_CARRY_S without a frame)."""
+        for i in [i for i, v in self._into.items() if stamp_ns - v[0] > INTO_CARRY_S * 1e9]:
+            del self._into[i]
+        rule = self.rule
+        if not isinstance(rule, KinematicRule) or not self._gathers:
+            return
+        for i, tgt in targets.items():
+            if tgt.score_name == "":
+                continue                      # no frame this cycle: the memory carries
+            t, k = cycle.confirmed[i], cycle.kins[i]
+            step = rule.into_path_next(t.track_id, k, tgt.gate_detail)
+            why: str | None = None
+            y = tgt.y_m
+            for _ in range(INTO_WINDOWS):
+                if step is None:
+                    break
+                y += step
+                detail = self._probe(cycle, t, y - tgt.y_m, stamp_ns)
+                if detail is None:
+                    break
+                why, step = rule.into_path(tgt.x_m, detail, 1 if step > 0 else -1)
+            if why is not None:
+                self._into[t.track_id] = (stamp_ns, why)
+            else:
+                self._into.pop(t.track_id, None)
+
+    def _probe(self, cycle: DecidedCycle, t: RadarTrack, dy_m: float,
+               stamp_ns: int) -> Mapping[str, float] | None:
+        """The check's detail `dy_m` sideways of track `t` at its range (no evidence
+        kept: it looks at a place, not at the track), None without a frame."""
+        y = t.y_m + dy_m
+        probe = msgspec.structs.replace(t, y_m=y, range_m=math.hypot(t.x_m, y))
+        views = camera_views(self.cameras, cycle.feeds, [probe], stamp_ns, self._max_skew_ns,
+                             self.s.frames.align, self.verifier.needs_depth)
+        result = check_track(0, views, True, self.verifier.verify).result
+        return result.detail if result is not None else None
 
     def _with_vehicle(self, targets: VerifiedTargets) -> VerifiedTargets:
         """With the vehicle's state as the kinematic rule used it this cycle (unchanged
@@ -331,7 +384,11 @@ class FusionCore:
         return tuple(out)
 
     def _kinematics(self, t: RadarTrack) -> Kinematics:
-        return self.rule.kinematics(t, t.track_id in self._moving)
+        k = self.rule.kinematics(t, t.track_id in self._moving)
+        into = self._into.get(t.track_id)
+        if into is not None and not k.in_path and k.window is None and not k.road_edge:
+            k = replace(k, in_path=True, by_camera=into[1])
+        return k
 
     def _stale_target(self, t: RadarTrack, age_ns: int) -> VerifiedTarget:
         k = self._kinematics(t)
@@ -395,6 +452,8 @@ class FusionCore:
             decision, reason = decide(decision, reason, verification, rule.policy)
         if k.road_edge:
             detail = {**detail, ROAD_EDGE: 1.0}
+        if k.by_camera:
+            detail = {**detail, INTO_PATH: 1.0}
         if isinstance(rule, KinematicRule):
             decision, reason, detail = self._beside_path(t, k, check.view, j, result,
                                                          decision, reason, detail,

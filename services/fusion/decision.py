@@ -75,6 +75,9 @@ class Kinematics:
     path_point: PathPoint | None = None
     # Why the point test's in-path track is out of it as the road's edge ("": it is not).
     road_edge: str = ""
+    # Why the camera put a track the point test leaves out of the path in it ("": it did
+    # not; fusion's into-path memory).
+    by_camera: str = ""
 
 
 def corridor_window(lateral_m: float, lateral_speed_mps: float,
@@ -516,6 +519,52 @@ class KinematicRule:
         return (f"beside the path by the camera: inner edge {inner:+.2f} m, limit "
                 f"{half:.1f} + {self.s.path.camera_margin_m:.1f} m")
 
+    def into_path_next(self, track_id: int, kin: Kinematics,
+                       detail: Mapping[str, float]) -> float | None:
+        """Where the camera looks next for the object of a track the point test leaves out
+        of the path: the ground-y shift to the window beside this one on the path's side,
+        when depth confirms the object (`detail`, the recall-first check's extent) and its
+        pixels at the range run up to this window's edge on the path's side. None where it
+        does not, and where the rule does not look: `camera_into_m` 0 or exceeded by the
+        radar point's distance beyond the path's edge, a crossing prediction, a track on
+        the road's edge (a guard rail ahead of a bend runs into the straight path), out of
+        range or beyond INTO_MAX_RANGE_M, not closing, a path that bends."""
+        into = self.s.path.camera_into_m
+        p = kin.path_point
+        if (not self.motion_ok or into <= 0.0 or p is None or kin.window is not None
+                or kin.road_edge or track_id in self._edge or not kin.in_range
+                or kin.range_m > INTO_MAX_RANGE_M or kin.ttc_s is None
+                or (kin.in_path and not kin.by_camera)
+                or abs(p.d_m) - self.path.half_width_m > into):
+            return None
+        # The windows step across the ground frame's y: the path's side only where the
+        # path runs straight to the range (within INTO_BEND_M of a straight line).
+        if abs(self.path.curvature_per_m) * p.s_m ** 2 / 2.0 > INTO_BEND_M:
+            return None
+        return _step_toward(detail, 1 if p.d_m < 0.0 else -1)
+
+    def into_path(self, x_m: float, detail: Mapping[str, float], toward: int
+                  ) -> tuple[str | None, float | None]:
+        """A window beside the last toward the path (`toward`: +1 to higher ground y):
+        (why the object is in the path, None) when the pixels at the range run on from its
+        outer edge to inside the path's half-width; (None, the next window's shift) when
+        they run across the whole window; (None, None) otherwise. Inside the path: within
+        the vehicle's half-width (`half_width_m`), not the margin beyond it."""
+        if any(key not in detail for key in _EXTENT):
+            return None, None
+        lo, hi = detail[WINDOW_Y_MIN], detail[WINDOW_Y_MAX]
+        at_lo, at_hi = detail[AT_Y_MIN], detail[AT_Y_MAX]
+        if not (at_lo <= lo + INTO_TOUCH_M if toward > 0 else at_hi >= hi - INTO_TOUCH_M):
+            return None, None
+        d = self.path.point(x_m, at_hi if toward > 0 else at_lo).d_m
+        # Into the vehicle's own width, not only the margin: a surface at the margin's
+        # edge is an object beside the path as often (beside_path).
+        half = self.s.path.half_width_m
+        if abs(d) <= half:
+            return (f"its surface at the range reaches {d:+.2f} m from the path's centre, "
+                    f"limit {half:g} m"), None
+        return None, _step_toward(detail, toward)
+
     def threat(self, kin: Kinematics) -> tuple[Decision, str]:
         if not self.motion_ok:
             decision, reason = self.paper.threat(kin)
@@ -572,6 +621,8 @@ class KinematicRule:
                    f"{kin.accel_mps2 or 0.0:+.1f} m/s^2, {self.path.describe()}")
         if w is not None:
             figures = f"in path by prediction ({_window_text(w)}), {figures}"
+        elif kin.by_camera:
+            figures = f"in path by the camera ({kin.by_camera}), {figures}"
         if stage is None:
             return Decision.NONE, f"no stage reached: {figures}"
         if stage == STAGE_WARNING:
@@ -611,6 +662,31 @@ class KinematicRule:
         stage = self.stage(kin)
         return (self.k.full_level_pct if stage == STAGE_FULL else
                 self.k.partial_level_pct if stage == STAGE_PARTIAL else None)
+
+
+# How close to a window's edge the pixels at the range count as running up to it: a
+# pixel 25 m ahead spans 6 cm.
+INTO_TOUCH_M = 0.1
+# The most the path may bend away from a straight line to a track's range for the camera
+# to follow its object sideways.
+INTO_BEND_M = 0.2
+# Beyond this range the check's depth tolerance (over 5 m at 25 m) takes a guard rail or
+# a row of parked cars seen at a slant for one surface at the range.
+INTO_MAX_RANGE_M = 25.0
+_EXTENT = (AT_Y_MIN, AT_Y_MAX, WINDOW_Y_MIN, WINDOW_Y_MAX)
+
+
+def _step_toward(detail: Mapping[str, float], toward: int) -> float | None:
+    """The shift (ground y) to the window beside this one on the `toward` side, when the
+    pixels at the range reach this window's edge there; else None."""
+    if any(key not in detail for key in _EXTENT):
+        return None
+    lo, hi = detail[WINDOW_Y_MIN], detail[WINDOW_Y_MAX]
+    if toward > 0 and detail[AT_Y_MAX] >= hi - INTO_TOUCH_M:
+        return hi - lo
+    if toward < 0 and detail[AT_Y_MIN] <= lo + INTO_TOUCH_M:
+        return lo - hi
+    return None
 
 
 def _decel(d: float | None) -> str:

@@ -28,6 +28,8 @@ WINDOW_Y_MIN, WINDOW_Y_MAX = "window_y_min_m", "window_y_max_m"
 THROUGH_LOW_Y, THROUGH_HIGH_Y = "through_low_y", "through_high_y"
 # In gate_detail: the camera showed the track's object beside the path (decision NONE).
 BESIDE_PATH = "beside_path_camera"
+# In gate_detail: the camera put a track the point test leaves out of the path in it.
+INTO_PATH = "into_path_camera"
 # In gate_detail: the track is out of the path as the road's edge (a chain of stationary
 # returns along a bend, services/fusion/road_edge.py).
 ROAD_EDGE = "road_edge"
