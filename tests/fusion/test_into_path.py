@@ -4,8 +4,12 @@ object's surface at the range running on, window by window, into the path - a ca
 standing side-on across the lane whose radar point is its far corner - and stays out of it
 where the surface stops short of the path or the columns between see through."""
 
+from typing import Any
+
 from aeb_radar_camera.common.messages import Decision
+from aeb_radar_camera.services.fusion.core import CycleResult
 from aeb_radar_camera.services.fusion.evidence import INTO_PATH
+from aeb_radar_camera.tools.eval.depth import Box
 from tests.fusion.helpers import CAL
 from tests.fusion.test_beside_path import DepthDrive, X
 from tests.fusion.test_decision_kinematic import ahead
@@ -13,17 +17,18 @@ from tests.fusion.test_depth_check import render_depth
 
 FAR_CORNER = -2.4                # the radar's point: 2.4 m right of the path's centre
 # A car standing side-on across the lane, its right end at the radar's point.
-SIDE_ON = (X, X + 1.8, FAR_CORNER, FAR_CORNER + 4.5, 0.0, 1.5)
+SIDE_ON: Box = (X, X + 1.8, FAR_CORNER, FAR_CORNER + 4.5, 0.0, 1.5)
 # A car parked along the road, its inner side 2.4 m from the centre, the radar's point at
 # its outer side.
-PARKED = (X, X + 4.5, FAR_CORNER - 1.8, FAR_CORNER, 0.0, 1.5)
+PARKED: Box = (X, X + 4.5, FAR_CORNER - 1.8, FAR_CORNER, 0.0, 1.5)
 PARKED_POINT = FAR_CORNER - 1.8
 # A car ahead in the lane at the same range.
-LEAD = (X, X + 4.5, -0.9, 0.9, 0.0, 1.5)
-INTO = {"path": {"camera_into_m": 3.0}}
+LEAD: Box = (X, X + 4.5, -0.9, 0.9, 0.0, 1.5)
+INTO: dict[str, Any] = {"path": {"camera_into_m": 3.0}}
 
 
-def cycles(*boxes, y: float = FAR_CORNER, **decision):
+def cycles(*boxes: Box, y: float = FAR_CORNER,
+           **decision: Any) -> tuple[CycleResult, CycleResult]:
     """The targets of two cycles at 10 m/s towards a stationary track at (X, y): 1 s to
     go, a full brake once it is in the path."""
     drive = DepthDrive(render_depth(CAL, boxes=boxes), **decision)
