@@ -175,10 +175,14 @@ class RecallFirst:
         self.look = look
         self.model = D435Noise(focal_px=p.focal_px, baseline_m=p.baseline_m,
                                subpixel=p.subpixel, hole_rate=0.0)
-        # The last depth image's reachable pixels with a return, and its reachable
-        # pixels, per row, cumulated: every track of a frame shares one image, so the
-        # frame is counted once, not once per track.
-        self._rows: tuple[weakref.ref[np.ndarray], float, np.ndarray, np.ndarray] | None = None
+        # The pixels an empty road returns from (per calibration's ray slopes and the
+        # camera's height: static), with their count per row, cumulated.
+        self._reach: tuple[weakref.ref[np.ndarray], float, np.ndarray,
+                           np.ndarray] | None = None
+        # The last depth image's such pixels with a return per row, cumulated: every
+        # track of a frame shares one image, so the frame is counted once, not once per
+        # track.
+        self._rows: tuple[weakref.ref[np.ndarray], np.ndarray, np.ndarray] | None = None
 
     def params(self) -> dict[str, ParamValue]:
         return msgspec.structs.asdict(self.p)
@@ -195,18 +199,22 @@ class RecallFirst:
         """The share of the pixels of rows r0..r1 (the whole frame's width) an empty road
         would return from (their ray's `slope` at most `lowest`: it meets the ground within
         `return_range_m`) that have a return: the sensor's cover where it could see."""
+        reach = self._reach
+        if reach is None or reach[0]() is not slope or reach[1] != lowest:
+            mask = slope <= lowest
+            reach = (weakref.ref(slope), lowest, mask,
+                     np.concatenate(([0], np.cumsum(np.count_nonzero(mask, axis=1)))))
+            self._reach = reach
         rows = self._rows
-        if rows is None or rows[0]() is not depth or rows[1] != lowest:
-            reach = slope <= lowest
-            seen = np.count_nonzero(reach & (depth > NO_RETURN_M), axis=1)
-            rows = (weakref.ref(depth), lowest,
-                    np.concatenate(([0], np.cumsum(seen))),
-                    np.concatenate(([0], np.cumsum(np.count_nonzero(reach, axis=1)))))
+        if rows is None or rows[0]() is not depth or rows[1] is not reach[2]:
+            seen = np.count_nonzero(reach[2] & (depth > NO_RETURN_M), axis=1)
+            rows = (weakref.ref(depth), reach[2], np.concatenate(([0], np.cumsum(seen))))
             self._rows = rows
         r0, r1 = max(r0, 0), min(r1, depth.shape[0])
-        if r1 <= r0 or rows[3][r1] == rows[3][r0]:
+        cum_reach = reach[3]
+        if r1 <= r0 or cum_reach[r1] == cum_reach[r0]:
             return 0.0
-        return float(rows[2][r1] - rows[2][r0]) / float(rows[3][r1] - rows[3][r0])
+        return float(rows[2][r1] - rows[2][r0]) / float(cum_reach[r1] - cum_reach[r0])
 
     def in_view_share(self, cal: Calibration, xy_m: tuple[float, float],
                       distance_m: float) -> float:
