@@ -327,12 +327,12 @@ class FusionCore:
             t, k = cycle.confirmed[i], cycle.kins[i]
             step = rule.into_path_next(t.track_id, k, tgt.gate_detail)
             why: str | None = None
-            y = tgt.y_m
+            dy = 0.0
             for _ in range(INTO_WINDOWS):
                 if step is None:
                     break
-                y += step
-                detail = self._probe(cycle, t, y - tgt.y_m, stamp_ns)
+                dy += step
+                detail = self._probe(cycle, t, dy, stamp_ns)
                 if detail is None:
                     break
                 why, step = rule.into_path(tgt.x_m, detail, 1 if step > 0 else -1)

@@ -532,7 +532,7 @@ class KinematicRule:
         into = self.s.path.camera_into_m
         p = kin.path_point
         if (not self.motion_ok or into <= 0.0 or p is None or kin.window is not None
-                or kin.road_edge or track_id in self._edge or not kin.in_range
+                or track_id in self._edge or not kin.in_range
                 or kin.range_m > INTO_MAX_RANGE_M or kin.ttc_s is None
                 or (kin.in_path and not kin.by_camera)
                 or abs(p.d_m) - self.path.half_width_m > into):
@@ -550,13 +550,9 @@ class KinematicRule:
         outer edge to inside the path's half-width; (None, the next window's shift) when
         they run across the whole window; (None, None) otherwise. Inside the path: within
         the vehicle's half-width (`half_width_m`), not the margin beyond it."""
-        if any(key not in detail for key in _EXTENT):
-            return None, None
-        lo, hi = detail[WINDOW_Y_MIN], detail[WINDOW_Y_MAX]
-        at_lo, at_hi = detail[AT_Y_MIN], detail[AT_Y_MAX]
-        if not (at_lo <= lo + INTO_TOUCH_M if toward > 0 else at_hi >= hi - INTO_TOUCH_M):
-            return None, None
-        d = self.path.point(x_m, at_hi if toward > 0 else at_lo).d_m
+        if _step_toward(detail, -toward) is None:
+            return None, None            # not running on from the window's outer edge
+        d = self.path.point(x_m, detail[AT_Y_MAX if toward > 0 else AT_Y_MIN]).d_m
         # Into the vehicle's own width, not only the margin: a surface at the margin's
         # edge is an object beside the path as often (beside_path).
         half = self.s.path.half_width_m
