@@ -78,6 +78,9 @@ class Kinematics:
     # Why the camera put a track the point test leaves out of the path in it ("": it did
     # not; fusion's into-path memory).
     by_camera: str = ""
+    # The radar point lies in the path's margin (beyond the vehicle's half-width) and was
+    # out of the path the radar cycle before: the partial stage waits for a second cycle.
+    margin_first: bool = False
 
 
 def corridor_window(lateral_m: float, lateral_speed_mps: float,
@@ -358,6 +361,9 @@ class KinematicRule:
         self._accels: dict[int, float] = {}
         self._ground: dict[int, tuple[float, float]] = {}   # id -> (along, across) over ground
         self._edge: dict[int, str] = {}    # id -> why it is the road's edge, this cycle
+        # The tracks whose radar point the path held, this cycle and the one before.
+        self._point_in: set[int] = set()
+        self._point_in_before: set[int] = set()
         # The yaw rate as the radar's lateral velocities follow it (low-passed with
         # turn_lag_s): None until the first motion, and again after motion was lost.
         self._yaw_lagged: tuple[float, int] | None = None     # (rad/s, stamp)
@@ -374,7 +380,9 @@ class KinematicRule:
         self._ground = {}
         self._accels = {}
         self._edge = {}
+        self._point_in_before, self._point_in = self._point_in, set()
         if motion is None:
+            self._point_in_before = set()
             self._yaw_lagged = None
             self.yaw_step_rps = 0.0
             self.path = straight_path(self.s.corridor.half_width_m + self.s.corridor.margin_m,
@@ -393,6 +401,8 @@ class KinematicRule:
             # Over ground: the radar's velocities are relative to the turning vehicle frame.
             gx, gy = t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m
             self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
+            if self.path.contains(self.path.point(t.x_m, t.y_m)):
+                self._point_in.add(t.track_id)
         self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
         if self.s.road_edge.enabled:
             self._edge = self._road_edge(tracks)
@@ -480,8 +490,13 @@ class KinematicRule:
         if window is not None:
             ttc = window.arrival_s
         need = required_decel(gap, v, lead, decel, k.latency_s) if v > 0.0 else 0.0
+        # A point at the margin's edge (an object as far beside the path as the margin is
+        # wide) flickers in and out with the radar's noise; a car whose point lies in the
+        # margin stays there. One cycle in it warns; the full stage never waits.
+        margin_first = (in_path and window is None and abs(p.d_m) > self.s.path.half_width_m
+                        and track.track_id not in self._point_in_before)
         kin = Kinematics(r, track.range_rate_mps, p.d_m, ttc, ttc, in_range, in_path, window,
-                         None, need, a, p, edge)
+                         None, need, a, p, edge, margin_first=margin_first)
         return replace(kin, level_pct=self.level(kin))
 
     def beside_path(self, kin: Kinematics, x_m: float,
@@ -585,7 +600,7 @@ class KinematicRule:
         if need >= k.full_decel_mps2 or ttc < k.full_ttc_s:
             return STAGE_FULL
         if need >= k.partial_decel_mps2 or ttc < k.partial_ttc_s:
-            return STAGE_PARTIAL
+            return STAGE_WARNING if kin.margin_first else STAGE_PARTIAL
         if need >= k.warning_decel_mps2 or ttc < k.warning_ttc_s:
             return STAGE_WARNING
         return None
@@ -622,6 +637,9 @@ class KinematicRule:
         if stage is None:
             return Decision.NONE, f"no stage reached: {figures}"
         if stage == STAGE_WARNING:
+            if kin.margin_first and self.stage(replace(kin, margin_first=False)) != stage:
+                figures = (f"its radar point entered the path's margin this cycle, partial "
+                           f"braking from the next: {figures}")
             return Decision.WARNING, f"warning: {figures}"
         return Decision.BRAKE, f"{stage} brake: {figures}"
 

@@ -183,6 +183,34 @@ def test_stage_bounds_in_order_at_50_kph():
     assert order == sorted(order)
 
 
+def test_a_radar_point_entering_the_paths_margin_warns_for_a_cycle_before_partial_braking():
+    # 60 km/h, 53 m ahead: the stop needs the partial stage (3 m/s^2). The path's margin
+    # is 0.9-1.2 m from its centre.
+    v = 60 / 3.6
+    d = Drive()
+    first = d.step(v, ahead(53.0, v, y=-1.15))
+    assert (first.command.decision, first.command.brake_level_pct) == (Decision.WARNING, 0.0)
+    assert "entered the path's margin this cycle" in first.targets.targets[0].reason
+    second = d.step(v, ahead(53.0 - v * 0.075, v, y=-1.15))
+    assert (second.command.decision, second.command.brake_level_pct) == (Decision.BRAKE, 50.0)
+
+
+def test_a_radar_point_flickering_across_the_margins_edge_never_reaches_the_partial_stage():
+    # An object as far beside the path as the margin is wide: its point in, out, in.
+    v = 60 / 3.6
+    d = Drive()
+    seen = [d.step(v, ahead(53.0 - i * v * 0.075, v, y=y)).command.decision
+            for i, y in enumerate((-1.15, -1.25, -1.17, -1.22, -1.18))]
+    assert seen == [Decision.WARNING, Decision.NONE] * 2 + [Decision.WARNING]
+
+
+@pytest.mark.parametrize(("x", "y", "level"), [(53.0, -0.5, 50.0), (25.0, -1.15, 100.0)])
+def test_inside_the_vehicles_width_or_at_the_full_stage_nothing_waits(x, y, level):
+    v = 60 / 3.6
+    res = Drive().step(v, ahead(x, v, y=y))
+    assert (res.command.decision, res.command.brake_level_pct) == (Decision.BRAKE, level)
+
+
 def test_range_gate_follows_speed():
     # 30 m ahead at 60 km/h is far inside the gate (15 + 3.5 x 16.7 = 73 m); the paper's
     # 25 m gate would not look at it at all.
