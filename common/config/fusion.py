@@ -14,6 +14,7 @@ from aeb_radar_camera.common.config.base import ServiceConfig
 from aeb_radar_camera.common.config.paths import ConfigPath, path_keys
 from aeb_radar_camera.common.config.realtime import RealtimeSettings
 from aeb_radar_camera.common.keys import EGO_MOTION, RADAR_TRACKS
+from aeb_radar_camera.common.messages.radar import OBJECT_CLASSES
 from aeb_radar_camera.common.resources import EXAMPLE_CALIBRATION
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -95,6 +96,20 @@ class PathPredictionSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=
     confirm_cycles: Annotated[int, msgspec.Meta(ge=1, le=20)] = 2
     # The ego's arrival counts from this much before to this much after (s).
     arrival_margin_s: NonNegative = 0.3
+    # By the radar's object class (0x60D: car, truck, pedestrian, motorcycle, bicycle,
+    # point, wide): how far the object may run on behind its radar point, along its
+    # sideways motion (m). The radar reports an object's nearest point, which for an
+    # object coming from the side is its leading end: a car crossing at 15 km/h whose
+    # front has left the path still fills it for another second. The path holds it
+    # until that much behind the point has left too. A class not given, and a track
+    # without one (clusters): 0.
+    trailing_m: dict[str, NonNegative] = msgspec.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.trailing_m) - set(OBJECT_CLASSES))
+        if unknown:
+            raise ValueError(f"trailing_m: unknown object class {', '.join(unknown)} "
+                             f"(one of {', '.join(OBJECT_CLASSES)})")
 
 
 class CorridorSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

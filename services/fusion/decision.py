@@ -19,8 +19,13 @@ from dataclasses import dataclass, replace
 
 import msgspec
 
-from aeb_radar_camera.common.config.fusion import DecisionSettings, UnverifiablePolicy
+from aeb_radar_camera.common.config.fusion import (
+    DecisionSettings,
+    PathPredictionSettings,
+    UnverifiablePolicy,
+)
 from aeb_radar_camera.common.messages import Decision, RadarTrack, Verification
+from aeb_radar_camera.common.messages.radar import OBJECT_CLASSES
 from aeb_radar_camera.common.vehicle_state import VehicleSample
 from aeb_radar_camera.services.fusion.evidence import (
     AT_Y_MAX,
@@ -94,6 +99,22 @@ def corridor_window(lateral_m: float, lateral_speed_mps: float,
     return (a, b) if a <= b else (b, a)
 
 
+def crossing_window(lateral_m: float, lateral_speed_mps: float, half_width_m: float,
+                    trailing_m: float) -> tuple[float, float]:
+    """As corridor_window for an object that runs on `trailing_m` behind its point along
+    its sideways motion: from its point's entering to its trailing end's leaving."""
+    enter, leave = corridor_window(lateral_m, lateral_speed_mps, half_width_m)
+    if trailing_m > 0.0 and lateral_speed_mps != 0.0:
+        tail = lateral_m - math.copysign(trailing_m, lateral_speed_mps)
+        leave = max(leave, corridor_window(tail, lateral_speed_mps, half_width_m)[1])
+    return enter, leave
+
+
+def trailing_lengths(p: PathPredictionSettings) -> dict[int, float]:
+    """`trailing_m` by the radar's object class code."""
+    return {OBJECT_CLASSES.index(name): m for name, m in p.trailing_m.items()}
+
+
 class LateralMotion:
     """Which tracks move sideways: |vy| >= `min_speed_mps`, in the same direction, for
     `cycles` consecutive radar cycles. One noisy cycle of lateral velocity (a new track,
@@ -141,6 +162,7 @@ class DecisionRule:
         self.predict = s.corridor.enabled and p.enabled
         self.horizon = p.horizon_s
         self.arrival_margin = p.arrival_margin_s
+        self.trailing = trailing_lengths(p)
 
     def kinematics(self, track: RadarTrack, moving: bool = False) -> Kinematics:
         """`moving`: the track's sideways motion is confirmed (LateralMotion)."""
@@ -152,7 +174,8 @@ class DecisionRule:
             arrival = max(track.x_m, 0.0) / -vx
             m = self.arrival_margin
             if arrival - m <= self.horizon:
-                enter, leave = corridor_window(lateral, track.vy_mps, self.corridor)
+                enter, leave = crossing_window(lateral, track.vy_mps, self.corridor,
+                                               self.trailing.get(track.obj_class, 0.0))
                 in_path = enter <= arrival + m and leave >= max(0.0, arrival - m)
                 return Kinematics(r, rate, lateral, arrival, arrival - self.offset,
                                   self.min_range <= r <= self.max_range, in_path,
@@ -347,6 +370,7 @@ class KinematicRule:
         self.predict = p.enabled
         self.horizon = p.horizon_s
         self.arrival_margin = p.arrival_margin_s
+        self.trailing = trailing_lengths(p)
         self.centre = s.corridor.center_y_m
         self.accel = LeadAcceleration(self.k.accel_filter_s, self.k.max_accel_mps2)
         self.vehicle: VehicleSample | None = None
@@ -475,7 +499,8 @@ class KinematicRule:
             arrival = p.s_m / (v - along)
             m = self.arrival_margin
             if arrival - m <= self.horizon:
-                enter, leave = corridor_window(p.d_m, across, self.path.half_width_m)
+                enter, leave = crossing_window(p.d_m, across, self.path.half_width_m,
+                                               self.trailing.get(track.obj_class, 0.0))
                 in_path = (enter <= arrival + m and leave >= max(0.0, arrival - m)
                            and p.s_m <= self.path.length_m)
                 window = PathWindow(enter, leave, arrival)

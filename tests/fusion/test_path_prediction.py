@@ -8,12 +8,17 @@ Defaults: corridor 0.9 + 0.3 = 1.2 m either side; prediction horizon 4 s, latera
 import math
 import random
 
+import msgspec
 import pytest
 
 from aeb_radar_camera.common.config.fusion import FusionConfig
-from aeb_radar_camera.common.config.loader import load_config
+from aeb_radar_camera.common.config.loader import ConfigError, load_config
 from aeb_radar_camera.common.messages import Decision, RadarTrack, Verification
-from aeb_radar_camera.services.fusion.decision import LateralMotion, corridor_window
+from aeb_radar_camera.services.fusion.decision import (
+    LateralMotion,
+    corridor_window,
+    crossing_window,
+)
 from aeb_radar_camera.services.fusion.verifiers import GateResult
 from tests.fusion.helpers import (
     MS,
@@ -39,8 +44,9 @@ def cycles(core, *steps: tuple[RadarTrack, ...]):
 
 def moved(t: RadarTrack, dt: float) -> RadarTrack:
     """The same track dt seconds later, at constant velocity."""
-    return track(tid=t.track_id, x=t.x_m + t.vx_mps * dt, y=t.y_m + t.vy_mps * dt,
-                 vx=t.vx_mps, vy=t.vy_mps)
+    return msgspec.structs.replace(
+        track(tid=t.track_id, x=t.x_m + t.vx_mps * dt, y=t.y_m + t.vy_mps * dt,
+              vx=t.vx_mps, vy=t.vy_mps), obj_class=t.obj_class)
 
 
 def only(result):
@@ -190,6 +196,46 @@ def test_the_early_command_equals_the_most_severe_of_all_targets_with_prediction
 ])
 def test_corridor_window(lateral, speed, expected):
     assert corridor_window(lateral, speed, 1.2) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize(("lateral", "speed", "trailing", "expected"), [
+    (3.0, -2.0, 0.0, (0.9, 2.1)),             # a point: corridor_window's
+    (3.0, -2.0, 4.8, (0.9, 4.5)),             # its end 4.8 m behind, at 7.8 m, leaves last
+    (-3.0, 2.0, 1.0, (0.9, 2.6)),             # from the right: its end at -4.0 m
+    (0.5, 0.0, 4.8, (-math.inf, math.inf)),   # no sideways motion: no direction to trail
+])
+def test_crossing_window_holds_the_path_until_the_trailing_end_has_left(
+        lateral, speed, trailing, expected):
+    assert crossing_window(lateral, speed, 1.2, trailing) == pytest.approx(expected)
+
+
+def crossing_car(y: float, obj_class: int = 1) -> RadarTrack:
+    """A car (the radar's class 1) 10 m ahead crossing from the left at 15 km/h, the ego
+    at 5 m/s."""
+    return msgspec.structs.replace(track(tid=4, x=10.0, y=y, vx=-5.0, vy=-15 / 3.6),
+                                   obj_class=obj_class)
+
+
+def test_a_crossing_car_whose_front_has_left_the_path_is_in_it_until_its_length_has():
+    # Its radar point (the front) is in the corridor 0.2-0.8 s from now, the ego arrives
+    # in 1.9 s: the point alone is out; 4.8 m of car behind it leave the corridor 1.9 s
+    # from now.
+    trailing = {"corridor": {"prediction": {"trailing_m": {"car": 4.8, "pedestrian": 0.5}}}}
+    first = crossing_car(2.0)
+    for decision, expected in (({}, Decision.NONE), (trailing, Decision.BRAKE)):
+        _, after = cycles(make_core(decision=decision), (first,), (moved(first, 0.075),))
+        assert only(after).decision is expected, only(after).reason
+        assert only(after).path_predicted
+    # A class without a length (or none: clusters) is a point.
+    for cls in (3, 0, -1):
+        other = crossing_car(2.0, cls)
+        _, after = cycles(make_core(decision=trailing), (other,), (moved(other, 0.075),))
+        assert only(after).decision is Decision.NONE
+
+
+def test_trailing_lengths_name_the_radars_classes():
+    with pytest.raises(ConfigError, match="unknown object class lorry"):
+        make_core(decision={"corridor": {"prediction": {"trailing_m": {"lorry": 12.0}}}})
 
 
 def test_lateral_motion_needs_consecutive_cycles_in_one_direction_and_forgets_gone_tracks():

@@ -14,6 +14,7 @@ import enum
 from dataclasses import dataclass, field
 from typing import Any
 
+from aeb_radar_camera.common.messages.radar import OBJECT_CLASSES
 from aeb_radar_camera.services.radar.ars408 import records
 
 
@@ -85,8 +86,7 @@ class MessageSpec:
 
 DYN_PROP = {0: "moving", 1: "stationary", 2: "oncoming", 3: "stationary candidate",
             4: "unknown", 5: "crossing stationary", 6: "crossing moving", 7: "stopped"}
-OBJ_CLASS = {0: "point", 1: "car", 2: "truck", 3: "pedestrian", 4: "motorcycle",
-             5: "bicycle", 6: "wide"}
+OBJ_CLASS = dict(enumerate(OBJECT_CLASSES))
 MEAS_STATE = {0: "deleted", 1: "new", 2: "measured", 3: "predicted", 4: "deleted for merge",
               5: "new from merge"}
 PROB_OF_EXIST = {0: "invalid", 1: "<25%", 2: "<50%", 3: "<75%", 4: "<90%", 5: "<99%",
