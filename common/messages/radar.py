@@ -33,12 +33,12 @@ BUS_NOT_READY = {
 }
 
 
-# Unlike the other messages of many fields not keyword-only: the tracker builds hundreds
-# per cycle positionally, and 16 keyword arguments cost CPython about five times as much.
 # The ARS408's object classes (0x60D Obj_Class), by code.
 OBJECT_CLASSES = ("point", "car", "truck", "pedestrian", "motorcycle", "bicycle", "wide")
 
 
+# Unlike the other messages of many fields not keyword-only: the tracker builds hundreds
+# per cycle positionally, and 16 keyword arguments cost CPython about five times as much.
 class RadarTrack(msgspec.Struct, frozen=True, gc=False):
     """One Kalman track in the radar frame (x forward, y left, z up; origin at the radar).
 

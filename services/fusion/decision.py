@@ -385,7 +385,8 @@ class KinematicRule:
         self._accels: dict[int, float] = {}
         self._ground: dict[int, tuple[float, float]] = {}   # id -> (along, across) over ground
         self._edge: dict[int, str] = {}    # id -> why it is the road's edge, this cycle
-        # The tracks whose radar point the path held, this cycle and the one before.
+        # The tracks whose radar point the path held, this cycle (as `kinematics` finds
+        # them: every confirmed track is judged each cycle) and the one before.
         self._point_in: set[int] = set()
         self._point_in_before: set[int] = set()
         # The yaw rate as the radar's lateral velocities follow it (low-passed with
@@ -425,8 +426,6 @@ class KinematicRule:
             # Over ground: the radar's velocities are relative to the turning vehicle frame.
             gx, gy = t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m
             self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
-            if self.path.contains(self.path.point(t.x_m, t.y_m)):
-                self._point_in.add(t.track_id)
         self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
         if self.s.road_edge.enabled:
             self._edge = self._road_edge(tracks)
@@ -494,6 +493,8 @@ class KinematicRule:
         in_range = self.min_range <= r <= self.max_range
         window: PathWindow | None = None
         in_path = self.path.contains(p)
+        if in_path:
+            self._point_in.add(track.track_id)
         lead, decel = along, max(0.0, -a)
         if moving and self.predict and v - along > 0.0 and p.s_m >= 0.0:
             arrival = p.s_m / (v - along)
