@@ -220,7 +220,7 @@ def test_a_crossing_car_whose_front_has_left_the_path_is_in_it_until_its_length_
     # Its radar point (the front) is in the corridor 0.2-0.8 s from now, the ego arrives
     # in 1.9 s: the point alone is out; 4.8 m of car behind it leave the corridor 1.9 s
     # from now.
-    trailing = {"corridor": {"prediction": {"trailing_m": {"car": 4.8, "pedestrian": 0.5}}}}
+    trailing = {"corridor": {"prediction": {"trailing_m": {"car": 4.8, "truck": 12.0}}}}
     first = crossing_car(2.0)
     for decision, expected in (({}, Decision.NONE), (trailing, Decision.BRAKE)):
         _, after = cycles(make_core(decision=decision), (first,), (moved(first, 0.075),))
