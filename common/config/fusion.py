@@ -227,6 +227,18 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     # (w x shrinks as the ego nears it) by about this long: turn_lag_s x |yaw rate x
     # speed| of a track's lateral speed over ground is not taken as motion across the path.
     turn_lag_s: NonNegative = 0.8
+    # The ego's turn that the radar already sees and the vehicle state does not yet (its
+    # yaw rate is sampled before the radar cycle that turned, at a bend's entry or exit or
+    # a steering manoeuvre): when at least unseen_turn_min_tracks tracks that stood still
+    # the cycle before, each at least unseen_turn_min_range_m ahead, show a rotation of
+    # the same sign beyond unseen_turn_min_rps (their median; two thirds of them agreeing),
+    # those whose own apparent rotation has that sign (and at most the path's
+    # max_curvature_per_m x speed) still stand: their sideways drift is the ego's turn;
+    # every other track's velocity over ground takes that median turn in.
+    # unseen_turn_min_tracks 0: off.
+    unseen_turn_min_tracks: Annotated[int, msgspec.Meta(ge=0, le=50)] = 3
+    unseen_turn_min_rps: Positive = 0.01
+    unseen_turn_min_range_m: NonNegative = 8.0
     # No new activation below this ego speed (a car creeping in a queue).
     min_speed_mps: NonNegative = 1.0
     # A BRAKE that brought the ego to a stop (speed <= standstill_mps) holds it at

@@ -14,6 +14,7 @@ a policy for tracks the camera cannot check; and a minimum hold.
 """
 
 import math
+import statistics
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -113,6 +114,20 @@ def crossing_window(lateral_m: float, lateral_speed_mps: float, half_width_m: fl
 def trailing_lengths(p: PathPredictionSettings) -> dict[int, float]:
     """`trailing_m` by the radar's object class code."""
     return {OBJECT_CLASSES.index(name): m for name, m in p.trailing_m.items()}
+
+
+def unseen_turn(ratios: Sequence[float], min_tracks: int, min_rps: float) -> float:
+    """The rotation (rad/s) that stationary points' sideways drift over their range
+    (`ratios`, one per point: -vy / x) shows: their median, when there are at least
+    `min_tracks` of them, it is at least `min_rps` and two thirds of them drift that way
+    by at least `min_rps`; else 0.0."""
+    if len(ratios) < max(min_tracks, 1):
+        return 0.0
+    med = statistics.median(ratios)
+    if abs(med) < min_rps:
+        return 0.0
+    agree = sum(1 for r in ratios if r * med > 0.0 and abs(r) >= min_rps)
+    return med if 3 * agree >= 2 * len(ratios) else 0.0
 
 
 class LateralMotion:
@@ -389,6 +404,9 @@ class KinematicRule:
         # them: every confirmed track is judged each cycle) and the one before.
         self._point_in: set[int] = set()
         self._point_in_before: set[int] = set()
+        # The tracks standing still over ground, this cycle and the one before.
+        self._still: set[int] = set()
+        self._still_before: set[int] = set()
         # The yaw rate as the radar's lateral velocities follow it (low-passed with
         # turn_lag_s): None until the first motion, and again after motion was lost.
         self._yaw_lagged: tuple[float, int] | None = None     # (rad/s, stamp)
@@ -406,8 +424,10 @@ class KinematicRule:
         self._accels = {}
         self._edge = {}
         self._point_in_before, self._point_in = self._point_in, set()
+        self._still_before, self._still = self._still, set()
         if motion is None:
             self._point_in_before = set()
+            self._still_before = set()
             self._yaw_lagged = None
             self.yaw_step_rps = 0.0
             self.path = straight_path(self.s.corridor.half_width_m + self.s.corridor.margin_m,
@@ -422,13 +442,44 @@ class KinematicRule:
         self.path = predicted_path(v, motion.yaw_rate_dps, steer, self.s.path, self.centre)
         self.max_range = min(k.range_max_m, k.range_base_m + k.range_time_s * max(v, 0.0),
                              self.s.path.length_m)
+        # Over ground: the radar's velocities are relative to the turning vehicle frame.
+        over = {t.track_id: (t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m) for t in tracks}
+        turn = self._unseen_turn(tracks, over)
+        if turn:
+            self.path = replace(self.path, source=(
+                f"{self.path.source}; the radar's stationary returns turn "
+                f"{math.degrees(turn):+.1f} deg/s more"))
+        max_turn = self.s.path.max_curvature_per_m * abs(v)
         for t in tracks:
-            # Over ground: the radar's velocities are relative to the turning vehicle frame.
-            gx, gy = t.vx_mps + v - w * t.y_m, t.vy_mps + w * t.x_m
+            gx, gy = over[t.track_id]
+            if turn:
+                # Each radar filter follows a turn at its own pace: what stood still and
+                # drifts the turn's way stands; the others take the turn's median.
+                own = -gy / t.x_m if t.x_m > 0.0 else 0.0
+                if not (t.track_id in self._still_before and own * turn > 0.0
+                        and abs(own) <= max_turn):
+                    own = turn
+                gx, gy = gx - own * t.y_m, gy + own * t.x_m
             self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
+        still = self.s.road_edge.stationary_mps
+        self._still = {i for i, g in self._ground.items() if math.hypot(*g) < still}
         self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
         if self.s.road_edge.enabled:
             self._edge = self._road_edge(tracks)
+
+    def _unseen_turn(self, tracks: Sequence[RadarTrack],
+                     over: Mapping[int, tuple[float, float]]) -> float:
+        """The ego's rotation (rad/s, left positive) beyond the vehicle state's yaw rate
+        that the tracks standing still the cycle before and measured in this one show
+        (`over`: their velocity over ground by that yaw rate, vehicle axes; a coasting
+        track's is the one predicted before the turn); 0.0 where they show none."""
+        k = self.k
+        if k.unseen_turn_min_tracks == 0:
+            return 0.0
+        near = max(k.unseen_turn_min_range_m, 1.0)
+        ratios = [-over[t.track_id][1] / t.x_m for t in tracks
+                  if t.track_id in self._still_before and t.x_m >= near and t.misses == 0]
+        return unseen_turn(ratios, k.unseen_turn_min_tracks, k.unseen_turn_min_rps)
 
     def _lagged_yaw(self, yaw_rps: float, stamp_ns: int) -> float:
         """The yaw rate low-passed with `turn_lag_s` up to `stamp_ns` (a radar cycle's),

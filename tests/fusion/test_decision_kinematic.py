@@ -22,6 +22,7 @@ from aeb_radar_camera.services.fusion.decision import (
     LeadAcceleration,
     required_decel,
     time_to_collision,
+    unseen_turn,
 )
 from tests.fusion.helpers import MS, T0, cycle, feed, frame, make_core, track
 
@@ -369,6 +370,90 @@ def test_a_pedestrian_crossing_in_a_steady_bend_is_predicted_once_the_yaw_step_h
     results = [d.step(v, ped, yaw_dps=math.degrees(w)) for _ in range(3)]
     tgt = results[-1].targets.targets[0]
     assert tgt.path_predicted and tgt.in_path
+
+
+def test_unseen_turn_is_the_median_of_agreeing_stationary_drifts():
+    assert unseen_turn([0.02, 0.019, 0.022, 0.115, 0.017], 3, 0.01) == pytest.approx(0.02)
+    assert unseen_turn([-0.03, -0.028, -0.165], 3, 0.01) == pytest.approx(-0.03)
+    assert unseen_turn([0.02, 0.02], 3, 0.01) == 0.0                 # too few
+    assert unseen_turn([0.004, -0.003, 0.002, 0.006], 3, 0.01) == 0.0  # noise
+    # The median turns, but only half of them do (the others measured no turn): none.
+    assert unseen_turn([0.03, 0.03, 0.03, 0.0, 0.001, 0.002], 3, 0.01) == 0.0
+    assert unseen_turn([0.03, 0.03, 0.03, 0.03, 0.001, 0.002], 3, 0.01) == pytest.approx(0.03)
+
+
+# The deployed default: one cycle of sideways motion is motion.
+ONE_CYCLE: dict[str, Any] = {"corridor": {"prediction": {"confirm_cycles": 1}}}
+
+
+def _posts_entering_a_bend(d: Drive, v: float, w: float, y: float, seen: bool,
+                           *extra: RadarTrack) -> CycleResult:
+    """Four rail posts `y` beside a straight road, 12-30 m ahead, then a radar cycle in
+    which the ego has begun to turn at `w` (the radar's velocities show it: vy = -w x)
+    while the vehicle state still says straight, or already says it (`seen`)."""
+    xs = [12.0, 18.0, 24.0, 30.0]
+    for _ in range(4):
+        d.step(v, *[track(tid=i + 1, x=x, y=y, vx=-v, vy=0.0) for i, x in enumerate(xs)])
+        xs = [x - v * 0.075 for x in xs]
+    posts = [track(tid=i + 1, x=x, y=y, vx=-v + w * y, vy=-w * x) for i, x in enumerate(xs)]
+    return d.step(v, *posts, *extra, yaw_dps=math.degrees(w) if seen else 0.0)
+
+
+def test_posts_drifting_with_a_turn_the_vehicle_state_has_not_shown_yet_still_stand():
+    """The radar cycle already turned, the yaw rate was sampled before it: every post
+    beside the path drifts across it at w x. They stood still the cycle before, all drift
+    alike: the ego's turn, not motion. Off (unseen_turn_min_tracks 0), the nearest post
+    is predicted across the path and braked for."""
+    v, w = 40 / 3.6, 40 / 3.6 / 100.0          # a left bend of 100 m at 40 km/h
+    res = _posts_entering_a_bend(Drive(**ONE_CYCLE), v, w, 1.6, seen=False)
+    assert not any(t.path_predicted for t in res.targets.targets)
+    assert res.command.decision is Decision.NONE
+    assert "stationary returns turn +6.4 deg/s more" in res.targets.path
+    off = _posts_entering_a_bend(Drive(**ONE_CYCLE, kinematic={"unseen_turn_min_tracks": 0}),
+                                 v, w, 1.6, seen=False)
+    assert any(t.path_predicted and t.in_path for t in off.targets.targets)
+    assert off.command.decision is not Decision.NONE
+    # The vehicle state shows the turn: nothing unseen, and no post moves over ground.
+    seen = _posts_entering_a_bend(Drive(**ONE_CYCLE), v, w, 1.6, seen=True)
+    assert "stationary returns" not in seen.targets.path
+    assert not any(t.path_predicted for t in seen.targets.targets)
+
+
+def test_an_unseen_turn_leaves_a_track_that_was_already_moving_as_it_is():
+    """A pedestrian crossing toward the path before the turn keeps its motion: only what
+    stood still is excused."""
+    v, w = 40 / 3.6, 40 / 3.6 / 100.0
+    d = Drive(**ONE_CYCLE)
+    xs, ped_y = [12.0, 18.0, 24.0, 30.0], -3.0
+    for _ in range(4):
+        ped = track(tid=9, x=22.0, y=ped_y, vx=-v, vy=1.5)
+        d.step(v, ped, *[track(tid=i + 1, x=x, y=-6.0, vx=-v, vy=0.0)
+                         for i, x in enumerate(xs)])
+        xs = [x - v * 0.075 for x in xs]
+        ped_y += 1.5 * 0.075
+    posts = [track(tid=i + 1, x=x, y=-6.0, vx=-v, vy=-w * x) for i, x in enumerate(xs)]
+    ped = track(tid=9, x=22.0, y=ped_y, vx=-v, vy=1.5 - w * 22.0)
+    res = d.step(v, ped, *posts)
+    assert "stationary returns turn" in res.targets.path
+    tgt = {t.track_id: t for t in res.targets.targets}[9]
+    assert tgt.path_predicted and tgt.in_path, tgt.reason
+
+
+def test_one_track_setting_off_is_no_turn():
+    """A cyclist waiting beside the path sets off across it while the posts stand: no
+    turn to excuse it, it is predicted into the path."""
+    v = 40 / 3.6
+    d = Drive(**ONE_CYCLE)
+    xs = [12.0, 18.0, 24.0, 30.0]
+    for _ in range(4):
+        d.step(v, track(tid=9, x=20.0, y=-2.5, vx=-v, vy=0.0),
+               *[track(tid=i + 1, x=x, y=-6.0, vx=-v, vy=0.0) for i, x in enumerate(xs)])
+        xs = [x - v * 0.075 for x in xs]
+    res = d.step(v, track(tid=9, x=20.0, y=-2.5, vx=-v, vy=2.0),
+                 *[track(tid=i + 1, x=x, y=-6.0, vx=-v, vy=0.0) for i, x in enumerate(xs)])
+    assert "stationary returns" not in res.targets.path
+    tgt = {t.track_id: t for t in res.targets.targets}[9]
+    assert tgt.path_predicted and tgt.in_path, tgt.reason
 
 
 def test_low_speed_no_new_activation_and_standstill_hold_then_release():
