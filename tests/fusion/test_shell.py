@@ -34,24 +34,31 @@ class FakeBus:
 
 
 def shell_with(verifier, **fusion) -> tuple[FusionShell, FakeBus]:
+    # A radar age bound no stall on a loaded machine reaches: these tests are about the
+    # shell, not the clock.
+    fusion.setdefault("decision", {"radar_max_age_s": 60.0})
     bus = FakeBus()
     core = make_core(verifier, **fusion)
     decoder = FrameDecoder(848, 480, logging.getLogger("test"))
     return FusionShell(bus, core.s, core, decoder, logging.getLogger("test")), bus  # type: ignore[arg-type]
 
 
-def fresh(shell: FusionShell) -> None:
-    shell.decoder.decode_now(compressed(stamp_ns=wall_ns()), 1)
+def fresh(shell: FusionShell) -> int:
+    """Decode a frame stamped now; its stamp, for the cycle it belongs to (stamped
+    alike, a stalled decode cannot put the frame beyond max_skew_s)."""
+    stamp = wall_ns()
+    shell.decoder.decode_now(compressed(stamp_ns=stamp), 1)
+    return stamp
 
 
-def payload(*tracks, seq: int = 0) -> bytes:
-    return encode(cycle(*tracks, seq=seq, stamp_ns=wall_ns()))
+def payload(*tracks, seq: int = 0, stamp_ns: int | None = None) -> bytes:
+    return encode(cycle(*tracks, seq=seq, stamp_ns=wall_ns() if stamp_ns is None else stamp_ns))
 
 
 def test_command_then_targets_for_each_cycle():
     shell, bus = shell_with(FixedVerifier())
-    fresh(shell)
-    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0), seq=0), "k", 0)
+    stamp = fresh(shell)
+    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0), seq=0, stamp_ns=stamp), "k", 0)
     shell.on_tracks_payload(payload(seq=1), "k", 0)
     kinds = [name for name, _ in bus.log]
     assert kinds == ["fusion_brake_cmd", "fusion_targets"] * 2
@@ -71,9 +78,9 @@ def test_processing_ends_where_the_command_is_handed_to_zenoh_so_the_put_is_the_
 
     shell, bus = shell_with(FixedVerifier())
     shell._cmd_pub = SlowPut(bus.log, "fusion_brake_cmd")  # type: ignore[assignment]
-    fresh(shell)
+    stamp = fresh(shell)
     rx = mono_ns()
-    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", rx)
+    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0), stamp_ns=stamp), "k", rx)
     command, targets = bus.log[0][1], bus.log[1][1]
     assert targets.processing_ns == command.header.pub_mono_ns - rx
     assert targets.processing_ns < 200_000_000 < mono_ns() - rx
@@ -90,10 +97,10 @@ def test_a_failure_half_way_through_a_cycle_sends_one_command_and_counts_it():
             return GateResult(0.001, False)
 
     shell, bus = shell_with(Breaks())
-    fresh(shell)
+    stamp = fresh(shell)
     # Most urgent first: rejected, so the next threat is gated, and that gate run raises.
     shell.on_tracks_payload(payload(track(tid=1, x=12.0, vx=-5.0),
-                                    track(tid=2, x=6.0, vx=-5.0)), "k", 0)
+                                    track(tid=2, x=6.0, vx=-5.0), stamp_ns=stamp), "k", 0)
     assert [name for name, _ in bus.log] == ["fusion_brake_cmd", "fusion_targets"]
     command, targets = bus.log[0][1], bus.log[1][1]
     assert command.decision is Decision.NONE and "bug in a verifier" in command.reason
@@ -107,8 +114,8 @@ def test_a_failing_verifier_sends_a_none_command_with_the_error():
             raise RuntimeError("boom")
 
     shell, bus = shell_with(Broken())
-    fresh(shell)
-    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0)), "k", 0)
+    stamp = fresh(shell)
+    shell.on_tracks_payload(payload(track(x=8.0, vx=-6.0), stamp_ns=stamp), "k", 0)
     commands = [m for name, m in bus.log if name == "fusion_brake_cmd"]
     assert len(commands) == 1 and commands[0].decision is Decision.NONE
     assert "fusion error: RuntimeError('boom')" in commands[0].reason
