@@ -52,6 +52,7 @@ from aeb_radar_camera.services.fusion.evidence import (
     CANNOT_TELL_KEY,
     EVIDENCE_CARRIED_KEY,
     EVIDENCE_KEY,
+    IN_VIEW,
     INTO_PATH,
     LLR_KEY,
     ROAD_EDGE,
@@ -490,20 +491,25 @@ class FusionCore:
                      ) -> tuple[Decision, str, dict[str, float]]:
         """The threat `decision` unless the camera shows the track's object beside the
         path (KinematicRule.beside_path) in this frame, or in the last frame that showed
-        it while no frame shows it now (an object passed close beside the ego leaves the
-        image before the ego reaches it) within BESIDE_CARRY_S and no nearer the path's
-        centre than it was then."""
+        it while no frame shows it now, or one shows only part of its window without
+        pixels at the range near the path (an object passed close beside the ego leaves
+        the image before the ego reaches it), within BESIDE_CARRY_S and no nearer the
+        path's centre than it was then."""
         rule = self.rule
         assert isinstance(rule, KinematicRule)
         offset = k.path_point.d_m if k.path_point is not None else k.lateral_m
         beside: str | None = None
-        if result is not None and view is not None:
+        shown = result is not None and view is not None
+        if shown and view is not None:
             beside = rule.beside_path(k, view.xy[j][0], detail)
-            if beside is None:
+            if beside is not None:
+                self._beside[t.track_id] = (stamp_ns, offset, beside)
+            elif (detail.get(IN_VIEW, 1.0) >= 1.0
+                  or rule.camera_reaches_path(view.xy[j][0], detail)):
                 self._beside.pop(t.track_id, None)
             else:
-                self._beside[t.track_id] = (stamp_ns, offset, beside)
-        elif k.window is None and t.track_id in self._beside:
+                shown = False       # leaving the image: no more than no frame at all
+        if not shown and k.window is None and t.track_id in self._beside:
             then_ns, then, why = self._beside[t.track_id]
             if (stamp_ns - then_ns <= BESIDE_CARRY_S * 1e9 and offset * then > 0.0
                     and abs(offset) >= abs(then) - BESIDE_CARRY_M):

@@ -595,8 +595,7 @@ class KinematicRule:
             return None
         half = self.s.path.half_width_m
         limit = half + self.s.path.camera_margin_m
-        lo = self.path.point(x_m, detail[AT_Y_MIN]).d_m
-        hi = self.path.point(x_m, detail[AT_Y_MAX]).d_m
+        lo, hi = self._camera_extent(x_m, detail)
         if lo > limit and hi > limit:
             # Left of the path: its side is the window's low-y end.
             inner, edge = lo, self.path.point(x_m, detail[WINDOW_Y_MIN]).d_m
@@ -610,6 +609,22 @@ class KinematicRule:
             return None
         return (f"beside the path by the camera: inner edge {inner:+.2f} m, limit "
                 f"{half:.1f} + {self.s.path.camera_margin_m:.1f} m")
+
+    def _camera_extent(self, x_m: float, detail: Mapping[str, float]) -> tuple[float, float]:
+        """The offsets from the path's centre of the camera's pixels at the range, lowest
+        and highest ground y (the keys must be in `detail`)."""
+        return (self.path.point(x_m, detail[AT_Y_MIN]).d_m,
+                self.path.point(x_m, detail[AT_Y_MAX]).d_m)
+
+    def camera_reaches_path(self, x_m: float, detail: Mapping[str, float]) -> bool:
+        """Whether the camera's pixels at the range (`detail`, the recall-first check's
+        extent where it confirms) come within half_width_m + camera_margin_m of the
+        path's centre; False where there is no extent."""
+        if AT_Y_MIN not in detail or AT_Y_MAX not in detail:
+            return False
+        limit = self.s.path.half_width_m + self.s.path.camera_margin_m
+        lo, hi = self._camera_extent(x_m, detail)
+        return not (lo > limit and hi > limit) and not (lo < -limit and hi < -limit)
 
     def into_path_next(self, track_id: int, kin: Kinematics,
                        detail: Mapping[str, float]) -> float | None:

@@ -26,6 +26,8 @@ APPEARANCE_VETO = "appearance_veto"
 AT_Y_MIN, AT_Y_MAX = "at_y_min_m", "at_y_max_m"
 WINDOW_Y_MIN, WINDOW_Y_MAX = "window_y_min_m", "window_y_max_m"
 THROUGH_LOW_Y, THROUGH_HIGH_Y = "through_low_y", "through_high_y"
+# In gate_detail: the share of the check's window within the image's columns.
+IN_VIEW = "in_view"
 # In gate_detail: the camera showed the track's object beside the path (decision NONE).
 BESIDE_PATH = "beside_path_camera"
 # In gate_detail: the camera put a track the point test leaves out of the path in it.

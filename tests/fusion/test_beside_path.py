@@ -147,3 +147,54 @@ def test_every_threat_the_camera_takes_out_of_the_path_is_counted():
             drive.step(10.0, ahead(X, 10.0, y=-EDGE + 0.05))
     assert beside_drive.core.beside_path_targets == 3
     assert straddling_drive.core.beside_path_targets == 0
+
+
+class MovingDepthDrive(DepthDrive):
+    """DepthDrive whose frame the test sets before each cycle."""
+
+    def frame(self, depth: np.ndarray | None) -> None:
+        self.depth = depth
+
+
+def _passing(depth: np.ndarray, x: float, y: float = -EDGE + 0.03) -> Any:
+    """The object beside the path seen whole 10 m ahead, then `x` ahead in `depth`: the
+    target of that second cycle."""
+    drive = MovingDepthDrive(render_depth(CAL, boxes=(beside(-1.0),)))
+    drive.step(10.0)
+    first = drive.step(10.0, ahead(X, 10.0, y=y)).targets.targets[0]
+    assert first.gate_detail.get(BESIDE_PATH) == 1.0, first
+    drive.frame(depth)
+    return drive.step(10.0, ahead(x, 10.0, y=y)).targets.targets[0]
+
+
+NEAR_X = 0.9      # the check's window half out of the image
+
+
+def test_an_object_leaving_the_image_beside_the_ego_stays_beside_the_path():
+    """Close beside the ego the check's window leaves the image and the columns between
+    the object and the path return nothing (there the road lies below the image): no
+    evidence either way, so the last verdict carries, as when no frame shows it. The
+    same frame with the whole window in the image leaves the point test's brake."""
+    near = (NEAR_X, NEAR_X + 0.6, -EDGE - 0.5, -EDGE, 0.0, 1.7)
+    depth = render_depth(CAL, boxes=(near,))
+    uv, _ = CAL.project(np.array([[NEAR_X, -EDGE, 0.8]]))    # the object's inner edge
+    u = int(uv[0, 0])
+    depth[:, u - 120:u - 2] = 0.0
+    tgt = _passing(depth, NEAR_X)
+    d = tgt.gate_detail
+    assert d["in_view"] < 1.0 and d.get("through_high_y", 0.0) == 0.0, d
+    assert tgt.decision is Decision.NONE, tgt
+    assert tgt.reason.endswith("(last seen 75 ms ago)"), tgt.reason
+    # Not leaving the image: the holes are the frame's verdict, the point test brakes.
+    far = with_holes_beside(render_depth(CAL, boxes=(beside(-1.0),)))
+    tgt = _passing(far, X - 0.75)
+    assert tgt.gate_detail["in_view"] == 1.0, tgt.gate_detail
+    assert tgt.decision is Decision.BRAKE and BESIDE_PATH not in tgt.gate_detail, tgt
+
+
+def test_an_object_leaving_the_image_whose_pixels_reach_the_path_is_braked_for():
+    near = (NEAR_X, NEAR_X + 0.6, -EDGE - 0.5, -0.7, 0.0, 1.7)
+    tgt = _passing(render_depth(CAL, boxes=(near,)), NEAR_X)
+    assert tgt.gate_detail["in_view"] < 1.0, tgt.gate_detail
+    assert "at_y_max_m" in tgt.gate_detail, tgt.gate_detail
+    assert tgt.decision is Decision.BRAKE and BESIDE_PATH not in tgt.gate_detail, tgt

@@ -89,6 +89,7 @@ from aeb_radar_camera.services.fusion.evidence import (
     APPEARANCE_VETO,
     AT_Y_MAX,
     AT_Y_MIN,
+    IN_VIEW,
     THROUGH_HIGH_Y,
     THROUGH_LOW_Y,
     WINDOW_Y_MAX,
@@ -262,7 +263,7 @@ class RecallFirst:
         detail = {"band_px": float(n_band), "returns": float(n_ret), "at_px": float(n_at),
                   "near_px": float(n_near), "through_px": float(n_through),
                   "expected_m": r, "tol_m": tol, "floor_m": detail_floor}
-        detail["in_view"] = in_view = self.in_view_share(obs.calibration, obs.xy_m, r)
+        detail[IN_VIEW] = in_view = self.in_view_share(obs.calibration, obs.xy_m, r)
         if in_view < p.min_in_view:
             return SPARSE, detail
         lowest = self.lowest_slope(col.camera_z_m)
