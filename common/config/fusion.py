@@ -234,7 +234,8 @@ class KinematicSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True)
     # the same sign beyond unseen_turn_min_rps (their median; two thirds of them agreeing),
     # those whose own apparent rotation has that sign (and at most the path's
     # max_curvature_per_m x speed) still stand: their sideways drift is the ego's turn;
-    # every other track's velocity over ground takes that median turn in.
+    # every other track measured in the cycle takes that median turn in (a coasting
+    # track's velocity is the one predicted before the turn).
     # unseen_turn_min_tracks 0: off.
     unseen_turn_min_tracks: Annotated[int, msgspec.Meta(ge=0, le=50)] = 3
     unseen_turn_min_rps: Positive = 0.01

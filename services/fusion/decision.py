@@ -452,9 +452,10 @@ class KinematicRule:
         max_turn = self.s.path.max_curvature_per_m * abs(v)
         for t in tracks:
             gx, gy = over[t.track_id]
-            if turn:
+            if turn and t.misses == 0:
                 # Each radar filter follows a turn at its own pace: what stood still and
-                # drifts the turn's way stands; the others take the turn's median.
+                # drifts the turn's way stands; the others take the turn's median. A
+                # coasting track's velocity is the one predicted before the turn.
                 own = -gy / t.x_m if t.x_m > 0.0 else 0.0
                 if not (t.track_id in self._still_before and own * turn > 0.0
                         and abs(own) <= max_turn):

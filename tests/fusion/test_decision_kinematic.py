@@ -5,6 +5,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import pytest
 
 from aeb_radar_camera.common.config.fusion import FusionConfig, RuleName
@@ -417,6 +418,19 @@ def test_posts_drifting_with_a_turn_the_vehicle_state_has_not_shown_yet_still_st
     seen = _posts_entering_a_bend(Drive(**ONE_CYCLE), v, w, 1.6, seen=True)
     assert "stationary returns" not in seen.targets.path
     assert not any(t.path_predicted for t in seen.targets.targets)
+
+
+def test_an_unseen_turn_leaves_a_coasting_track_as_it_was_predicted():
+    """A post the radar missed this cycle coasts on the velocity predicted before the
+    turn (none sideways): the turn is not added to it, or it would walk into the path."""
+    v, w = 40 / 3.6, 40 / 3.6 / 100.0
+    coasting = msgspec.structs.replace(track(tid=9, x=20.0, y=-1.6, vx=-v, vy=0.0),
+                                       misses=1)
+    res = _posts_entering_a_bend(Drive(**ONE_CYCLE), v, w, 1.6, False, coasting)
+    assert "stationary returns turn" in res.targets.path
+    tgt = {t.track_id: t for t in res.targets.targets}[9]
+    assert not tgt.path_predicted, tgt.reason
+    assert res.command.decision is Decision.NONE, res.command.reason
 
 
 def test_an_unseen_turn_leaves_a_track_that_was_already_moving_as_it_is():
