@@ -499,16 +499,18 @@ class FusionCore:
         assert isinstance(rule, KinematicRule)
         offset = k.path_point.d_m if k.path_point is not None else k.lateral_m
         beside: str | None = None
-        shown = result is not None and view is not None
-        if shown and view is not None:
-            beside = rule.beside_path(k, view.xy[j][0], detail)
+        shown = False
+        if result is not None and view is not None:
+            x = view.xy[j][0]
+            beside = rule.beside_path(k, x, detail)
+            # A frame with only part of the window in the image (the object leaving it)
+            # and no pixels at the range near the path shows no more than no frame.
+            shown = (detail.get(IN_VIEW, 1.0) >= 1.0 or beside is not None
+                     or rule.camera_reaches_path(x, detail))
             if beside is not None:
                 self._beside[t.track_id] = (stamp_ns, offset, beside)
-            elif (detail.get(IN_VIEW, 1.0) >= 1.0
-                  or rule.camera_reaches_path(view.xy[j][0], detail)):
+            elif shown:
                 self._beside.pop(t.track_id, None)
-            else:
-                shown = False       # leaving the image: no more than no frame at all
         if not shown and k.window is None and t.track_id in self._beside:
             then_ns, then, why = self._beside[t.track_id]
             if (stamp_ns - then_ns <= BESIDE_CARRY_S * 1e9 and offset * then > 0.0

@@ -500,8 +500,7 @@ class KinematicRule:
         e = self.s.road_edge
         points = []
         for t in tracks:
-            along, across = self._ground[t.track_id]
-            if math.hypot(along, across) < e.stationary_mps:
+            if t.track_id in self._still:
                 p = self.path.point(t.x_m, t.y_m)
                 points.append(EdgePoint(t.track_id, p.s_m, p.d_m))
         if len(points) < e.min_members:
@@ -595,13 +594,12 @@ class KinematicRule:
                 or any(key not in detail for key in keys)):
             return None
         half = self.s.path.half_width_m
-        limit = half + self.s.path.camera_margin_m
-        lo, hi = self._camera_extent(x_m, detail)
-        if lo > limit and hi > limit:
+        side, lo, hi = self._camera_side(x_m, detail)
+        if side > 0:
             # Left of the path: its side is the window's low-y end.
             inner, edge = lo, self.path.point(x_m, detail[WINDOW_Y_MIN]).d_m
             clear = detail[THROUGH_LOW_Y] > 0.0
-        elif lo < -limit and hi < -limit:
+        elif side < 0:
             inner, edge = hi, -self.path.point(x_m, detail[WINDOW_Y_MAX]).d_m
             clear = detail[THROUGH_HIGH_Y] > 0.0
         else:
@@ -611,21 +609,23 @@ class KinematicRule:
         return (f"beside the path by the camera: inner edge {inner:+.2f} m, limit "
                 f"{half:.1f} + {self.s.path.camera_margin_m:.1f} m")
 
-    def _camera_extent(self, x_m: float, detail: Mapping[str, float]) -> tuple[float, float]:
-        """The offsets from the path's centre of the camera's pixels at the range, lowest
-        and highest ground y (the keys must be in `detail`)."""
-        return (self.path.point(x_m, detail[AT_Y_MIN]).d_m,
-                self.path.point(x_m, detail[AT_Y_MAX]).d_m)
+    def _camera_side(self, x_m: float, detail: Mapping[str, float]
+                     ) -> tuple[int, float, float]:
+        """Where the camera's pixels at the range lie (the keys must be in `detail`): +1
+        every one farther than half_width_m + camera_margin_m left of the path's centre,
+        -1 right, 0 reaching within that; with their lowest and highest offsets."""
+        limit = self.s.path.half_width_m + self.s.path.camera_margin_m
+        lo = self.path.point(x_m, detail[AT_Y_MIN]).d_m
+        hi = self.path.point(x_m, detail[AT_Y_MAX]).d_m
+        side = 1 if lo > limit and hi > limit else -1 if lo < -limit and hi < -limit else 0
+        return side, lo, hi
 
     def camera_reaches_path(self, x_m: float, detail: Mapping[str, float]) -> bool:
         """Whether the camera's pixels at the range (`detail`, the recall-first check's
         extent where it confirms) come within half_width_m + camera_margin_m of the
         path's centre; False where there is no extent."""
-        if AT_Y_MIN not in detail or AT_Y_MAX not in detail:
-            return False
-        limit = self.s.path.half_width_m + self.s.path.camera_margin_m
-        lo, hi = self._camera_extent(x_m, detail)
-        return not (lo > limit and hi > limit) and not (lo < -limit and hi < -limit)
+        return (AT_Y_MIN in detail and AT_Y_MAX in detail
+                and self._camera_side(x_m, detail)[0] == 0)
 
     def into_path_next(self, track_id: int, kin: Kinematics,
                        detail: Mapping[str, float]) -> float | None:
