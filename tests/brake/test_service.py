@@ -118,6 +118,20 @@ def test_every_rejection_reason_is_counted_and_never_moves_the_brake(rig):
                           for s in window)
 
 
+def _hold_pty_name(name: str) -> list[int]:
+    """Open ptys until the old number `name` is held, so that the reconnect cannot be
+    given it back: the kernel hands out the lowest free number, and another test's pty
+    closed meanwhile can make that lower than the old one. Stops at the first number
+    past the old (then something else holds it). Returns the fds to close."""
+    old = int(Path(name).name)
+    fds: list[int] = []
+    while True:
+        master, slave = os.openpty()
+        fds += [master, slave]
+        if int(Path(os.ttyname(slave)).name) >= old:
+            return fds
+
+
 def test_pty_closed_and_recreated_reconnects_and_brakes_again(rig):
     """The port vanishes (EIO) and comes back under another /dev/pts name
     behind the configured path; the service reopens it by itself."""
@@ -129,12 +143,12 @@ def test_pty_closed_and_recreated_reconnects_and_brakes_again(rig):
         i, lost = rig.wait_status(lambda s: not s.actuator_connected, start, 10, "port lost")
         assert lost.state is BrakeState.FAULT and "serial port lost" in lost.reason
         assert lost.command_state is BrakeState.BRAKING   # the decision is not forgotten
-        blocker = os.openpty()                           # take the old number
+        blockers = _hold_pty_name(old_name)
         try:
             t_back = time.monotonic_ns()
             rig.sim.reconnect()
         finally:
-            for fd in blocker:
+            for fd in blockers:
                 os.close(fd)
         assert rig.pair.slave_name != old_name
         rig.wait_live(i, 50.0)
