@@ -60,7 +60,7 @@ def test_velocity_in_path_axes_follows_the_tangent() -> None:
     path = PredictedPath(1 / 50.0, 1.2, 80.0)
     s = 50.0 * math.pi / 2        # a quarter turn: the tangent points along +y
     x, y = on_arc(50.0, s)
-    along, across = path.velocity(x, y, 0.0, 3.0)
+    along, across = path.velocity(path.point(x, y), 0.0, 3.0)
     assert along == pytest.approx(3.0)
     assert across == pytest.approx(0.0, abs=1e-9)
 

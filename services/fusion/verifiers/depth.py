@@ -206,9 +206,9 @@ class ColumnDepth:
     the measured point's horizontal distance from the camera, `lift` its height above the
     camera, `band` the pixels whose ray at the track's distance lies in the height band
     asked for, `returns` those of them with a depth return; `run`, `side`, `slope` the
-    window's part of the RayMaps. `expected_m`: the track's distance from the camera;
-    `camera_y_m`, `camera_z_m`: the camera's sideways position and height in the ground
-    frame."""
+    window's part of the RayMaps, `maps` the whole image's. `expected_m`: the track's
+    distance from the camera; `camera_y_m`, `camera_z_m`: the camera's sideways position
+    and height in the ground frame."""
 
     depth: np.ndarray
     dist: np.ndarray
@@ -218,6 +218,7 @@ class ColumnDepth:
     run: np.ndarray
     side: np.ndarray
     slope: np.ndarray
+    maps: RayMaps
     expected_m: float
     camera_y_m: float
     camera_z_m: float
@@ -265,7 +266,7 @@ def column_depth(obs: Observation, min_width_px: int, band_min_m: float,
     run = maps.run[r0:r1, c0:c1]
     dist = cv2.multiply(d, run)
     lift = cv2.multiply(d, maps.rise[r0:r1, c0:c1])   # height above the camera
-    return ColumnDepth(d, dist, lift, band, returns, run, maps.side[r0:r1, c0:c1], slope,
+    return ColumnDepth(d, dist, lift, band, returns, run, maps.side[r0:r1, c0:c1], slope, maps,
                        expected, float(centre[1]), cz)
 
 

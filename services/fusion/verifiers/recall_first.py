@@ -232,7 +232,7 @@ class RecallFirst:
         seen = min(u + half, float(cal.width)) - max(u - half, 0.0)
         return min(max(seen / (2.0 * half), 0.0), 1.0)
 
-    def lowest_slope(self, camera_z_m: float) -> float:
+    def _lowest_slope(self, camera_z_m: float) -> float:
         """The largest ray slope (rise / run) that still meets the ground within
         `return_range_m` of a camera `camera_z_m` above it: a pixel an empty road returns
         from has a ray at most this steep upwards."""
@@ -266,9 +266,9 @@ class RecallFirst:
         detail[IN_VIEW] = in_view = self.in_view_share(obs.calibration, obs.xy_m, r)
         if in_view < p.min_in_view:
             return SPARSE, detail
-        lowest = self.lowest_slope(col.camera_z_m)
+        lowest = self._lowest_slope(col.camera_z_m)
         detail["row_cover"] = cover = self.row_cover(
-            obs.depth_m, ray_maps(obs.calibration).slope, lowest, obs.roi.y,
+            obs.depth_m, col.maps.slope, lowest, obs.roi.y,
             obs.roi.y + obs.roi.h)
         reach = cv2.bitwise_and(col.band, cv2.inRange(col.slope, -np.inf, lowest))
         detail["reach_px"] = n_reach = float(cv2.countNonZero(reach))
