@@ -399,6 +399,8 @@ class KinematicRule:
         self.max_range = s.max_range_m
         self._accels: dict[int, float] = {}
         self._ground: dict[int, tuple[float, float]] = {}   # id -> (along, across) over ground
+        # This cycle's tracks in path coordinates, by (id, x, y): one point per track.
+        self._points: dict[tuple[int, float, float], PathPoint] = {}
         self._edge: dict[int, str] = {}    # id -> why it is the road's edge, this cycle
         # The tracks whose radar point the path held, this cycle (as `kinematics` finds
         # them: every confirmed track is judged each cycle) and the one before.
@@ -410,7 +412,7 @@ class KinematicRule:
         # The yaw rate as the radar's lateral velocities follow it (low-passed with
         # turn_lag_s): None until the first motion, and again after motion was lost.
         self._yaw_lagged: tuple[float, int] | None = None     # (rad/s, stamp)
-        self.yaw_step_rps = 0.0       # this cycle's yaw rate less the lagged one
+        self._yaw_step_rps = 0.0       # this cycle's yaw rate less the lagged one
 
     def begin(self, vehicle: VehicleSample, tracks: Sequence[RadarTrack],
               stamp_ns: int) -> None:
@@ -421,6 +423,7 @@ class KinematicRule:
         self.motion_ok = motion is not None
         self.degraded = vehicle.reason
         self._ground = {}
+        self._points = {}
         self._accels = {}
         self._edge = {}
         self._point_in_before, self._point_in = self._point_in, set()
@@ -429,7 +432,7 @@ class KinematicRule:
             self._point_in_before = set()
             self._still_before = set()
             self._yaw_lagged = None
-            self.yaw_step_rps = 0.0
+            self._yaw_step_rps = 0.0
             self.path = straight_path(self.s.corridor.half_width_m + self.s.corridor.margin_m,
                                       self.s.max_range_m, self.centre, "no vehicle state")
             self.accel.update({}, stamp_ns)
@@ -437,7 +440,7 @@ class KinematicRule:
         k = self.k
         self.ego_mps = v = motion.speed_mps
         self.yaw_rps = w = math.radians(motion.yaw_rate_dps)
-        self.yaw_step_rps = w - self._lagged_yaw(w, stamp_ns)
+        self._yaw_step_rps = w - self._lagged_yaw(w, stamp_ns)
         steer = vehicle.driver.steering_wheel_angle_deg if vehicle.driver is not None else None
         self.path = predicted_path(v, motion.yaw_rate_dps, steer, self.s.path, self.centre)
         self.max_range = min(k.range_max_m, k.range_base_m + k.range_time_s * max(v, 0.0),
@@ -450,6 +453,8 @@ class KinematicRule:
                 f"{self.path.source}; the radar's stationary returns turn "
                 f"{math.degrees(turn):+.1f} deg/s more"))
         max_turn = self.s.path.max_curvature_per_m * abs(v)
+        self._points = {(t.track_id, t.x_m, t.y_m): self.path.point(t.x_m, t.y_m)
+                        for t in tracks}
         for t in tracks:
             gx, gy = over[t.track_id]
             if turn and t.misses == 0:
@@ -461,12 +466,13 @@ class KinematicRule:
                         and abs(own) <= max_turn):
                     own = turn
                 gx, gy = gx - own * t.y_m, gy + own * t.x_m
-            self._ground[t.track_id] = self.path.velocity(t.x_m, t.y_m, gx, gy)
+            p = self._points[t.track_id, t.x_m, t.y_m]
+            self._ground[t.track_id] = self.path.velocity(p, gx, gy)
         still = self.s.road_edge.stationary_mps
         self._still = {i for i, g in self._ground.items() if math.hypot(*g) < still}
         self._accels = self.accel.update({i: g[0] for i, g in self._ground.items()}, stamp_ns)
         if self.s.road_edge.enabled:
-            self._edge = self._road_edge(tracks)
+            self._edge = self._road_edge()
 
     def _unseen_turn(self, tracks: Sequence[RadarTrack],
                      over: Mapping[int, tuple[float, float]]) -> float:
@@ -495,14 +501,11 @@ class KinematicRule:
         self._yaw_lagged = (lagged, t)
         return lagged
 
-    def _road_edge(self, tracks: Sequence[RadarTrack]) -> dict[int, str]:
+    def _road_edge(self) -> dict[int, str]:
         """The stationary tracks that form the road's edge this cycle (road_edge.py)."""
         e = self.s.road_edge
-        points = []
-        for t in tracks:
-            if t.track_id in self._still:
-                p = self.path.point(t.x_m, t.y_m)
-                points.append(EdgePoint(t.track_id, p.s_m, p.d_m))
+        points = [EdgePoint(i, p.s_m, p.d_m) for (i, _, _), p in self._points.items()
+                  if i in self._still]
         if len(points) < e.min_members:
             return {}
         edges = road_edges(points, self.path.half_width_m, self.path.curvature_per_m,
@@ -521,7 +524,7 @@ class KinematicRule:
         # itself has just changed (a bend's entry or exit), the radar's velocities still
         # follow the yaw rate that was: the step's -dw x is no evidence either.
         allowance = self.k.turn_lag_s * abs(self.yaw_rps * self.ego_mps)
-        step = abs(self.yaw_step_rps)
+        step = abs(self._yaw_step_rps)
         out = []
         for t in tracks:
             g = self._ground.get(t.track_id)
@@ -536,7 +539,8 @@ class KinematicRule:
         if not self.motion_ok:
             return self.paper.kinematics(track, moving)
         k = self.k
-        p = self.path.point(track.x_m, track.y_m)
+        p = (self._points.get((track.track_id, track.x_m, track.y_m))
+             or self.path.point(track.x_m, track.y_m))
         along, across = self._ground.get(track.track_id, (0.0, 0.0))
         a = self._accels.get(track.track_id, 0.0)
         v = self.ego_mps

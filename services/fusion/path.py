@@ -67,14 +67,12 @@ class PredictedPath:
         theta = s_m * k
         return (r - d_m) * math.sin(theta), r - (r - d_m) * math.cos(theta) + self.center_y_m
 
-    def velocity(self, x_m: float, y_m: float, vx_mps: float,
-                 vy_mps: float) -> tuple[float, float]:
-        """A velocity at (x, y) along the path's tangent and normal there (left
-        positive)."""
+    def velocity(self, p: PathPoint, vx_mps: float, vy_mps: float) -> tuple[float, float]:
+        """A velocity (vehicle axes) at the path point `p` along the path's tangent and
+        normal there (left positive)."""
         k = self.curvature_per_m
         if abs(k) < STRAIGHT_CURVATURE:
             return vx_mps, vy_mps
-        p = self.point(x_m, y_m)
         heading = p.s_m * k             # the tangent's direction at the foot point
         c, s = math.cos(heading), math.sin(heading)
         return vx_mps * c + vy_mps * s, -vx_mps * s + vy_mps * c
