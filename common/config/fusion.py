@@ -174,8 +174,9 @@ class RoadEdgeSettings(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     # ... and its first step running along the path, within this angle (deg).
     start_heading_deg: Annotated[float, msgspec.Meta(ge=0, le=45)] = 10.0
     # Consecutive members at most this far apart (m): a rail's returns come every
-    # segment (4 m in the simulator); a car further on is no continuation.
-    max_spacing_m: Positive = 9.0
+    # segment (4 m in the simulator), and in a run's first cycles the tracker has not
+    # yet confirmed every one (two missed in a row); a car further on is no continuation.
+    max_spacing_m: Positive = 13.0
     # Each new member is fitted with the members within this length behind it
     # (a quadratic in arc length) ...
     fit_length_m: Positive = 24.0

@@ -170,6 +170,16 @@ def test_a_gap_longer_than_the_spacing_ends_the_chain():
     assert not any(p.track_id in ids for p in in_path(gap))
 
 
+def test_two_missed_segments_in_a_row_do_not_break_the_chain():
+    """A run's first radar cycles: the tracker has confirmed some segments and not yet
+    the two between them (a 12 m gap)."""
+    pts = rail(-100.0, curve_start_m=30.0, first_m=5.0)
+    gap = [p for p in pts if not 25.0 <= p.s_m <= 30.0]
+    assert max(b.s_m - a.s_m for a, b in zip(gap, gap[1:], strict=False)) == pytest.approx(12.0, abs=0.2)
+    ids = edge_ids(gap, 50 * KPH)
+    assert in_path(gap) and all(p.track_id in ids for p in in_path(gap)[:-2])
+
+
 # -- the kinematic rule and the core ------------------------------------------------------
 
 
