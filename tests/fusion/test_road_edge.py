@@ -1,6 +1,7 @@
 """The road's edge from stationary radar returns (services/fusion/road_edge.py): a guard
 rail along a bend's outside is out of the straight path, a car stopped in the lane beside
 or beyond a straight rail stays in it; and the kinematic rule and the core with it."""
+import itertools
 import math
 
 import pytest
@@ -175,7 +176,8 @@ def test_two_missed_segments_in_a_row_do_not_break_the_chain():
     the two between them (a 12 m gap)."""
     pts = rail(-100.0, curve_start_m=30.0, first_m=5.0)
     gap = [p for p in pts if not 25.0 <= p.s_m <= 30.0]
-    assert max(b.s_m - a.s_m for a, b in zip(gap, gap[1:], strict=False)) == pytest.approx(12.0, abs=0.2)
+    widest = max(b.s_m - a.s_m for a, b in itertools.pairwise(gap))
+    assert widest == pytest.approx(12.0, abs=0.2)
     ids = edge_ids(gap, 50 * KPH)
     assert in_path(gap) and all(p.track_id in ids for p in in_path(gap)[:-2])
 
