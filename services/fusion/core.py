@@ -158,7 +158,8 @@ class FusionCore:
         self._gathers = self.evidence is not None and bool(
             getattr(verifier, "gives_llr", False))
         # Per track, the last frame that showed its object beside the path: (radar stamp,
-        # the radar point's offset from the path then, the reason).
+        # the radar point's offset from the path then, the reason); forgotten once older
+        # than BESIDE_CARRY_S, at the start of a cycle.
         self._beside: dict[int, tuple[int, float, str]] = {}
         self.beside_path_targets = 0   # threats the camera took out of the path, since start
         # Per track the point test leaves out of the path, the last frame that showed its
@@ -218,6 +219,10 @@ class FusionCore:
         self._moving = self.lateral.update(lateral_input) if self.lateral is not None else set()
         if self.evidence is not None:
             self.evidence.forget_older(tracks.header.stamp_ns)
+        carry_ns = BESIDE_CARRY_S * 1e9
+        for i in [i for i, b in self._beside.items()
+                  if tracks.header.stamp_ns - b[0] > carry_ns]:
+            del self._beside[i]
         age_ns = now_wall_ns - tracks.header.stamp_ns
         # A stamp from the future beyond the bound means unsynchronised clocks: the age
         # is unknown, so the cycle is treated as stale.
@@ -516,9 +521,6 @@ class FusionCore:
             if (stamp_ns - then_ns <= BESIDE_CARRY_S * 1e9 and offset * then > 0.0
                     and abs(offset) >= abs(then) - BESIDE_CARRY_M):
                 beside = f"{why} (last seen {(stamp_ns - then_ns) / 1e6:.0f} ms ago)"
-        for i in [i for i, b in self._beside.items()
-                  if stamp_ns - b[0] > BESIDE_CARRY_S * 1e9]:
-            del self._beside[i]
         if beside is None or decision is Decision.NONE:
             return decision, reason, dict(detail)
         self.beside_path_targets += 1
