@@ -11,7 +11,16 @@ import pytest
 
 from aeb_radar_camera.common.messages import Decision
 from aeb_radar_camera.services.fusion.core import CycleResult
-from aeb_radar_camera.services.fusion.evidence import BESIDE_PATH
+from aeb_radar_camera.services.fusion.evidence import (
+    AT_Y_MAX,
+    AT_Y_MIN,
+    BESIDE_PATH,
+    IN_VIEW,
+    THROUGH_HIGH_Y,
+    THROUGH_LOW_Y,
+    WINDOW_Y_MAX,
+    WINDOW_Y_MIN,
+)
 from aeb_radar_camera.services.fusion.frames import DecodedFrame
 from aeb_radar_camera.services.fusion.verifiers import create
 from tests.fusion.helpers import CAL, MS, T0, cycle, feed, make_core
@@ -53,32 +62,32 @@ def test_the_check_reports_an_object_beside_the_path_and_the_columns_between_see
     got = CHECK.verify(observe(render_depth(CAL, boxes=(beside(side),)), X, side * EDGE))
     d = got.detail
     assert d["depth_confirms"] == 1.0 and got.verified
-    inner, outer = (d["at_y_min_m"], d["at_y_max_m"])[::int(side)]
+    inner, outer = (d[AT_Y_MIN], d[AT_Y_MAX])[::int(side)]
     assert abs(inner - side * EDGE) < 0.06 and abs(outer - side * (EDGE + 0.5)) < 0.06, d
     # The window reaches 0.5 m either side of the radar's point at its range.
-    assert abs(d["window_y_min_m"] - (side * EDGE - 0.5)) < 0.06, d
-    assert abs(d["window_y_max_m"] - (side * EDGE + 0.5)) < 0.06, d
-    toward, away = ("through_low_y", "through_high_y")[::int(side)]
+    assert abs(d[WINDOW_Y_MIN] - (side * EDGE - 0.5)) < 0.06, d
+    assert abs(d[WINDOW_Y_MAX] - (side * EDGE + 0.5)) < 0.06, d
+    toward, away = (THROUGH_LOW_Y, THROUGH_HIGH_Y)[::int(side)]
     assert d[toward] == 1.0 and d[away] == 0.0, d
 
 
 def test_a_straddling_object_is_measured_inside_the_path():
     d = CHECK.verify(observe(render_depth(CAL, boxes=(STRADDLING,)), X, -EDGE)).detail
     assert d["depth_confirms"] == 1.0
-    assert abs(d["at_y_max_m"] - -0.8) < 0.06, d
+    assert abs(d[AT_Y_MAX] - -0.8) < 0.06, d
 
 
 def test_a_side_on_car_fills_the_window_to_its_inner_edge():
     d = CHECK.verify(observe(render_depth(CAL, boxes=(SIDE_ON,)), X, -EDGE)).detail
     assert d["depth_confirms"] == 1.0
-    assert d["at_y_max_m"] >= d["window_y_max_m"] - 0.06 and d["through_high_y"] == 0.0, d
+    assert d[AT_Y_MAX] >= d[WINDOW_Y_MAX] - 0.06 and d[THROUGH_HIGH_Y] == 0.0, d
 
 
 def test_holes_between_the_object_and_the_path_cannot_tell():
     depth = with_holes_beside(render_depth(CAL, boxes=(beside(-1.0),)))
     d = CHECK.verify(observe(depth, X, -EDGE)).detail
-    assert d["depth_confirms"] == 1.0 and d["at_y_max_m"] < -EDGE + 0.06, d
-    assert d["through_high_y"] == 0.0, d
+    assert d["depth_confirms"] == 1.0 and d[AT_Y_MAX] < -EDGE + 0.06, d
+    assert d[THROUGH_HIGH_Y] == 0.0, d
 
 
 class DepthDrive(Drive):
@@ -127,7 +136,7 @@ def test_without_evidence_that_the_path_is_clear_the_point_test_stands(scene):
     assert tgt.decision is Decision.BRAKE and BESIDE_PATH not in tgt.gate_detail, tgt
     if depth is not None:
         # The camera measured the extent: the brake is its verdict, not its absence.
-        assert "at_y_max_m" in tgt.gate_detail, tgt.gate_detail
+        assert AT_Y_MAX in tgt.gate_detail, tgt.gate_detail
 
 
 def test_a_wider_camera_margin_keeps_the_object_in_the_path():
@@ -135,7 +144,7 @@ def test_a_wider_camera_margin_keeps_the_object_in_the_path():
                        path={"camera_margin_m": 0.4})
     drive.step(10.0)
     tgt = drive.step(10.0, ahead(X, 10.0, y=-EDGE + 0.05)).targets.targets[0]
-    assert tgt.decision is Decision.BRAKE and "at_y_max_m" in tgt.gate_detail, tgt
+    assert tgt.decision is Decision.BRAKE and AT_Y_MAX in tgt.gate_detail, tgt
 
 
 def test_every_threat_the_camera_takes_out_of_the_path_is_counted():
@@ -182,19 +191,19 @@ def test_an_object_leaving_the_image_beside_the_ego_stays_beside_the_path():
     depth[:, u - 120:u - 2] = 0.0
     tgt = _passing(depth, NEAR_X)
     d = tgt.gate_detail
-    assert d["in_view"] < 1.0 and d.get("through_high_y", 0.0) == 0.0, d
+    assert d[IN_VIEW] < 1.0 and d.get(THROUGH_HIGH_Y, 0.0) == 0.0, d
     assert tgt.decision is Decision.NONE, tgt
     assert tgt.reason.endswith("(last seen 75 ms ago)"), tgt.reason
     # Not leaving the image: the holes are the frame's verdict, the point test brakes.
     far = with_holes_beside(render_depth(CAL, boxes=(beside(-1.0),)))
     tgt = _passing(far, X - 0.75)
-    assert tgt.gate_detail["in_view"] == 1.0, tgt.gate_detail
+    assert tgt.gate_detail[IN_VIEW] == 1.0, tgt.gate_detail
     assert tgt.decision is Decision.BRAKE and BESIDE_PATH not in tgt.gate_detail, tgt
 
 
 def test_an_object_leaving_the_image_whose_pixels_reach_the_path_is_braked_for():
     near = (NEAR_X, NEAR_X + 0.6, -EDGE - 0.5, -0.7, 0.0, 1.7)
     tgt = _passing(render_depth(CAL, boxes=(near,)), NEAR_X)
-    assert tgt.gate_detail["in_view"] < 1.0, tgt.gate_detail
-    assert "at_y_max_m" in tgt.gate_detail, tgt.gate_detail
+    assert tgt.gate_detail[IN_VIEW] < 1.0, tgt.gate_detail
+    assert AT_Y_MAX in tgt.gate_detail, tgt.gate_detail
     assert tgt.decision is Decision.BRAKE and BESIDE_PATH not in tgt.gate_detail, tgt
